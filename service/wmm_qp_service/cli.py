@@ -1,0 +1,104 @@
+"""The ``wmm-qp`` command line.
+
+Each subcommand lives in its own module under :mod:`wmm_qp_service.commands` and exposes
+``HELP`` (one line), ``add_arguments(parser)`` and ``run(args) -> int``. Modules are
+imported only when their subcommand runs, so ``wmm-qp inspect`` never loads Zenoh.
+
+Errors a user can cause (bad arguments, a bad config, a missing solver) print one line on
+stderr and exit with status 2 — never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+# name → module (under wmm_qp_service.commands), in the order `wmm-qp --help` lists them.
+COMMANDS: dict[str, str] = {
+    "inspect": "inspect",
+    "verify": "verify",
+    "sim": "sim",
+    "serve": "serve",
+    "teleop": "teleop",
+    "mode": "mode",
+    "status": "status",
+    "demo": "demo",
+    "experiment": "experiment",
+    "bench": "bench",
+    "soak": "soak",
+}
+
+HELP = {
+    "inspect": "kinematics and directional manipulability at one configuration",
+    "verify": "sample random states and check every command against every hard bound",
+    "sim": "run the simulated robot (Zenoh)",
+    "serve": "run the control daemon (Zenoh)",
+    "teleop": "stream setpoints to the daemon: a haptic-like stream or the paper's circle",
+    "mode": "change the daemon's mode",
+    "status": "show the daemon's status",
+    "demo": "start sim and daemon on loopback, drive every mode, print a summary",
+    "experiment": "reproduce one of the paper's experiments (circle, dm, push)",
+    "bench": "measure per-tick controller time and the loop over Zenoh",
+    "soak": "run sim + daemon + client for a long time and report drift in time and memory",
+}
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that prints a one-line error and exits 2 (its default), without usage noise."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def _load(name: str):  # type: ignore[no-untyped-def]
+    try:
+        return importlib.import_module(f"wmm_qp_service.commands.{COMMANDS[name]}")
+    except ModuleNotFoundError as e:
+        if e.name and e.name.startswith("wmm_qp_service.commands"):
+            return None
+        raise
+
+
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    parser = _Parser(prog="wmm-qp", description="QP control of a wheeled mobile manipulator.")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    for name in COMMANDS:
+        if only is not None and name != only:
+            sub.add_parser(name, help=HELP[name], add_help=False)
+            continue
+        mod = _load(name)
+        if mod is None:
+            continue
+        p = sub.add_parser(name, help=HELP[name], description=HELP[name])
+        mod.add_arguments(p)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    from wmm_qp.exceptions import WmmQpError
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    only = argv[0] if argv and argv[0] in COMMANDS else None
+    parser = build_parser(only)
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 2
+    mod = _load(args.command)
+    if mod is None:
+        print(f"wmm-qp: error: {args.command} is not available in this install", file=sys.stderr)
+        return 2
+    try:
+        return int(mod.run(args))
+    except WmmQpError as e:
+        print(f"wmm-qp {args.command}: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"wmm-qp {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,1 @@
+"""One module per ``wmm-qp`` subcommand: ``HELP``, ``add_arguments(parser)``, ``run(args)``."""

@@ -1,0 +1,1 @@
+"""The simulated wheeled mobile manipulator: a pure model and its Zenoh adapter."""

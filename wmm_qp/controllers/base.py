@@ -1,0 +1,144 @@
+"""The controllers' common entry point ``step(state, reference) → command``.
+
+:meth:`Controller.step` never raises: malformed input, a numerical failure or an exception
+anywhere in a controller becomes a safe stop (maximal braking, inside the acceleration
+bounds) with the reason in ``Command.reason``.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config import ControllerConfig, FloatArray, RobotConfig
+from ..limits import braking_command, joint_motion_bounds, wheel_braking_command, wheel_bounds
+from ..manipulability import dm_cartesian_gradient, dm_gradient, directional_manipulability
+from ..model.wmm import Kinematics, WmmModel
+from ..pseudoinverse import damping_factor, sigma_min
+from ..types import Command, Mode, Reference, RobotState, Status
+
+
+@dataclass(slots=True)
+class TickContext:
+    """What every controller computes first in a tick (kinematics, DM, bounds)."""
+
+    kin: Kinematics
+    u: FloatArray  # DM direction, base frame, unit
+    dm: float
+    grad_q: FloatArray | None  # ∇_{q_m} H2, eq. (9), when the mode needs it
+    sigma: float
+    damping: float
+    arm_lo: FloatArray
+    arm_hi: FloatArray
+    wheel_lo: FloatArray
+    wheel_hi: FloatArray
+
+
+class Controller(ABC):
+    """A kinematic controller of the WMM.
+
+    Args:
+        model: the robot's kinematic model.
+        config: gains and settings; ``config.dt`` is the control period.
+    """
+
+    name = "controller"
+
+    def __init__(self, model: WmmModel, config: ControllerConfig) -> None:
+        self.model = model
+        self.robot: RobotConfig = model.config
+        self.config = config
+        self.dt = config.dt
+
+    def reset(self) -> None:
+        """Forget any state carried between ticks (warm starts, mode latches)."""
+
+    # ------------------------------------------------------------------ entry point
+    def step(self, state: RobotState, reference: Reference) -> Command:
+        """One control tick. Never raises: failures become a safe stop with a reason."""
+        try:
+            if not state.is_finite():
+                return self.safe_stop(state, "state holds NaN or inf")
+            if not reference.is_finite():
+                return self.safe_stop(state, "reference holds NaN, inf or a zero direction")
+            cmd = self._step(state, reference)
+            if not (np.isfinite(cmd.wheel_speeds).all() and np.isfinite(cmd.arm_rates).all()):
+                return self.safe_stop(state, f"{self.name}: non-finite command")
+            return cmd
+        except Exception as e:  # the control loop must never raise (DESIGN.md §2, item 5)
+            return self.safe_stop(state, f"{self.name}: {type(e).__name__}: {e}")
+
+    @abstractmethod
+    def _step(self, state: RobotState, reference: Reference) -> Command:
+        """The controller's own computation (may raise; :meth:`step` catches)."""
+
+    # ------------------------------------------------------------------ helpers
+    def safe_stop(self, state: RobotState, reason: str) -> Command:
+        """Maximal braking inside the acceleration bounds, from the state's rates.
+
+        Non-finite rates (a NaN state) are taken as 0: the command is then zero.
+        """
+        v_arm = np.nan_to_num(np.asarray(state.v_arm, dtype=float), nan=0.0, posinf=0.0, neginf=0.0)
+        w = np.nan_to_num(np.asarray(state.wheel_speeds, dtype=float), nan=0.0, posinf=0.0, neginf=0.0)
+        return Command(
+            wheel_speeds=wheel_braking_command(w, self.robot.base, self.dt),
+            arm_rates=braking_command(v_arm, self.robot.arm.acceleration_max, self.dt),
+            status=Status.SAFE_STOP,
+            reason=reason,
+        )
+
+    def context(self, state: RobotState, reference: Reference, need_gradient: bool) -> TickContext:
+        """Kinematics, DM (and its gradient when needed), σ_min, damping and bounds (13)."""
+        kin = self.model.kinematics(state.q_base, state.q_arm, hessian=need_gradient)
+        u = self.config.direction if reference.direction is None else reference.direction
+        u = u / np.linalg.norm(u)
+        W = self.config.W
+        if need_gradient:
+            assert kin.dJ_arm is not None
+            dm, grad_q = dm_gradient(kin.J_arm, kin.dJ_arm, u, W)  # eqs. (8), (9)
+        else:
+            dm, grad_q = directional_manipulability(kin.J_arm, u, W), None  # eq. (8)
+        sig = sigma_min(kin.J_m)
+        arm = self.robot.arm
+        lo, hi = joint_motion_bounds(state.q_arm, state.v_arm, arm.position_lower, arm.position_upper,
+                                     arm.velocity_max, arm.acceleration_max, self.dt)  # eq. (13)
+        wlo, whi = wheel_bounds(state.wheel_speeds, self.robot.base, self.dt)
+        return TickContext(kin=kin, u=u, dm=dm, grad_q=grad_q, sigma=sig,
+                           damping=damping_factor(sig, self.config.sigma_threshold, self.config.damping_max),
+                           arm_lo=lo, arm_hi=hi, wheel_lo=wlo, wheel_hi=whi)
+
+    def task_velocity(self, ctx: TickContext, reference: Reference) -> FloatArray:
+        """ẋ_ref of the mode: ẋ_d + K_x (x_d − x) (eq. (18)) or v_c (eq. (17))."""
+        if reference.mode == Mode.DM_CARTESIAN:
+            assert ctx.grad_q is not None
+            return self.cartesian_dm_velocity(ctx)
+        return reference.xd_d + self.config.K_x * (reference.x_d - ctx.kin.x)  # eq. (18)
+
+    def cartesian_dm_velocity(self, ctx: TickContext) -> FloatArray:
+        """v_c of eq. (17): k_C ∇_x H2 on the axes whose box is active and holds x, else 0."""
+        assert ctx.grad_q is not None
+        grad_x = dm_cartesian_gradient(ctx.grad_q, ctx.kin.J_m)  # eq. (10)
+        lo, hi = self.config.ee_box_lower, self.config.ee_box_upper
+        boxed = np.isfinite(lo) | np.isfinite(hi)
+        inside = (lo <= ctx.kin.x) & (ctx.kin.x <= hi)
+        return np.where(boxed & inside, self.config.k_C * grad_x, 0.0)  # eq. (17)
+
+    @staticmethod
+    def needs_gradient(mode: Mode) -> bool:
+        return mode in (Mode.DM_CARTESIAN, Mode.DM_NULLSPACE)
+
+    def finish(self, ctx: TickContext, v: FloatArray, xdot_ref: FloatArray, status: Status = Status.OK,
+               reason: str = "", alpha: float = 0.0) -> Command:
+        """Wrap v = [v_b; v_m] into a Command with diagnostics."""
+        err = float(np.linalg.norm(ctx.kin.J @ v - xdot_ref))
+        if status == Status.OK and ctx.damping > 0.0:
+            status, reason = Status.DAMPED, reason or f"sigma_min {ctx.sigma:.3g} below threshold"
+        return Command(wheel_speeds=v[:4].copy(), arm_rates=v[4:].copy(), status=status, reason=reason,
+                       alpha=alpha, task_error=err, x=ctx.kin.x.copy(), dm=ctx.dm, sigma_min=ctx.sigma)
+
+
+def is_finite_number(x: float) -> bool:
+    return math.isfinite(x)

@@ -1,0 +1,12 @@
+"""Manipulability measures: directional (eqs. (8)–(10)) and Yoshikawa's."""
+
+from .directional import dm_cartesian_gradient, dm_gradient, directional_manipulability, torque_norm_per_newton
+from .yoshikawa import yoshikawa_manipulability
+
+__all__ = [
+    "directional_manipulability",
+    "dm_cartesian_gradient",
+    "dm_gradient",
+    "torque_norm_per_newton",
+    "yoshikawa_manipulability",
+]

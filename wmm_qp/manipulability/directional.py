@@ -1,0 +1,60 @@
+"""Directional manipulability (DM) of the arm along u, eqs. (8)–(10).
+
+H2(q) = (uᵀ J A Jᵀ u)^(−1/2), A = WᵀW, W = diag(τ_ref/τ_lim,i)           eq. (8)
+
+For a force f·u at the EE the weighted joint torque norm is ‖W Jᵀ u‖·f = f / H2: larger
+H2 means more force along u for the same (weighted) torque.
+
+u is given in the base (yaw-compensated) frame and J is the arm Jacobian in the arm base
+frame, so uᵀ J_m = uᵀ Rz(ψ)ᵀ Rz(ψ) J_arm: H2 depends on q_m only.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..config import FloatArray
+
+
+def directional_manipulability(J_arm: FloatArray, u: FloatArray, W: FloatArray) -> float:
+    """H2 of eq. (8).
+
+    Args:
+        J_arm: 3×7 translational arm Jacobian (arm base frame).
+        u: unit direction (arm base frame).
+        W: diagonal of the torque scaling W.
+    """
+    t = W * (J_arm.T @ u)  # W Jᵀ u
+    return float(1.0 / np.sqrt(t @ t))
+
+
+def torque_norm_per_newton(J_arm: FloatArray, u: FloatArray, W: FloatArray) -> float:
+    """‖W Jᵀ u‖ [N·m/N]: weighted joint torque per newton of EE force along u (= 1/H2)."""
+    return float(np.linalg.norm(W * (J_arm.T @ u)))
+
+
+def dm_gradient(J_arm: FloatArray, dJ_arm: FloatArray, u: FloatArray, W: FloatArray) -> tuple[float, FloatArray]:
+    """H2 and its joint gradient ∇_{q_m} H2 (7,), eq. (9).
+
+    ∂H2/∂q_k = −½ H2³ ∂(uᵀ J A Jᵀ u)/∂q_k = −H2³ · uᵀ (∂J/∂q_k) A Jᵀ u.
+
+    Args:
+        J_arm: 3×7 arm Jacobian.
+        dJ_arm: (7, 3, 7) with dJ_arm[k] = ∂J_arm/∂q_k (analytic, from the kinematic Hessian).
+        u: unit direction.
+        W: diagonal of W.
+    """
+    a = (W * W) * (J_arm.T @ u)  # A Jᵀ u
+    s = float(u @ J_arm @ a)  # uᵀ J A Jᵀ u
+    h2 = 1.0 / np.sqrt(s)
+    g = (dJ_arm @ a) @ u  # g_k = uᵀ ∂J/∂q_k A Jᵀ u
+    return h2, -(h2**3) * g  # eq. (9)
+
+
+def dm_cartesian_gradient(grad_q: FloatArray, J_m: FloatArray) -> FloatArray:
+    """∇_x H2 = ∇_{q_m} H2 · J_m⁺ (3,), eq. (10), with J_m world-aligned.
+
+    J_m⁺ = J_mᵀ (J_m J_mᵀ)⁻¹ is the plain right pseudoinverse (Moore–Penrose, via lstsq
+    so that it stays finite near singularities).
+    """
+    return np.linalg.lstsq(J_m.T, grad_q, rcond=1e-10)[0]  # solves J_mᵀ y = gᵀ: y = (J_m⁺)ᵀ gᵀ

@@ -1,0 +1,83 @@
+"""The manipulator on Pinocchio: position of the EE frame, its Jacobian and Hessian.
+
+Only the translational part is used (r = 3: the EE orientation is free). Continuous
+joints are stored by Pinocchio as (cos, sin) pairs; :meth:`ArmModel.pin_q` maps the 7 joint
+angles to Pinocchio's configuration vector once per call.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from ..config import N_ARM, FloatArray
+from ..exceptions import ConfigError
+
+_LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+
+
+class ArmModel:
+    """Pinocchio model of the arm, expressed in the arm's base frame.
+
+    Args:
+        urdf: the arm's URDF.
+        ee_frame: the end-effector frame's name.
+
+    Raises:
+        ConfigError: the URDF does not load, lacks the frame, or is not a 7-DOF chain.
+    """
+
+    def __init__(self, urdf: Path, ee_frame: str) -> None:
+        try:
+            self.model = pin.buildModelFromUrdf(str(urdf))
+        except (RuntimeError, ValueError) as e:
+            raise ConfigError(urdf, "", f"Pinocchio cannot load this URDF: {e}") from None
+        if self.model.nv != N_ARM:
+            raise ConfigError(urdf, "", f"expected a {N_ARM}-DOF arm, the URDF has {self.model.nv}")
+        if not self.model.existFrame(ee_frame):
+            raise ConfigError(urdf, "", f"no frame named {ee_frame!r}")
+        self.data = self.model.createData()
+        self.frame_id = self.model.getFrameId(ee_frame)
+        joints = [self.model.joints[j] for j in range(1, self.model.njoints)]
+        # Index maps for q (angles) → Pinocchio's q (revolute: angle; continuous: cos, sin).
+        self._rev_q = np.array([j.idx_q for j in joints if j.nq == 1], dtype=int)
+        self._rev_v = np.array([j.idx_v for j in joints if j.nq == 1], dtype=int)
+        self._cont_q = np.array([j.idx_q for j in joints if j.nq == 2], dtype=int)
+        self._cont_v = np.array([j.idx_v for j in joints if j.nq == 2], dtype=int)
+        self._q = pin.neutral(self.model)
+        self.joint_names = [self.model.names[j] for j in range(1, self.model.njoints)]
+
+    def pin_q(self, q: FloatArray) -> FloatArray:
+        """Pinocchio configuration of the 7 joint angles q [rad] (a reused buffer)."""
+        self._q[self._rev_q] = q[self._rev_v]
+        self._q[self._cont_q] = np.cos(q[self._cont_v])
+        self._q[self._cont_q + 1] = np.sin(q[self._cont_v])
+        return self._q
+
+    def position(self, q: FloatArray) -> FloatArray:
+        """p_m(q_m) [m]: EE position in the arm base frame, eq. (1)."""
+        pin.forwardKinematics(self.model, self.data, self.pin_q(q))
+        return pin.updateFramePlacement(self.model, self.data, self.frame_id).translation.copy()
+
+    def position_jacobian(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """EE position and translational Jacobian (3×7) in the arm base frame, eqs. (1), (5)."""
+        qq = self.pin_q(q)
+        pin.computeJointJacobians(self.model, self.data, qq)  # also runs forward kinematics
+        p = pin.updateFramePlacement(self.model, self.data, self.frame_id).translation.copy()
+        J = pin.getFrameJacobian(self.model, self.data, self.frame_id, _LWA)[:3].copy()
+        return p, J
+
+    def jacobian_derivatives(self, q: FloatArray) -> FloatArray:
+        """∂J/∂q_k for every joint k: an array D with D[k] = ∂J_arm/∂q_k (3×7), shape (7, 3, 7).
+
+        Analytic, from Pinocchio's kinematic Hessian. Must follow :meth:`position_jacobian`
+        at the same q (it reuses the joint Jacobians computed there). With pin ≥ 4.1 the
+        returned tensor must be read as ``H.reshape(nv, nv, 6)[k, i, :] = ∂J_i/∂q_k``
+        (DESIGN.md §1; checked against finite differences in the tests).
+        """
+        pin.computeJointKinematicHessians(self.model, self.data)
+        H = pin.getFrameKinematicHessian(self.model, self.data, self.frame_id, _LWA)
+        nv = self.model.nv
+        return np.ascontiguousarray(H.reshape(nv, nv, 6)[:, :, :3].transpose(0, 2, 1))

@@ -1,0 +1,46 @@
+"""Pseudoinverses of the whole-robot Jacobian: weighted, eq. (11), and damped.
+
+J# = W_x Jᵀ (J W_x Jᵀ)⁻¹,  W_x = diag(α·I_4, (1−α)·I_7)        eqs. (11), (12)
+
+The print shows I_b in the base block; the text (α = 0: arm only, α = 1: base only)
+needs α·I_b. Near singularities (σ_min(J_m) below a threshold) the inverse is damped:
+J#_λ = W_x Jᵀ (J W_x Jᵀ + λ² I)⁻¹ with λ² = λ_max² (1 − (σ/σ_th)²) (variable damping).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .config import N_ARM, N_WHEELS, FloatArray
+
+
+def weight_matrix_diag(alpha: float) -> FloatArray:
+    """Diagonal of W_x, eq. (12)."""
+    return np.concatenate([np.full(N_WHEELS, alpha), np.full(N_ARM, 1.0 - alpha)])
+
+
+def weighted_pinv(J: FloatArray, w: FloatArray, damping: float = 0.0) -> FloatArray:
+    """W Jᵀ (J W Jᵀ + λ² I)⁻¹ for a diagonal weight w (eq. (11); damped when λ > 0).
+
+    Args:
+        J: r×n Jacobian.
+        w: diagonal of W_x (n,), entries ≥ 0.
+        damping: λ ≥ 0.
+    """
+    WJt = w[:, None] * J.T
+    G = J @ WJt
+    if damping > 0.0:
+        G = G + (damping**2) * np.eye(J.shape[0])
+    return WJt @ np.linalg.pinv(G, rcond=1e-12, hermitian=True)
+
+
+def damping_factor(sigma_min: float, threshold: float, damping_max: float) -> float:
+    """λ of the damped least squares: 0 above the threshold, λ_max at σ_min = 0."""
+    if sigma_min >= threshold or threshold <= 0.0:
+        return 0.0
+    return float(damping_max * np.sqrt(1.0 - (sigma_min / threshold) ** 2))
+
+
+def sigma_min(J: FloatArray) -> float:
+    """Smallest singular value of J (r×n, r ≤ n)."""
+    return float(np.linalg.svd(J, compute_uv=False)[-1])

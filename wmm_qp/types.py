@@ -1,0 +1,131 @@
+"""The values that cross the controller's one entry point: state, reference, command."""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .config import N_ARM, N_WHEELS, FloatArray
+
+
+class Mode(enum.StrEnum):
+    """What the controller does this tick.
+
+    HOLD: keep the EE where it is (brake the robot, then hold x_d = x at the mode change).
+    TRACK: follow x_d, ẋ_d (teleop stream or scripted trajectory), eq. (18) without v_n.
+    DM_CARTESIAN: move the EE along the Cartesian DM gradient inside the box, eqs. (16)–(17).
+    DM_NULLSPACE: follow x_d and raise DM in the null space, eqs. (18)–(19).
+    """
+
+    HOLD = "hold"
+    TRACK = "track"
+    DM_CARTESIAN = "dm_cartesian"
+    DM_NULLSPACE = "dm_nullspace"
+
+
+def _vec(a: object, n: int, name: str) -> FloatArray:
+    v = np.asarray(a, dtype=float).reshape(-1)
+    if v.shape != (n,):
+        raise ValueError(f"{name} must have {n} entries, got {v.shape[0]}")
+    return v
+
+
+@dataclass(slots=True)
+class RobotState:
+    """What the robot reports (the controller's input).
+
+    Attributes:
+        q_base: [m, m, rad] base pose (x_b, y_b, ψ) — odometry on a real robot.
+        q_arm: [rad] joint angles q_m.
+        v_arm: [rad/s] joint rates now (bounds (13) start from them).
+        wheel_speeds: [rad/s] wheel speeds now (FL, FR, RL, RR).
+    """
+
+    q_base: FloatArray
+    q_arm: FloatArray
+    v_arm: FloatArray = field(default_factory=lambda: np.zeros(N_ARM))
+    wheel_speeds: FloatArray = field(default_factory=lambda: np.zeros(N_WHEELS))
+
+    def __post_init__(self) -> None:
+        self.q_base = _vec(self.q_base, 3, "q_base")
+        self.q_arm = _vec(self.q_arm, N_ARM, "q_arm")
+        self.v_arm = _vec(self.v_arm, N_ARM, "v_arm")
+        self.wheel_speeds = _vec(self.wheel_speeds, N_WHEELS, "wheel_speeds")
+
+    def is_finite(self) -> bool:
+        return bool(
+            np.isfinite(self.q_base).all() and np.isfinite(self.q_arm).all()
+            and np.isfinite(self.v_arm).all() and np.isfinite(self.wheel_speeds).all()
+        )
+
+
+@dataclass(slots=True)
+class Reference:
+    """What the controller should do (the controller's other input).
+
+    Attributes:
+        mode: see :class:`Mode`.
+        x_d: [m] desired EE position (world), used by TRACK, DM_NULLSPACE and HOLD.
+        xd_d: [m/s] its feed-forward velocity.
+        direction: DM direction u in the base (yaw-compensated) frame; None = the config's.
+    """
+
+    mode: Mode
+    x_d: FloatArray = field(default_factory=lambda: np.zeros(3))
+    xd_d: FloatArray = field(default_factory=lambda: np.zeros(3))
+    direction: FloatArray | None = None
+
+    def __post_init__(self) -> None:
+        self.mode = Mode(self.mode)
+        self.x_d = _vec(self.x_d, 3, "x_d")
+        self.xd_d = _vec(self.xd_d, 3, "xd_d")
+        if self.direction is not None:
+            self.direction = _vec(self.direction, 3, "direction")
+
+    def is_finite(self) -> bool:
+        d = self.direction
+        return bool(np.isfinite(self.x_d).all() and np.isfinite(self.xd_d).all()
+                    and (d is None or (np.isfinite(d).all() and np.linalg.norm(d) > 1e-9)))
+
+
+class Status(enum.StrEnum):
+    """Outcome of one controller step."""
+
+    OK = "ok"  # the task is met within the bounds
+    SATURATED = "saturated"  # the bounds cut the task: best effort (slack > 0)
+    DAMPED = "damped"  # near a singularity: damped least squares
+    SAFE_STOP = "safe_stop"  # something failed: braking at the acceleration limits
+
+
+@dataclass(slots=True)
+class Command:
+    """The controller's output for one tick.
+
+    Attributes:
+        wheel_speeds: [rad/s] wheel speed command v_b (FL, FR, RL, RR).
+        arm_rates: [rad/s] joint rate command v_m.
+        status: see :class:`Status`.
+        reason: why, when status is not OK ("" otherwise).
+        alpha: the α actually used (paper controller) or configured (QP).
+        task_error: [m/s] ‖J v − ẋ_ref‖ of this command (0 when the task is met).
+        x: [m] EE position the command was computed at (model, world frame).
+        dm: directional manipulability H2 at this state along the active direction.
+        sigma_min: σ_min(J_m) at this state.
+    """
+
+    wheel_speeds: FloatArray
+    arm_rates: FloatArray
+    status: Status = Status.OK
+    reason: str = ""
+    alpha: float = 0.0
+    task_error: float = 0.0
+    x: FloatArray = field(default_factory=lambda: np.full(3, np.nan))
+    dm: float = float("nan")
+    sigma_min: float = float("nan")
+
+    @property
+    def v(self) -> FloatArray:
+        """[v_b; v_m] ∈ R¹¹."""
+        return np.concatenate([self.wheel_speeds, self.arm_rates])
