@@ -1,0 +1,233 @@
+"""Frozen, validated configuration of the simulated robot (``configs/sim.toml``).
+
+The file is read once into :class:`SimConfig`; every check names the file and the key.
+Absent keys keep the defaults below (the same values ``configs/sim.toml`` documents).
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from wmm_qp import default_config_dir
+from wmm_qp.exceptions import ConfigError
+
+
+@dataclass(frozen=True)
+class SlipConfig:
+    """Base slip and drift: how the true base motion departs from odometry.
+
+    True body twist: ``M · (w ⊙ (1 + b + n(t))) + [0, 0, yaw_drift_per_meter·‖(v_x, v_y)‖]``.
+
+    Attributes:
+        enabled: False = the base executes the wheel speeds exactly (odometry == truth).
+        wheel_scale_std: [-] std of the per-wheel systematic scale error b_i, drawn per reset.
+        wheel_noise_std: [-] stationary std of the per-wheel Ornstein–Uhlenbeck slip n_i(t).
+        wheel_noise_tau: [s] correlation time of n_i(t).
+        yaw_drift_per_meter: [rad/m] extra true yaw rate per metre of base travel.
+    """
+
+    enabled: bool = True
+    wheel_scale_std: float = 0.02
+    wheel_noise_std: float = 0.05
+    wheel_noise_tau: float = 0.2
+    yaw_drift_per_meter: float = 0.01
+
+
+@dataclass(frozen=True)
+class RefereeConfig:
+    """Tolerance of the limit referee: legal when ``|v| <= limit·(1 + rtol) + atol``.
+
+    Attributes:
+        rtol: [-] relative tolerance (numerical round-off of the controller's bounds).
+        atol: absolute tolerance, in the unit of the checked quantity ([rad], [rad/s]).
+    """
+
+    rtol: float = 1e-9
+    atol: float = 1e-9
+
+
+@dataclass(frozen=True)
+class BoxConfig:
+    """A box on the floor in front of the EE, pushed along +x (world), quasi-static.
+
+    Attributes:
+        mass: [kg] box mass m.
+        mu: [-] Coulomb friction coefficient box/floor; sliding needs F = μ m g.
+        face_x: [m] initial world x of the face the EE pushes on.
+        center_y: [m] world y of the face's centre.
+        width: [m] face extent along y.
+        height: [m] face extent along z (from the floor, z = 0).
+        g: [m/s²] gravity.
+    """
+
+    mass: float = 26.0
+    mu: float = 0.3
+    face_x: float = 0.70
+    center_y: float = 0.0
+    width: float = 0.4
+    height: float = 0.6
+    g: float = 9.81
+
+    @property
+    def friction_force(self) -> float:
+        """[N] μ m g: the force that keeps the box sliding."""
+        return self.mu * self.mass * self.g
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """The simulated robot.
+
+    Attributes:
+        rate_hz: [Hz] the sim loop's integration rate (the Zenoh adapter's tick).
+        seed: seed of the slip/drift noise.
+        stale_timeout: [s] without a new command the sim brakes the robot to rest itself.
+        slip: base slip and drift model.
+        referee: tolerance of the limit referee.
+        box: the box of the push experiment, or None (no box).
+    """
+
+    rate_hz: float = 1000.0
+    seed: int = 0
+    stale_timeout: float = 0.1
+    slip: SlipConfig = field(default_factory=SlipConfig)
+    referee: RefereeConfig = field(default_factory=RefereeConfig)
+    box: BoxConfig | None = None
+
+    @property
+    def dt(self) -> float:
+        """[s] integration step 1 / rate_hz."""
+        return 1.0 / self.rate_hz
+
+    def with_(self, **changes: Any) -> SimConfig:
+        """A copy with some fields changed; ``slip`` and ``referee`` may be dicts of fields."""
+        for k in ("slip", "referee"):
+            if isinstance(changes.get(k), dict):
+                changes[k] = replace(getattr(self, k), **changes[k])
+        return replace(self, **changes)
+
+
+def _number(
+    path: Path,
+    table: dict[str, Any],
+    prefix: str,
+    key: str,
+    default: float,
+    *,
+    lo: float | None = None,
+    positive: bool = False,
+) -> float:
+    v = table.get(key, default)
+    name = f"{prefix}{key}"
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        raise ConfigError(path, name, f"must be a number, got {v!r}")
+    v = float(v)
+    if not math.isfinite(v):
+        raise ConfigError(path, name, f"must be finite, got {v}")
+    if positive and v <= 0:
+        raise ConfigError(path, name, f"must be > 0, got {v}")
+    if lo is not None and v < lo:
+        raise ConfigError(path, name, f"must be >= {lo}, got {v}")
+    return v
+
+
+def _table(path: Path, data: dict[str, Any], key: str, allowed: set[str]) -> dict[str, Any]:
+    t = data.get(key, {})
+    if not isinstance(t, dict):
+        raise ConfigError(path, key, "must be a table")
+    extra = sorted(set(t) - allowed)
+    if extra:
+        raise ConfigError(
+            path, f"{key}.{extra[0]}", f"unknown key (allowed: {', '.join(sorted(allowed))})"
+        )
+    return t
+
+
+def _bool(path: Path, table: dict[str, Any], name: str, key: str, default: bool) -> bool:
+    v = table.get(key, default)
+    if not isinstance(v, bool):
+        raise ConfigError(path, name, f"must be true or false, got {v!r}")
+    return v
+
+
+def load_sim_config(path: Path | str | None = None) -> SimConfig:
+    """Load and validate ``sim.toml``.
+
+    Args:
+        path: the file; default ``<wmm_qp.default_config_dir()>/sim.toml``. A missing default
+            file gives the defaults of :class:`SimConfig`.
+
+    Raises:
+        ConfigError: naming the file and key of the first problem found.
+    """
+    if path is None:
+        path = default_config_dir() / "sim.toml"
+        if not path.is_file():
+            return SimConfig()
+    path = Path(path)
+    try:
+        with open(path, "rb") as f:
+            data = tomllib.load(f)
+    except FileNotFoundError:
+        raise ConfigError(path, "", "file not found") from None
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(path, "", f"not valid TOML: {e}") from None
+    except OSError as e:
+        raise ConfigError(path, "", f"cannot read: {e.strerror}") from None
+    extra = sorted(set(data) - {"rate_hz", "seed", "stale_timeout", "slip", "referee", "box"})
+    if extra:
+        raise ConfigError(path, extra[0], "unknown key")
+    d = SimConfig()
+    seed = data.get("seed", d.seed)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ConfigError(path, "seed", f"must be a non-negative integer, got {seed!r}")
+    s = _table(
+        path,
+        data,
+        "slip",
+        {"enabled", "wheel_scale_std", "wheel_noise_std", "wheel_noise_tau", "yaw_drift_per_meter"},
+    )
+    ds = SlipConfig()
+    slip = SlipConfig(
+        enabled=_bool(path, s, "slip.enabled", "enabled", ds.enabled),
+        wheel_scale_std=_number(path, s, "slip.", "wheel_scale_std", ds.wheel_scale_std, lo=0.0),
+        wheel_noise_std=_number(path, s, "slip.", "wheel_noise_std", ds.wheel_noise_std, lo=0.0),
+        wheel_noise_tau=_number(
+            path, s, "slip.", "wheel_noise_tau", ds.wheel_noise_tau, positive=True
+        ),
+        yaw_drift_per_meter=_number(
+            path, s, "slip.", "yaw_drift_per_meter", ds.yaw_drift_per_meter
+        ),
+    )
+    r = _table(path, data, "referee", {"rtol", "atol"})
+    referee = RefereeConfig(
+        rtol=_number(path, r, "referee.", "rtol", 1e-9, lo=0.0),
+        atol=_number(path, r, "referee.", "atol", 1e-9, lo=0.0),
+    )
+    b = _table(
+        path, data, "box", {"enabled", "mass", "mu", "face_x", "center_y", "width", "height", "g"}
+    )
+    db = BoxConfig()
+    box = None
+    if _bool(path, b, "box.enabled", "enabled", False):
+        box = BoxConfig(
+            mass=_number(path, b, "box.", "mass", db.mass, positive=True),
+            mu=_number(path, b, "box.", "mu", db.mu, lo=0.0),
+            face_x=_number(path, b, "box.", "face_x", db.face_x),
+            center_y=_number(path, b, "box.", "center_y", db.center_y),
+            width=_number(path, b, "box.", "width", db.width, positive=True),
+            height=_number(path, b, "box.", "height", db.height, positive=True),
+            g=_number(path, b, "box.", "g", db.g, positive=True),
+        )
+    return SimConfig(
+        rate_hz=_number(path, data, "", "rate_hz", d.rate_hz, positive=True),
+        seed=seed,
+        stale_timeout=_number(path, data, "", "stale_timeout", d.stale_timeout, positive=True),
+        slip=slip,
+        referee=referee,
+        box=box,
+    )

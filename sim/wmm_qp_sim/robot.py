@@ -1,0 +1,238 @@
+"""The simulated wheeled mobile manipulator: a kinematic robot stepped by commanded rates.
+
+:meth:`SimRobot.step` executes the commanded wheel speeds and joint rates as they are (a
+kinematic robot: the referee, not the sim, judges whether they were legal), integrates the
+arm, the odometry (nominal Mecanum model) and the true base (with slip and drift, see
+:mod:`.slip`), pushes the box if there is one (:mod:`.contact`), and counts every limit
+violation (:mod:`.referee`). It never raises from ``step``: a malformed command is ignored
+(counted in ``SimState.rejected_commands``) and the held command goes on.
+
+Stale commands: when no new command has arrived for ``config.stale_timeout`` seconds, the
+sim brakes every joint and wheel to rest by itself at its acceleration limit
+(``SimState.stale_stop`` is True until the next command).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+import wmm_qp
+from wmm_qp.config import N_ARM, N_WHEELS, FloatArray
+
+from .config import BoxConfig, SimConfig
+from .contact import Box
+from .referee import Referee
+from .slip import SlipModel, integrate_pose
+
+
+@dataclass(slots=True)
+class SimCommand:
+    """A command to the robot, held until the next one.
+
+    Attributes:
+        wheel_speeds: [rad/s] wheel speeds (FL, FR, RL, RR).
+        arm_rates: [rad/s] joint rates.
+    """
+
+    wheel_speeds: FloatArray
+    arm_rates: FloatArray
+
+    def __post_init__(self) -> None:
+        self.wheel_speeds = np.asarray(self.wheel_speeds, dtype=float).reshape(-1)
+        self.arm_rates = np.asarray(self.arm_rates, dtype=float).reshape(-1)
+
+    def is_valid(self) -> bool:
+        """Right sizes and finite values."""
+        return bool(
+            self.wheel_speeds.shape == (N_WHEELS,)
+            and self.arm_rates.shape == (N_ARM,)
+            and np.isfinite(self.wheel_speeds).all()
+            and np.isfinite(self.arm_rates).all()
+        )
+
+
+@dataclass(slots=True)
+class SimState:
+    """Everything the sim reports (ground truth included).
+
+    Attributes:
+        t: [s] sim time since reset.
+        q_arm: [rad] joint angles.
+        v_arm: [rad/s] executed joint rates.
+        wheel_speeds: [rad/s] executed wheel speeds.
+        base_odom: [m, m, rad] base pose integrated from the wheel speeds with the nominal model.
+        base_true: [m, m, rad] true base pose (with slip and drift).
+        ee_true: [m] true EE position (world), the "motion capture".
+        tau: [N·m] joint torques J_mᵀ F from the box contact (zeros without contact).
+        contact_force: [N] force the EE applies to the box (world).
+        box_position: [m] world x of the box face, nan without a box.
+        box_displacement: [m] how far the box has been pushed, nan without a box.
+        stalled_joint: the joint (0-based) that stalled the push this step, or None.
+        violations: counts by kind (see :mod:`.referee`).
+        stale_stop: the sim is braking because commands went stale.
+        rejected_commands: malformed commands ignored since reset.
+        commands: valid commands received since reset.
+    """
+
+    t: float
+    q_arm: FloatArray
+    v_arm: FloatArray
+    wheel_speeds: FloatArray
+    base_odom: FloatArray
+    base_true: FloatArray
+    ee_true: FloatArray
+    tau: FloatArray
+    contact_force: FloatArray
+    box_position: float
+    box_displacement: float
+    stalled_joint: int | None
+    violations: dict[str, int]
+    stale_stop: bool
+    rejected_commands: int = 0
+    commands: int = 0
+
+
+class SimRobot:
+    """The simulated WMM.
+
+    Args:
+        model: the robot's kinematic model (its config gives the limits the referee enforces).
+        config: the sim's config.
+        seed: seed of the slip/drift noise; None = ``config.seed``.
+    """
+
+    def __init__(self, model: wmm_qp.WmmModel, config: SimConfig, seed: int | None = None) -> None:
+        self.model = model
+        self.config = config
+        self.seed = config.seed if seed is None else seed
+        self.rng = np.random.default_rng(self.seed)
+        self.slip = SlipModel(config.slip, model.base.M, self.rng)
+        self.referee = Referee(model.config, config.referee)
+        self.torque_limit = np.array(model.config.arm.torque_limit, dtype=float)
+        self.a_max = np.array(model.config.arm.acceleration_max, dtype=float)
+        self.wa_max = float(model.config.base.wheel_acceleration_max)
+        self.reset()
+
+    def reset(
+        self,
+        q_base: Sequence[float] | FloatArray = (0.0, 0.0, 0.0),
+        q_arm: Sequence[float] | FloatArray = wmm_qp.PAPER_START_Q_ARM,
+        box: BoxConfig | None = None,
+    ) -> SimState:
+        """Put the robot at rest at (q_base, q_arm); odometry = truth; counts zeroed.
+
+        Args:
+            q_base: [m, m, rad] base pose (x, y, ψ).
+            q_arm: [rad] joint angles.
+            box: the box to push; None = ``config.box`` (which may itself be None).
+        """
+        self.rng = np.random.default_rng(self.seed)
+        self.slip.rng = self.rng
+        self.slip.reset()
+        self.referee.reset()
+        self.t = 0.0
+        self.q_arm = np.array(q_arm, dtype=float).reshape(N_ARM)
+        self.v_arm = np.zeros(N_ARM)
+        self.wheels = np.zeros(N_WHEELS)
+        self.base_odom = np.array(q_base, dtype=float).reshape(3)
+        self.base_true = self.base_odom.copy()
+        box_cfg = box if box is not None else self.config.box
+        self.box = Box(box_cfg) if box_cfg is not None else None
+        self.t_last_command = 0.0
+        self.stale = False
+        self.rejected = 0
+        self.n_commands = 0
+        self.tau = np.zeros(N_ARM)
+        self.force = np.zeros(3)
+        self.stalled_joint: int | None = None
+        return self.state()
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, command: SimCommand | None, dt: float) -> SimState:
+        """Advance by dt [s]: take the new command (None = keep the held one), integrate.
+
+        Never raises; a malformed command is ignored and counted.
+        """
+        if command is not None and not command.is_valid():
+            self.rejected += 1
+            command = None
+        if command is not None:
+            self._set_rates(command.arm_rates.copy(), command.wheel_speeds.copy())
+            self.t_last_command = self.t
+            self.stale = False
+            self.n_commands += 1
+        elif self.t - self.t_last_command >= self.config.stale_timeout - 1e-12:
+            self.stale = True
+        if self.stale:
+            self._brake(dt)
+        self._integrate(dt)
+        self.t += dt
+        self.referee.check_positions(self.q_arm)
+        return self.state()
+
+    def _set_rates(self, v_arm: FloatArray, wheels: FloatArray) -> None:
+        self.referee.on_new_rates(self.t, self.v_arm, self.wheels, v_arm, wheels)
+        self.v_arm, self.wheels = v_arm, wheels
+
+    def _brake(self, dt: float) -> None:
+        """One braking step toward rest at the acceleration limits."""
+        if not (self.v_arm.any() or self.wheels.any()):
+            return
+        dv = np.clip(-self.v_arm, -self.a_max * dt, self.a_max * dt)
+        dw = np.clip(-self.wheels, -self.wa_max * dt, self.wa_max * dt)
+        self._set_rates(self.v_arm + dv, self.wheels + dw)
+
+    def _integrate(self, dt: float) -> None:
+        q_new = self.q_arm + self.v_arm * dt
+        self.base_odom = integrate_pose(self.base_odom, self.model.base.body_twist(self.wheels), dt)
+        base_new = integrate_pose(self.base_true, self.slip.true_body_twist(self.wheels, dt), dt)
+        self.tau = np.zeros(N_ARM)
+        self.force = np.zeros(3)
+        self.stalled_joint = None
+        if self.box is not None:
+            kin = self.model.kinematics(base_new, q_new)
+            contact = self.box.check(kin.x, kin.J_m, self.torque_limit)
+            self.tau, self.force, self.stalled_joint = (
+                contact.tau,
+                contact.force,
+                contact.stalled_joint,
+            )
+            if contact.stalled:
+                return  # the robot is blocked by the box: neither the arm nor the base moves
+            if contact.in_contact:
+                self.box.slide_to(float(kin.x[0]))
+        self.q_arm, self.base_true = q_new, base_new
+
+    # ------------------------------------------------------------------ reporting
+    def state(self) -> SimState:
+        """The full state, ground truth included."""
+        return SimState(
+            t=self.t,
+            q_arm=self.q_arm.copy(),
+            v_arm=self.v_arm.copy(),
+            wheel_speeds=self.wheels.copy(),
+            base_odom=self.base_odom.copy(),
+            base_true=self.base_true.copy(),
+            ee_true=self.model.ee_position(self.base_true, self.q_arm),
+            tau=self.tau.copy(),
+            contact_force=self.force.copy(),
+            box_position=self.box.face_x if self.box is not None else float("nan"),
+            box_displacement=self.box.displacement if self.box is not None else float("nan"),
+            stalled_joint=self.stalled_joint,
+            violations=dict(self.referee.counts),
+            stale_stop=self.stale,
+            rejected_commands=self.rejected,
+            commands=self.n_commands,
+        )
+
+    def robot_state(self) -> wmm_qp.RobotState:
+        """What a controller sees: odometry base pose, joint angles, executed rates."""
+        return wmm_qp.RobotState(
+            q_base=self.base_odom.copy(),
+            q_arm=self.q_arm.copy(),
+            v_arm=self.v_arm.copy(),
+            wheel_speeds=self.wheels.copy(),
+        )
