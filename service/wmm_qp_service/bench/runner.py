@@ -1,0 +1,91 @@
+"""Run the selected sections and assemble one result object (the ``--json`` output)."""
+
+from __future__ import annotations
+
+import sys
+from typing import Any
+
+import wmm_qp as w
+from wmm_qp.solvers import available_solvers
+
+from . import controller, e2e, oneshot, pink_race, scaling
+from .machine import machine_info
+
+SECTIONS: tuple[str, ...] = ("controller", "oneshot", "pink", "scaling", "e2e")
+
+
+def run_bench(
+    ticks: int = 20000,
+    only: str | None = None,
+    solvers: list[str] | None = None,
+    modes: list[str] | None = None,
+    breakdown: bool = True,
+    max_seconds: float = 30.0,
+) -> dict[str, Any]:
+    """Every section (or ``only`` one); progress goes to stderr.
+
+    Args:
+        ticks: ticks per case (the one-shot section uses at most 5,000 problems, the scaling
+            section at most 10,000 ticks per model).
+        only: one of :data:`SECTIONS`, or None for all.
+        solvers: backends to measure (default: every available one).
+        modes: controller modes (default: all four).
+        breakdown: also run the instrumented pass of the controller section.
+        max_seconds: [s] wall-clock budget per timed pass (a pass stops early past it).
+
+    Returns:
+        {"machine", "ticks", "tick_us" {solver: {p50, p99, max}} (track mode), "controller",
+        "oneshot", "pink", "pink_tick_us" {p50, p99}, "scaling", "e2e", "targets"}.
+    """
+    robot, cfg = w.load_robot_config(), w.load_controller_config()
+    solvers = solvers or available_solvers()
+    modes = modes or list(controller.MODES)
+    out: dict[str, Any] = {"machine": machine_info(), "ticks": ticks, "rate_hz": cfg.rate_hz}
+    sections = SECTIONS if only is None else (only,)
+    if "controller" in sections:
+        res = controller.run(robot, cfg, solvers, modes, ticks, breakdown, max_seconds)
+        out["controller"] = res
+        if "track" in modes:
+            out["tick_us"] = controller.tick_table(res, "track")
+    if "oneshot" in sections:
+        out["oneshot"] = oneshot.run(robot, cfg, solvers, min(ticks, 5000))
+    if "pink" in sections:
+        race = pink_race.run(robot, cfg, ticks, max_seconds)
+        out["pink"] = race
+        if race.get("available"):
+            out["pink_tick_us"] = {k: race["pink"]["tick_us"][k] for k in ("p50", "p99")}
+    if "scaling" in sections:
+        out["scaling"] = scaling.run(robot, cfg, solvers, min(ticks, 10000), max_seconds)
+    if "e2e" in sections:
+        print("e2e: daemon + sim over Zenoh", file=sys.stderr, flush=True)
+        out["e2e"] = e2e.run(ticks)
+    out["targets"] = targets(out)
+    return out
+
+
+def targets(r: dict[str, Any]) -> dict[str, Any]:
+    """Issue 6's targets against this run's medians (None where the section did not run)."""
+    t: dict[str, Any] = {}
+    ticks = r.get("tick_us")
+    if ticks:
+        best = min(ticks, key=lambda s: ticks[s]["p50"])
+        t["fastest_backend"] = best
+        t["fastest_p50_le_120us"] = ticks[best]["p50"] <= 120.0
+        t["fastest_p99_le_250us"] = ticks[best]["p99"] <= 250.0
+        if "proxsuite" in ticks:
+            t["proxsuite_p50_le_150us"] = ticks["proxsuite"]["p50"] <= 150.0
+        ctl = r.get("controller", {})
+        ratios = {
+            s: round(c["dm_nullspace"]["tick_us"]["p50"] / c["track"]["tick_us"]["p50"], 2)
+            for s, c in ctl.items()
+            if "dm_nullspace" in c and "track" in c
+        }
+        if ratios:
+            t["nullspace_over_track_p50"] = ratios
+            t["nullspace_within_1_3x"] = all(v <= 1.3 for v in ratios.values())
+    race = r.get("pink")
+    if race and race.get("available"):
+        t["pink_over_ours_p50"] = race["ratio_p50"]
+        t["at_least_3x_faster_than_pink"] = race["ratio_p50"] >= 3.0
+        t["race_fair"] = race["fair"]
+    return t

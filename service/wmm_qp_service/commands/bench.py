@@ -1,0 +1,134 @@
+"""``wmm-qp bench``: per-tick controller time, one-shot vs persistent QPs, the pink race,
+scaling with the number of joints and the loop over Zenoh (issue 6, docs/benchmarks.md)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from typing import Any
+
+HELP = "measure per-tick controller time and the loop over Zenoh"
+
+_SECTIONS = ("controller", "oneshot", "pink", "scaling", "e2e")
+_MODES = ("hold", "track", "dm_cartesian", "dm_nullspace")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    parser.add_argument("--ticks", type=int, default=20000, help="ticks per case (default 20000)")
+    parser.add_argument("--only", choices=_SECTIONS, help="run one section only")
+    parser.add_argument(
+        "--solver",
+        action="append",
+        dest="solvers",
+        metavar="NAME",
+        help="a backend to measure (repeatable; default: every available one)",
+    )
+    parser.add_argument(
+        "--mode",
+        action="append",
+        dest="modes",
+        choices=_MODES,
+        help="a controller mode (repeatable; default: all four)",
+    )
+    parser.add_argument("--no-breakdown", action="store_true", help="skip the instrumented pass")
+    parser.add_argument(
+        "--max-seconds",
+        type=float,
+        default=30.0,
+        help="wall-clock budget per timed pass [s] (default 30)",
+    )
+
+
+def _clean(x: Any) -> Any:
+    """NaN → None so that the JSON is standard."""
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, dict):
+        return {k: _clean(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_clean(v) for v in x]
+    return x
+
+
+def _fmt(s: dict[str, Any]) -> str:
+    return f"p50 {s['p50']:8.1f}  p99 {s['p99']:8.1f}  max {s['max']:8.1f} µs  (n={s['n']})"
+
+
+def _print_report(r: dict[str, Any]) -> None:
+    m = r["machine"]
+    print(f"machine: {m['nproc']} cores, {m['cpu']}, Python {m['python']}, load {m['loadavg']}")
+    for solver, modes in r.get("controller", {}).items():
+        for mode, c in modes.items():
+            print(f"controller {solver:9s} {mode:12s} {_fmt(c['tick_us'])}  stages {c['stages']}")
+            if "pieces_us" in c:
+                parts = "  ".join(f"{k} {v['p50']:.1f}" for k, v in c["pieces_us"].items())
+                print(f"    breakdown p50 µs: {parts}")
+    one = r.get("oneshot", {})
+    for solver, o in one.items():
+        if isinstance(o, dict) and "oneshot_us" in o:
+            print(
+                f"oneshot    {solver:9s} qpsolvers {o['oneshot_us']['p50']:8.1f}  persistent "
+                f"{o['persistent_us']['p50']:8.1f} µs p50  ×{o['speedup_p50']}"
+            )
+    race = r.get("pink")
+    if race:
+        if race.get("available"):
+            for k in ("ours", "pink", "pink_accel"):
+                print(f"race       {k:10s} {_fmt(race[k]['tick_us'])}  valid {race[k]['valid']}")
+            print(
+                f"race       pink/ours p50 ×{race['ratio_p50']}  p99 ×{race['ratio_p99']}"
+                f"  fair {race['fair']}"
+            )
+        else:
+            print(f"race       {race['reason']}")
+    sc = r.get("scaling", {})
+    for solver, rows in sc.items():
+        if isinstance(rows, dict):
+            for n, row in rows.items():
+                print(
+                    f"scaling    {solver:9s} {n:>2s} arm joints ({row['n_vars']} vars) "
+                    f"{_fmt(row['tick_us'])}"
+                )
+    if "e2e" in r:
+        print(f"e2e        {r['e2e']}")
+    print(f"targets    {r['targets']}")
+
+
+def run(args: argparse.Namespace) -> int:
+    from wmm_qp.solvers import SOLVER_NAMES, available_solvers
+
+    if args.ticks < 1:
+        print("wmm-qp bench: error: --ticks must be at least 1", file=sys.stderr)
+        return 2
+    if args.max_seconds <= 0:
+        print("wmm-qp bench: error: --max-seconds must be positive", file=sys.stderr)
+        return 2
+    for s in args.solvers or []:
+        if s not in SOLVER_NAMES:
+            print(
+                f"wmm-qp bench: error: unknown solver {s!r}; choose from {', '.join(SOLVER_NAMES)}",
+                file=sys.stderr,
+            )
+            return 2
+        if s not in available_solvers():
+            print(f"wmm-qp bench: error: solver {s!r} is not installed", file=sys.stderr)
+            return 2
+    from wmm_qp_service.bench import run_bench
+
+    result = run_bench(
+        ticks=args.ticks,
+        only=args.only,
+        solvers=args.solvers,
+        modes=args.modes,
+        breakdown=not args.no_breakdown,
+        max_seconds=args.max_seconds,
+    )
+    if args.json:
+        json.dump(_clean(result), sys.stdout, indent=1)
+        print()
+    else:
+        _print_report(result)
+    return 0

@@ -1,0 +1,89 @@
+"""Smoke tests of ``wmm-qp bench``: tiny tick counts, the result's keys, no timing asserts."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from wmm_qp_service.bench import controller, oneshot, pink_race, scaling
+from wmm_qp_service.bench.stats import PieceTimer, summarize_ns
+from wmm_qp_service.cli import main
+
+import wmm_qp as w
+
+
+def test_summarize_ns_percentiles() -> None:
+    s = summarize_ns(np.arange(1, 101) * 1000)  # 1..100 µs
+    assert s["n"] == 100
+    assert s["p50"] == pytest.approx(50.5)
+    assert s["max"] == pytest.approx(100.0)
+    assert np.isnan(summarize_ns([])["p50"])
+
+
+def test_piece_timer_accumulates_within_a_tick() -> None:
+    t = PieceTimer(["a", "b"])
+    t.add("a", 1000)
+    t.add("a", 2000)
+    t.flush()
+    t.flush()
+    assert t.samples == {"a": [3000, 0], "b": [0, 0]}
+
+
+def test_controller_case_keys_and_breakdown_restores_the_controller() -> None:
+    robot, cfg = w.load_robot_config(), w.load_controller_config()
+    r = controller.run_case(robot, cfg, "daqp", "dm_nullspace", ticks=20)
+    assert r["tick_us"]["n"] == 20 and r["breakdown_tick_us"]["n"] == 20
+    assert set(r["pieces_us"]) == set(controller.PIECES)
+    assert r["pieces_us"]["kinematics"]["p50"] > 0 and r["pieces_us"]["solve"]["p50"] > 0
+    assert r["max_rate_excess"] <= 1e-9
+    import wmm_qp.controllers.base as base
+
+    assert base.dm_gradient.__module__ == "wmm_qp.manipulability.directional"  # unpatched
+
+
+def test_oneshot_agrees_with_persistent() -> None:
+    r = oneshot.run(w.load_robot_config(), w.load_controller_config(), ["daqp"], 5)
+    assert r["n_problems"] > 0
+    assert r["daqp"]["max_abs_diff"] < 1e-6
+    assert r["daqp"]["failures_persistent"] == 0
+
+
+def test_scaling_models_have_the_right_sizes(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    robot, cfg = w.load_robot_config(), w.load_controller_config()
+    models = scaling.build_models(robot, tmp_path)
+    assert {n: m.n for n, m in models.items()} == {6: 6, 7: 7, 14: 14}
+    assert len(models[14].frames) == 2
+    r = scaling.run_one(models[14], cfg, "daqp", ticks=5, max_seconds=10)
+    assert r["n_vars"] == 4 + 14 + 6 and r["failures"] == 0
+
+
+def test_pink_race_runs_and_is_checked() -> None:
+    pytest.importorskip("pink")
+    r = pink_race.run(w.load_robot_config(), w.load_controller_config(), ticks=10)
+    assert r["available"]
+    for k in ("ours", "pink", "pink_accel"):
+        assert r[k]["tick_us"]["n"] == 10
+        assert r[k]["failures"] == 0
+        assert r[k]["max_limit_excess"] <= 1e-3
+    assert r["ratio_p50"] > 0
+
+
+def test_cli_json_has_the_required_keys(capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("pink")
+    rc = main(
+        ["bench", "--json", "--ticks", "5", "--solver", "daqp", "--mode", "track", "--no-breakdown"]
+    )
+    assert rc == 0
+    out = json.loads(capsys.readouterr().out)
+    assert set(out["tick_us"]["daqp"]) >= {"p50", "p99"}
+    assert set(out["pink_tick_us"]) == {"p50", "p99"}
+    assert "available" in out["e2e"]
+    assert out["machine"]["nproc"] >= 1
+
+
+def test_cli_user_errors_exit_2(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["bench", "--ticks", "0"]) == 2
+    assert main(["bench", "--solver", "nope"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "error" in err
