@@ -1,0 +1,50 @@
+"""Arguments and helpers shared by the service's subcommands."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import threading
+from types import FrameType
+
+from .config import ServiceConfig, check_name, load_service_config
+
+
+def add_service_arguments(p: argparse.ArgumentParser) -> None:
+    """--service-config, --robot, --prefix, --daemon-endpoint, --sim-endpoint."""
+    g = p.add_argument_group("service")
+    g.add_argument("--service-config", metavar="TOML", help="service config (default: configs/service.toml)")
+    g.add_argument("--robot", help="robot id (default: from the service config)")
+    g.add_argument("--prefix", help="key-expression prefix (default: from the service config)")
+    g.add_argument("--daemon-endpoint", metavar="EP", help="e.g. tcp/127.0.0.1:7448")
+    g.add_argument("--sim-endpoint", metavar="EP", help="e.g. tcp/127.0.0.1:7447")
+
+
+def service_config(args: argparse.Namespace) -> ServiceConfig:
+    """The service config with the command line's overrides applied."""
+    cfg = load_service_config(getattr(args, "service_config", None))
+    changes: dict[str, object] = {}
+    if getattr(args, "robot", None):
+        changes["robot"] = check_name(args.robot, "--robot")
+    if getattr(args, "prefix", None):
+        changes["prefix"] = check_name(args.prefix, "--prefix")
+    z: dict[str, str] = {}
+    if getattr(args, "daemon_endpoint", None):
+        z["daemon_endpoint"] = args.daemon_endpoint
+    if getattr(args, "sim_endpoint", None):
+        z["sim_endpoint"] = args.sim_endpoint
+    if z:
+        changes["zenoh"] = z
+    return cfg.with_(**changes) if changes else cfg
+
+
+def stop_on_signals() -> threading.Event:
+    """An event set by SIGINT or SIGTERM (so sessions are closed cleanly)."""
+    stop = threading.Event()
+
+    def handler(signum: int, frame: FrameType | None) -> None:
+        stop.set()
+
+    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGTERM, handler)
+    return stop

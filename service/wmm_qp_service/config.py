@@ -1,0 +1,204 @@
+"""The service's own configuration (``configs/service.toml``), loaded into frozen dataclasses.
+
+Every check names the file and the dotted key (:class:`wmm_qp.ConfigError`).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from wmm_qp import ConfigError, default_config_dir
+
+_NAME = re.compile(r"^[A-Za-z0-9_\-]+(/[A-Za-z0-9_\-]+)*$")
+
+
+@dataclass(frozen=True)
+class ZenohConfig:
+    """Transport settings.
+
+    Attributes:
+        config: path of the base Zenoh JSON5 session config.
+        daemon_endpoint: where the daemon listens (clients connect here).
+        sim_endpoint: where the sim listens (the daemon and clients connect here).
+    """
+
+    config: Path | None = None
+    daemon_endpoint: str = "tcp/127.0.0.1:7448"
+    sim_endpoint: str = "tcp/127.0.0.1:7447"
+
+
+@dataclass(frozen=True)
+class LoopConfig:
+    """The daemon's fixed-rate loop.
+
+    Attributes:
+        rate_hz: [Hz] control rate.
+        spin_us: [µs] the loop sleeps until this long before the deadline, then spins.
+        status_hz: [Hz] status publication rate.
+        telemetry_every: publish telemetry every N ticks (0 = never).
+    """
+
+    rate_hz: float = 500.0
+    spin_us: float = 200.0
+    status_hz: float = 10.0
+    telemetry_every: int = 1
+
+
+@dataclass(frozen=True)
+class WatchdogConfig:
+    """Timeouts.
+
+    Attributes:
+        state_timeout: [s] no valid state for this long → safe stop.
+        setpoint_timeout: [s] no setpoint for this long → the smoothed target comes to rest.
+    """
+
+    state_timeout: float = 0.05
+    setpoint_timeout: float = 0.25
+
+
+@dataclass(frozen=True)
+class SmoothingConfig:
+    """Ruckig limits of the smoothed Cartesian setpoint, per axis.
+
+    Attributes:
+        v_max: [m/s] velocity limit.
+        a_max: [m/s²] acceleration limit.
+        j_max: [m/s³] jerk limit.
+    """
+
+    v_max: float = 0.25
+    a_max: float = 1.0
+    j_max: float = 10.0
+
+
+@dataclass(frozen=True)
+class ValidationConfig:
+    """Ranges incoming messages are checked against (beyond sizes and finiteness).
+
+    Attributes:
+        position_abs_max: [m] max |x|, |y| of a setpoint.
+        z_min, z_max: [m] range of a setpoint's z.
+        speed_max: [m/s] max norm of a setpoint's feed-forward velocity.
+        state_abs_max: max |value| of any entry of a state message.
+        command_abs_max: [rad/s] max |entry| of a command message.
+    """
+
+    position_abs_max: float = 100.0
+    z_min: float = -0.5
+    z_max: float = 2.0
+    speed_max: float = 2.0
+    state_abs_max: float = 1e3
+    command_abs_max: float = 1e2
+
+
+@dataclass(frozen=True)
+class ServiceConfig:
+    """Everything the daemon, the sim's adapter and clients agree on.
+
+    Attributes:
+        robot: robot id carried by every message.
+        prefix: first segment(s) of every key expression (``<prefix>/<robot>/...``).
+    """
+
+    robot: str = "wmm"
+    prefix: str = "wmm"
+    zenoh: ZenohConfig = field(default_factory=ZenohConfig)
+    loop: LoopConfig = field(default_factory=LoopConfig)
+    watchdog: WatchdogConfig = field(default_factory=WatchdogConfig)
+    smoothing: SmoothingConfig = field(default_factory=SmoothingConfig)
+    validation: ValidationConfig = field(default_factory=ValidationConfig)
+
+    def with_(self, **changes: Any) -> ServiceConfig:
+        """A copy with some fields changed; nested sections may be given as dicts."""
+        for name in ("zenoh", "loop", "watchdog", "smoothing", "validation"):
+            if isinstance(changes.get(name), dict):
+                changes[name] = replace(getattr(self, name), **changes[name])
+        return replace(self, **changes)
+
+
+def _section(path: Path, data: dict[str, Any], name: str, cls: type, base: Any) -> Any:
+    raw = data.get(name, {})
+    if not isinstance(raw, dict):
+        raise ConfigError(path, name, "must be a table")
+    out = {}
+    for k, v in raw.items():
+        key = f"{name}.{k}"
+        if k not in cls.__dataclass_fields__:
+            raise ConfigError(path, key, "unknown key")
+        default = getattr(base, k)
+        if k == "config":
+            p = Path(v)
+            out[k] = p if p.is_absolute() else path.parent / p
+            continue
+        if isinstance(default, str):
+            if not isinstance(v, str) or not v:
+                raise ConfigError(path, key, "must be a non-empty string")
+        elif isinstance(default, bool | int) and not isinstance(default, float):
+            if not isinstance(v, int) or isinstance(v, bool) or v < 0:
+                raise ConfigError(path, key, "must be an integer >= 0")
+        else:
+            if not isinstance(v, int | float) or isinstance(v, bool) or not math.isfinite(v):
+                raise ConfigError(path, key, "must be a finite number")
+            v = float(v)
+            if k not in ("z_min",) and v <= 0:
+                raise ConfigError(path, key, "must be > 0")
+        out[k] = v
+    return replace(base, **out)
+
+
+def load_service_config(path: Path | str | None = None) -> ServiceConfig:
+    """Load and validate ``service.toml`` (default: the config folder's, else built-in defaults).
+
+    Raises:
+        ConfigError: unreadable file, unknown key or invalid value (names file and key).
+    """
+    if path is None:
+        p = default_config_dir() / "service.toml"
+        if not p.is_file():
+            return ServiceConfig()
+    else:
+        p = Path(path)
+    try:
+        data = tomllib.loads(p.read_text())
+    except OSError as e:
+        raise ConfigError(p, "", f"cannot read: {e.strerror}") from None
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(p, "", f"invalid TOML: {e}") from None
+    sections = ("zenoh", "loop", "watchdog", "smoothing", "validation")
+    for k in data:
+        if k not in (*sections, "robot", "prefix"):
+            raise ConfigError(p, k, "unknown key")
+    base = ServiceConfig()
+    for k in ("robot", "prefix"):
+        v = data.get(k, getattr(base, k))
+        if not isinstance(v, str) or not _NAME.match(v):
+            raise ConfigError(p, k, "must be a non-empty key segment (letters, digits, _ -)")
+    cfg = ServiceConfig(
+        robot=data.get("robot", base.robot),
+        prefix=data.get("prefix", base.prefix),
+        zenoh=_section(p, data, "zenoh", ZenohConfig, base.zenoh),
+        loop=_section(p, data, "loop", LoopConfig, base.loop),
+        watchdog=_section(p, data, "watchdog", WatchdogConfig, base.watchdog),
+        smoothing=_section(p, data, "smoothing", SmoothingConfig, base.smoothing),
+        validation=_section(p, data, "validation", ValidationConfig, base.validation),
+    )
+    if cfg.validation.z_min >= cfg.validation.z_max:
+        raise ConfigError(p, "validation.z_min", "must be < validation.z_max")
+    return cfg
+
+
+def check_name(value: str, what: str) -> str:
+    """Validate a robot id or prefix given on the command line.
+
+    Raises:
+        ConfigError: not a valid key segment.
+    """
+    if not _NAME.match(value):
+        raise ConfigError("<command line>", what, "must be letters, digits, _ or - (segments split by /)")
+    return value

@@ -1,0 +1,223 @@
+"""Typed, versioned wire messages (msgspec Structs, msgpack-encoded).
+
+Every message is a msgpack map with ``type`` (the schema's tag), ``v`` (protocol version),
+``robot`` (the robot id), ``seq`` (sender's counter) and ``stamp`` ([s], sender's
+``time.time()``), plus its own fields. Vectors are lists of floats with fixed lengths,
+checked on receipt by :mod:`wmm_qp_service.validation`. Units are SI, angles rad.
+See docs/protocol.md.
+"""
+
+from __future__ import annotations
+
+from typing import Any, TypeVar
+
+import msgspec
+
+PROTOCOL_VERSION = 1
+"""Bumped on any incompatible change of a schema below."""
+
+
+class _Msg(msgspec.Struct, kw_only=True, forbid_unknown_fields=True, tag_field="type"):
+    v: int = PROTOCOL_VERSION
+    robot: str
+    seq: int = 0
+    stamp: float = 0.0
+
+
+class Header(msgspec.Struct, forbid_unknown_fields=False):
+    """The fields every message has (used to explain a rejected message)."""
+
+    type: str | None = None
+    v: int | None = None
+    robot: str | None = None
+
+
+class StateMsg(_Msg, tag="state"):
+    """sim → daemon: the robot's measured state (published at the sim's rate).
+
+    Attributes:
+        t: [s] sim time.
+        q_base: [m, m, rad] base pose from odometry (what a controller may use).
+        q_arm: [rad] 7 joint angles.
+        v_arm: [rad/s] 7 executed joint rates.
+        wheel_speeds: [rad/s] 4 executed wheel speeds (FL, FR, RL, RR).
+        base_true: [m, m, rad] ground-truth base pose (for evaluation only).
+        ee_true: [m] ground-truth EE position ("motion capture").
+        tau: [N·m] 7 joint torques from the contact model.
+        contact_force: [N] 3 EE contact force.
+        box_position: [m] box position along the push axis (nan: no box).
+        violations: limit-referee counts by kind.
+        stale_stop: the sim is braking because commands went stale.
+        cmd_seq: seq of the last command the sim applied (-1: none).
+    """
+
+    t: float
+    q_base: list[float]
+    q_arm: list[float]
+    v_arm: list[float]
+    wheel_speeds: list[float]
+    base_true: list[float]
+    ee_true: list[float]
+    tau: list[float]
+    contact_force: list[float]
+    box_position: float = float("nan")
+    violations: dict[str, int] = msgspec.field(default_factory=dict)
+    stale_stop: bool = False
+    cmd_seq: int = -1
+
+
+class CommandMsg(_Msg, tag="cmd"):
+    """daemon → sim: one tick's command, held by the sim until the next.
+
+    Attributes:
+        wheel_speeds: [rad/s] 4 wheel speeds (FL, FR, RL, RR).
+        arm_rates: [rad/s] 7 joint rates.
+        status: controller status (ok, saturated, damped, safe_stop).
+    """
+
+    wheel_speeds: list[float]
+    arm_rates: list[float]
+    status: str = "ok"
+
+
+class SetpointMsg(_Msg, tag="setpoint"):
+    """client → daemon: an EE target (world frame).
+
+    Attributes:
+        x: [m] target EE position.
+        xd: [m/s] the target's velocity (feed-forward, e.g. a scripted trajectory);
+            None: the daemon estimates it from the stream.
+    """
+
+    x: list[float]
+    xd: list[float] | None = None
+
+
+class ModeMsg(_Msg, tag="mode"):
+    """client → daemon: change the mode.
+
+    Attributes:
+        mode: hold | track | dm_cartesian | dm_nullspace.
+        direction: DM direction u (base, yaw-compensated frame); None: the config's.
+    """
+
+    mode: str
+    direction: list[float] | None = None
+
+
+class LoopStats(msgspec.Struct, kw_only=True):
+    """Loop timing figures.
+
+    Attributes:
+        rate_hz: [Hz] configured rate.
+        measured_hz: [Hz] ticks per second since start.
+        ticks: ticks run.
+        deadline_misses: ticks that started after their deadline.
+        tick_p50_us, tick_p99_us, tick_max_us: [µs] work time per tick (recent window; max: ever).
+    """
+
+    rate_hz: float = 0.0
+    measured_hz: float = 0.0
+    ticks: int = 0
+    deadline_misses: int = 0
+    tick_p50_us: float = 0.0
+    tick_p99_us: float = 0.0
+    tick_max_us: float = 0.0
+
+
+class StatusMsg(_Msg, tag="status"):
+    """daemon → all: what the daemon is doing (~10 Hz, and on the ``info`` query).
+
+    Attributes:
+        mode: current mode.
+        state_ok: a fresh, valid state is arriving.
+        safe_stop: the daemon is commanding a safe stop.
+        controller_status, reason: of the last command.
+        last_fault: the last fault seen ("" = none), e.g. "state stale", "sim lost".
+        loop: timing figures.
+        rejected: rejected messages, by reason.
+        accepted: accepted messages, by key (state, setpoint, mode).
+        sim_violations: the sim's referee counts, by kind (from the last state).
+        x, x_d: [m] EE position (model, odometry) and smoothed target.
+        dm: directional manipulability along the active direction.
+        sim_alive: the sim's liveliness token is present.
+    """
+
+    mode: str
+    state_ok: bool
+    safe_stop: bool
+    controller_status: str = ""
+    reason: str = ""
+    last_fault: str = ""
+    loop: LoopStats = msgspec.field(default_factory=LoopStats)
+    rejected: dict[str, int] = msgspec.field(default_factory=dict)
+    accepted: dict[str, int] = msgspec.field(default_factory=dict)
+    sim_violations: dict[str, int] = msgspec.field(default_factory=dict)
+    x: list[float] = msgspec.field(default_factory=list)
+    x_d: list[float] = msgspec.field(default_factory=list)
+    dm: float = float("nan")
+    sim_alive: bool = False
+
+
+class TelemetryMsg(_Msg, tag="telemetry"):
+    """daemon → all: one tick (every ``loop.telemetry_every`` ticks).
+
+    Attributes:
+        t: [s] daemon time since start.
+        mode: current mode.
+        x: [m] EE position (model, odometry base pose).
+        x_d, xd_d: [m], [m/s] the reference handed to the controller.
+        ee_true: [m] ground-truth EE position from the last state.
+        ee_error: [m] ‖ee_true − x_d‖ (tracking modes), nan otherwise.
+        wheel_speeds, arm_rates: [rad/s] the command.
+        status: controller status.
+        dm: directional manipulability.
+        task_error: [m/s] ‖J v − ẋ_ref‖.
+        tick_us: [µs] work time of this tick.
+    """
+
+    t: float
+    mode: str
+    x: list[float]
+    x_d: list[float]
+    xd_d: list[float]
+    ee_true: list[float]
+    ee_error: float
+    wheel_speeds: list[float]
+    arm_rates: list[float]
+    status: str
+    dm: float
+    task_error: float
+    tick_us: float
+
+
+class InfoMsg(_Msg, tag="info"):
+    """Reply of the ``info`` queryable: status plus the running configuration.
+
+    Attributes:
+        status: the current status.
+        config: service, controller settings as plain data.
+    """
+
+    status: StatusMsg
+    config: dict[str, Any] = msgspec.field(default_factory=dict)
+
+
+_ENC = msgspec.msgpack.Encoder()
+
+T = TypeVar("T", bound=msgspec.Struct)
+
+
+def encode(msg: msgspec.Struct) -> bytes:
+    """msgpack bytes of a message."""
+    return _ENC.encode(msg)
+
+
+def decoder(cls: type[T]) -> msgspec.msgpack.Decoder[T]:
+    """A reusable strict decoder for one message type."""
+    return msgspec.msgpack.Decoder(cls)
+
+
+def decode(cls: type[T], data: bytes) -> T:
+    """Decode one message of a known type (raises :class:`msgspec.DecodeError`)."""
+    return msgspec.msgpack.decode(data, type=cls)

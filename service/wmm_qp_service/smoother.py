@@ -1,0 +1,174 @@
+"""Ruckig online smoothing of a streamed Cartesian setpoint (3-DOF position).
+
+Each control tick Ruckig (online, velocity interface, axes independent) moves the smoothed
+setpoint towards the velocity ``v_t + k_p (x_t − x_s)``: the target's velocity v_t plus a
+proportional pull onto the target position x_t (extrapolated at v_t between samples). The
+result is a jerk-limited trajectory within per-axis velocity, acceleration and jerk limits.
+
+Why not Ruckig's position interface? Re-planning a time-optimal point-to-point profile
+towards a target that moves on every tick is unstable: a sub-millimetre jitter of the
+target flips the optimal profile (decelerate-then-catch-up), and a steadily moving,
+slightly noisy stream then comes out as stop-and-go with centimetre errors (measured while
+building this: speed dropping from 0.11 to 0.003 m/s, 3 cm lag). The velocity
+interface with the target's velocity as feed-forward follows it smoothly (0.6 mm lag at
+0.2 mm jitter) and still lands on a standing target without overshoot to speak of.
+
+The target's velocity is given by the client (feed-forward of a scripted trajectory) or
+estimated from the stream (:class:`VelocityEstimator`). A stale stream is brought to rest.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+from ruckig import ControlInterface, InputParameter, OutputParameter, Result, Ruckig, Synchronization
+
+FloatArray = NDArray[np.float64]
+
+
+class VelocityEstimator:
+    """Target position and velocity from a jittery, jumpy stream (an α-β filter).
+
+    Uses the sender's time stamps. A residual longer than ``jump`` is a jump, not motion:
+    the filter restarts at the new position with zero velocity.
+
+    Args:
+        alpha: position gain of the filter (1 = trust each sample fully).
+        beta: velocity gain of the filter.
+        jump: [m] residual treated as a jump.
+        v_max: [m/s] per-axis clip of the estimate.
+    """
+
+    def __init__(self, alpha: float = 0.5, beta: float = 0.1, jump: float = 0.05,
+                 v_max: float = np.inf) -> None:
+        self.alpha = alpha
+        self.beta = beta
+        self.jump = jump
+        self.v_max = v_max
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the stream."""
+        self.x: FloatArray | None = None
+        self._t = 0.0
+        self.v = np.zeros(3)
+
+    def update(self, x: FloatArray, t: float) -> tuple[FloatArray, FloatArray]:
+        """Add a sample: position [m] at sender time t [s].
+
+        Returns:
+            (filtered position [m], velocity [m/s]).
+        """
+        x = np.asarray(x, dtype=float)
+        dt = t - self._t
+        if self.x is None or dt > 0.5 or dt <= 0.0:
+            if self.x is None or dt > 0.5:
+                self.x, self.v = x.copy(), np.zeros(3)
+            self._t = max(self._t, t) if self.x is not None else t
+            return self.x.copy(), self.v.copy()
+        predicted = self.x + self.v * dt
+        r = x - predicted
+        self._t = t
+        if np.linalg.norm(r) > self.jump:
+            self.x, self.v = x.copy(), np.zeros(3)
+            return self.x.copy(), self.v.copy()
+        self.x = predicted + self.alpha * r
+        self.v = np.clip(self.v + (self.beta / dt) * r, -self.v_max, self.v_max)
+        return self.x.copy(), self.v.copy()
+
+
+class SetpointSmoother:
+    """Online jerk-limited smoothing of the EE target (Ruckig, per tick).
+
+    Args:
+        dt: [s] control period.
+        v_max: [m/s] per-axis velocity limit.
+        a_max: [m/s²] per-axis acceleration limit.
+        j_max: [m/s³] per-axis jerk limit.
+        gain: [1/s] k_p, pull onto the target position.
+    """
+
+    def __init__(self, dt: float, v_max: float, a_max: float, j_max: float, gain: float = 4.0) -> None:
+        self.dt = dt
+        self.v_max = v_max
+        self.gain = gain
+        self._otg = Ruckig(3, dt)
+        self._inp = InputParameter(3)
+        self._out = OutputParameter(3)
+        self._inp.max_velocity = [v_max] * 3
+        self._inp.max_acceleration = [a_max] * 3
+        self._inp.max_jerk = [j_max] * 3
+        # Axes are independent: time synchronisation would bend one axis to another's noise.
+        self._inp.synchronization = Synchronization.No
+        self._inp.control_interface = ControlInterface.Velocity
+        self._inp.target_acceleration = [0.0, 0.0, 0.0]
+        self.position = np.zeros(3)
+        self.velocity = np.zeros(3)
+        self.acceleration = np.zeros(3)
+        self.resting = True
+        self.errors = 0
+        self._target_x = np.zeros(3)
+        self._target_v = np.zeros(3)
+        self.reset(np.zeros(3))
+
+    def reset(self, x: FloatArray, v: FloatArray | None = None, a: FloatArray | None = None) -> None:
+        """Restart from the current EE state [m], [m/s], [m/s²], then come to rest there."""
+        self.position = np.asarray(x, dtype=float).copy()
+        self.velocity = (np.zeros(3) if v is None
+                         else np.clip(np.asarray(v, dtype=float), -self.v_max, self.v_max))
+        self.acceleration = np.zeros(3) if a is None else np.asarray(a, dtype=float).copy()
+        self._sync_input()
+        self.bring_to_rest()
+
+    def _sync_input(self) -> None:
+        self._inp.current_position = self.position.tolist()
+        self._inp.current_velocity = self.velocity.tolist()
+        self._inp.current_acceleration = self.acceleration.tolist()
+
+    def set_target(self, x: FloatArray, v: FloatArray | None = None) -> None:
+        """Follow a new target: position x [m] now, moving with velocity v [m/s] (None = at rest).
+
+        Until the next sample, the target is extrapolated at v every tick.
+        """
+        self._target_x = np.asarray(x, dtype=float).copy()
+        self._target_v = (np.zeros(3) if v is None
+                          else np.clip(np.asarray(v, dtype=float), -self.v_max, self.v_max))
+        self.resting = False
+
+    def bring_to_rest(self) -> None:
+        """Stop following: decelerate to zero velocity within the limits, then hold."""
+        self._target_v = np.zeros(3)
+        self.resting = True
+
+    @property
+    def target(self) -> FloatArray:
+        """[m] the (extrapolated) target position being followed."""
+        return self._target_x.copy()
+
+    def step(self) -> tuple[FloatArray, FloatArray]:
+        """Advance one period; returns (x_d [m], ẋ_d [m/s]). Never raises.
+
+        On a Ruckig error the setpoint holds still (counted in :attr:`errors`); the
+        controller's own acceleration bounds keep the robot's command continuous.
+        """
+        if self.resting:
+            v_cmd = np.zeros(3)
+        else:
+            self._target_x = self._target_x + self._target_v * self.dt
+            v_cmd = self._target_v + self.gain * (self._target_x - self.position)
+        self._inp.target_velocity = np.clip(v_cmd, -self.v_max, self.v_max).tolist()
+        try:
+            ok = self._otg.update(self._inp, self._out) in (Result.Working, Result.Finished)
+        except Exception:
+            ok = False
+        if ok:
+            self.position = np.array(self._out.new_position)
+            self.velocity = np.array(self._out.new_velocity)
+            self.acceleration = np.array(self._out.new_acceleration)
+            self._out.pass_to_input(self._inp)
+        else:
+            self.errors += 1
+            self.velocity = np.zeros(3)
+            self.acceleration = np.zeros(3)
+            self._sync_input()
+        return self.position.copy(), self.velocity.copy()

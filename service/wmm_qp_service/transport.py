@@ -1,0 +1,52 @@
+"""Zenoh sessions: peer mode, no multicast scouting, explicit loopback endpoints.
+
+The only module (with the sim's adapter) that opens Zenoh sessions. Always use the
+session as a context manager (or close it): an open session with a subscriber hangs the
+process at exit.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+
+import zenoh
+
+from .config import ServiceConfig
+
+ROLE_DAEMON = "daemon"
+ROLE_SIM = "sim"
+ROLE_CLIENT = "client"
+
+
+def session_config(cfg: ServiceConfig, role: str) -> zenoh.Config:
+    """The Zenoh config of one process.
+
+    The daemon listens on ``daemon_endpoint`` and connects to the sim; the sim listens on
+    ``sim_endpoint``; a client listens nowhere and connects to both. Peers retry their
+    connects in the background, so the start order does not matter.
+
+    Args:
+        cfg: service config (base JSON5 file and endpoints).
+        role: ``daemon``, ``sim`` or ``client``.
+    """
+    z = cfg.zenoh
+    zc = zenoh.Config.from_file(str(z.config)) if z.config is not None else zenoh.Config()
+    listen: Sequence[str]
+    connect: Sequence[str]
+    if role == ROLE_DAEMON:
+        listen, connect = [z.daemon_endpoint], [z.sim_endpoint]
+    elif role == ROLE_SIM:
+        listen, connect = [z.sim_endpoint], []
+    else:
+        listen, connect = [], [z.daemon_endpoint, z.sim_endpoint]
+    zc.insert_json5("mode", json.dumps("peer"))
+    zc.insert_json5("scouting/multicast/enabled", "false")
+    zc.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    zc.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    return zc
+
+
+def open_session(cfg: ServiceConfig, role: str) -> zenoh.Session:
+    """Open a Zenoh session for ``role`` (see :func:`session_config`)."""
+    return zenoh.open(session_config(cfg, role))

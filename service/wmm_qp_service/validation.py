@@ -1,0 +1,162 @@
+"""Validation on receipt: bytes → a checked message, or a rejection reason (counted).
+
+Nothing malformed reaches the controller. Checks, in order: msgpack at all (``decode``),
+the expected schema (``schema``; ``version`` when the header shows another protocol
+version), the robot id (``robot``), vector sizes (``size``), NaN/inf (``non_finite``),
+ranges (``range``), the mode name (``mode``).
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections import Counter
+from collections.abc import Iterable
+from typing import Generic, TypeVar
+
+import msgspec
+
+from wmm_qp import Mode
+
+from .config import ValidationConfig
+from .protocol import PROTOCOL_VERSION, CommandMsg, Header, ModeMsg, SetpointMsg, StateMsg
+
+
+class Reject(enum.StrEnum):
+    """Why a message was rejected."""
+
+    DECODE = "decode"  # not msgpack
+    SCHEMA = "schema"  # msgpack, but not the expected message type / fields / types
+    VERSION = "version"  # another protocol version
+    ROBOT = "robot"  # addressed to another robot
+    SIZE = "size"  # a vector has the wrong number of entries
+    NON_FINITE = "non_finite"  # NaN or inf
+    RANGE = "range"  # a value out of its allowed range
+    MODE = "mode"  # unknown mode name
+
+
+class Rejected(Exception):
+    """A message failed validation.
+
+    Attributes:
+        reason: the :class:`Reject` reason.
+        detail: a human-readable explanation.
+    """
+
+    def __init__(self, reason: Reject, detail: str) -> None:
+        self.reason = reason
+        self.detail = detail
+        super().__init__(f"{reason}: {detail}")
+
+
+M = TypeVar("M", bound=msgspec.Struct)
+
+_HEADER = msgspec.msgpack.Decoder(Header)
+
+
+def _finite(name: str, values: Iterable[float]) -> None:
+    for v in values:
+        if not math.isfinite(v):
+            raise Rejected(Reject.NON_FINITE, f"{name} holds {v}")
+
+
+def _vector(name: str, values: list[float] | None, n: int, abs_max: float) -> None:
+    if values is None:
+        return
+    if len(values) != n:
+        raise Rejected(Reject.SIZE, f"{name} has {len(values)} entries, expected {n}")
+    _finite(name, values)
+    for v in values:
+        if abs(v) > abs_max:
+            raise Rejected(Reject.RANGE, f"|{name}| entry {v:g} exceeds {abs_max:g}")
+
+
+class Validator(Generic[M]):
+    """Decodes and checks one message type for one robot, counting rejections.
+
+    Args:
+        cls: the expected message type.
+        robot: the robot id messages must carry.
+        limits: the ranges to check.
+    """
+
+    def __init__(self, cls: type[M], robot: str, limits: ValidationConfig) -> None:
+        self.cls = cls
+        self.robot = robot
+        self.limits = limits
+        self._decoder = msgspec.msgpack.Decoder(cls)
+        self.rejected: Counter[str] = Counter()
+        self.accepted = 0
+        self.last_rejection = ""
+
+    def __call__(self, data: bytes) -> M | None:
+        """The checked message, or None (the reason is counted in :attr:`rejected`)."""
+        try:
+            msg = self.check(data)
+        except Rejected as e:
+            self.rejected[e.reason.value] += 1
+            self.last_rejection = f"{self.cls.__name__}: {e}"
+            return None
+        self.accepted += 1
+        return msg
+
+    def check(self, data: bytes) -> M:
+        """Decode and check ``data``.
+
+        Raises:
+            Rejected: with the reason.
+        """
+        try:
+            msg = self._decoder.decode(data)
+        except msgspec.ValidationError as e:
+            raise self._explain(data, str(e)) from None
+        except msgspec.DecodeError as e:
+            raise Rejected(Reject.DECODE, str(e)) from None
+        except Exception as e:  # never let anything escape into the loop
+            raise Rejected(Reject.DECODE, f"{type(e).__name__}: {e}") from None
+        if msg.v != PROTOCOL_VERSION:  # type: ignore[attr-defined]
+            raise Rejected(Reject.VERSION, f"version {msg.v}, expected {PROTOCOL_VERSION}")  # type: ignore[attr-defined]
+        if msg.robot != self.robot:  # type: ignore[attr-defined]
+            raise Rejected(Reject.ROBOT, f"robot {msg.robot!r}, expected {self.robot!r}")  # type: ignore[attr-defined]
+        self._check_fields(msg)
+        return msg
+
+    def _explain(self, data: bytes, detail: str) -> Rejected:
+        """A schema failure: say ``version`` or ``robot`` when the header shows why."""
+        try:
+            h = _HEADER.decode(data)
+        except Exception:
+            return Rejected(Reject.SCHEMA, detail)
+        if h.v is not None and h.v != PROTOCOL_VERSION:
+            return Rejected(Reject.VERSION, f"version {h.v}, expected {PROTOCOL_VERSION}")
+        return Rejected(Reject.SCHEMA, detail)
+
+    def _check_fields(self, msg: msgspec.Struct) -> None:
+        lim = self.limits
+        if isinstance(msg, SetpointMsg):
+            _vector("x", msg.x, 3, math.inf)
+            _vector("xd", msg.xd, 3, math.inf)
+            if max(abs(msg.x[0]), abs(msg.x[1])) > lim.position_abs_max:
+                raise Rejected(Reject.RANGE, f"x, y beyond ±{lim.position_abs_max:g} m")
+            if not lim.z_min <= msg.x[2] <= lim.z_max:
+                raise Rejected(Reject.RANGE, f"z = {msg.x[2]:g} m outside [{lim.z_min:g}, {lim.z_max:g}]")
+            if msg.xd is not None and math.sqrt(sum(v * v for v in msg.xd)) > lim.speed_max:
+                raise Rejected(Reject.RANGE, f"|xd| beyond {lim.speed_max:g} m/s")
+        elif isinstance(msg, ModeMsg):
+            if msg.mode not in Mode._value2member_map_:
+                raise Rejected(Reject.MODE, f"unknown mode {msg.mode!r}")
+            _vector("direction", msg.direction, 3, math.inf)
+            if msg.direction is not None and math.sqrt(sum(v * v for v in msg.direction)) < 1e-9:
+                raise Rejected(Reject.RANGE, "direction is zero")
+        elif isinstance(msg, StateMsg):
+            m = lim.state_abs_max
+            _finite("t", [msg.t])
+            for name, n in (("q_base", 3), ("q_arm", 7), ("v_arm", 7), ("wheel_speeds", 4)):
+                _vector(name, getattr(msg, name), n, m)
+            for name, n in (("base_true", 3), ("ee_true", 3), ("tau", 7), ("contact_force", 3)):
+                vals = getattr(msg, name)
+                if len(vals) != n:
+                    raise Rejected(Reject.SIZE, f"{name} has {len(vals)} entries, expected {n}")
+        elif isinstance(msg, CommandMsg):
+            _vector("wheel_speeds", msg.wheel_speeds, 4, lim.command_abs_max)
+            _vector("arm_rates", msg.arm_rates, 7, lim.command_abs_max)

@@ -1,0 +1,115 @@
+"""The sim process (``wmm-qp sim``): the pure :class:`SimRobot` behind Zenoh.
+
+Runs the sim at its own rate (1 kHz) with absolute deadlines, takes the latest command
+(ring channel, depth 1, validated on receipt), publishes the state every tick (odometry
+and ground truth, torques, the referee's violation counts) and holds a liveliness token.
+When commands go stale the pure model brakes the robot to rest by itself.
+
+Drive model: like a real joint or wheel drive, the adapter ramps the executed rate towards
+the commanded one at the acceleration limit (A·dt per sim step). The controller's command
+already respects A over its own period, but commands cross the network with jitter: two
+commands 1 ms apart instead of 2 ms would otherwise double the executed acceleration.
+``ramp=False`` applies each command at once (the referee then sees the transport jitter).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import zenoh
+
+import wmm_qp as w
+from wmm_qp_service.config import ServiceConfig
+from wmm_qp_service.keys import Keys
+from wmm_qp_service.protocol import CommandMsg, StateMsg, encode
+from wmm_qp_service.rate_loop import RateLoop
+from wmm_qp_service.transport import ROLE_SIM, open_session
+from wmm_qp_service.validation import Validator
+
+from .config import SimConfig
+from .robot import SimCommand, SimRobot, SimState
+
+
+class SimNode:
+    """The simulated robot as a Zenoh node.
+
+    Args:
+        svc: service config (keys, endpoints, validation ranges).
+        sim_cfg: the sim's config (rate, noise, stale timeout).
+        robot: robot config.
+        seed: noise seed; None = the sim config's.
+        ramp: ramp executed rates at the acceleration limits (see module docstring).
+    """
+
+    def __init__(self, svc: ServiceConfig, sim_cfg: SimConfig, robot: w.RobotConfig,
+                 seed: int | None = None, ramp: bool = True) -> None:
+        self.svc = svc
+        self.cfg = sim_cfg
+        self.model = w.WmmModel(robot)
+        self.sim = SimRobot(self.model, sim_cfg, seed=seed)
+        self.keys = Keys.of(svc.prefix, svc.robot)
+        self.validate = Validator(CommandMsg, svc.robot, svc.validation)
+        self.ramp = ramp
+        self.loop = RateLoop(sim_cfg.rate_hz, svc.loop.spin_us * 1e-6)
+        self.a_max = np.asarray(robot.arm.acceleration_max, dtype=float)
+        self.wa_max = float(robot.base.wheel_acceleration_max)
+        self.target: SimCommand | None = None
+        self.cmd_seq = -1
+
+    def next_command(self, new: CommandMsg | None, dt: float) -> SimCommand | None:
+        """The command handed to the pure model this step (None: nothing new)."""
+        if new is not None:
+            self.cmd_seq = new.seq
+            self.target = SimCommand(wheel_speeds=new.wheel_speeds, arm_rates=new.arm_rates)
+            if not self.ramp:
+                return self.target
+        if not self.ramp or self.target is None:
+            return None
+        s = self.sim
+        dv = self.target.arm_rates - s.v_arm
+        dw = self.target.wheel_speeds - s.wheels
+        if new is None and not (dv.any() or dw.any()):
+            self.target = None  # reached: hand nothing more, so staleness can be noticed
+            return None
+        return SimCommand(
+            wheel_speeds=s.wheels + np.clip(dw, -self.wa_max * dt, self.wa_max * dt),
+            arm_rates=s.v_arm + np.clip(dv, -self.a_max * dt, self.a_max * dt))
+
+    def state_msg(self, st: SimState, seq: int) -> StateMsg:
+        """The wire message of a sim state."""
+        return StateMsg(
+            robot=self.svc.robot, seq=seq, stamp=time.time(), t=st.t,
+            q_base=st.base_odom.tolist(), q_arm=st.q_arm.tolist(), v_arm=st.v_arm.tolist(),
+            wheel_speeds=st.wheel_speeds.tolist(), base_true=st.base_true.tolist(),
+            ee_true=st.ee_true.tolist(), tau=st.tau.tolist(),
+            contact_force=st.contact_force.tolist(), box_position=st.box_position,
+            violations=dict(st.violations), stale_stop=st.stale_stop, cmd_seq=self.cmd_seq)
+
+    def run(self, stop: threading.Event, max_ticks: int | None = None) -> SimState:
+        """Run until ``stop`` is set (or ``max_ticks``); returns the final state."""
+        with open_session(self.svc, ROLE_SIM) as session:
+            k = self.keys
+            sub = session.declare_subscriber(k.cmd, zenoh.handlers.RingChannel(1))
+            pub = session.declare_publisher(k.state, express=True,
+                                            congestion_control=zenoh.CongestionControl.DROP,
+                                            priority=zenoh.Priority.REAL_TIME)
+            token = session.liveliness().declare_token(k.alive("sim"))
+            dt = self.cfg.dt
+            st = self.sim.state()
+            self.loop.start()
+            try:
+                while not stop.is_set() and (max_ticks is None or self.loop.ticks < max_ticks):
+                    s = sub.try_recv()
+                    new = self.validate(s.payload.to_bytes()) if s is not None else None
+                    st = self.sim.step(self.next_command(new, dt), dt)
+                    pub.put(encode(self.state_msg(st, self.loop.ticks)))
+                    self.loop.wait()
+            finally:
+                for ent in (token, sub, pub):
+                    try:
+                        ent.undeclare()
+                    except Exception:
+                        pass
+            return st
