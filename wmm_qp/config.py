@@ -92,14 +92,22 @@ class QpConfig:
         alpha: the α of eq. (12) in the QP's cost ½ vᵀ W_x⁻¹ v; small = base expensive.
         arm_first: in track mode, keep the wheels still whenever the arm alone can realise
             the task inside its bounds (a first, arm-only stage).
-        slack_weight: weight ρ of the task slack ½ρ‖s‖² when the task is infeasible.
+        slack_l1: weight ρ₁ of the exact penalty ρ₁‖s‖₁ on the task slack: above the task's
+            Lagrange multiplier, the slack is exactly 0 whenever the task is feasible.
+        slack_weight: weight ρ₂ of ½ρ₂‖s‖², which shapes how the task degrades when infeasible.
+        task_speed_max: [m/s] ẋ_ref is scaled down to this norm (keeps the QP well scaled).
+        singular_arm_weight: near an arm singularity the arm's cost is multiplied by
+            1 + singular_arm_weight·(λ/λ_max)², so the base takes over (the QP's damping).
         eps_abs: absolute tolerance handed to iterative backends.
     """
 
     solver: str = "proxsuite"
     alpha: float = 0.2
     arm_first: bool = True
-    slack_weight: float = 1e6
+    slack_l1: float = 1e4
+    slack_weight: float = 1e4
+    task_speed_max: float = 2.0
+    singular_arm_weight: float = 100.0
     eps_abs: float = 1e-9
 
 
@@ -327,7 +335,8 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
     s = r.table("singularity", required=False)
     s.unknown({"sigma_threshold", "damping_max"})
     q = r.table("qp", required=False)
-    q.unknown({"solver", "alpha", "arm_first", "slack_weight", "eps_abs"})
+    q.unknown({"solver", "alpha", "arm_first", "slack_l1", "slack_weight", "task_speed_max", "singular_arm_weight",
+              "eps_abs"})
     direction = dm.vector("direction", 3, d.direction)
     if np.linalg.norm(direction) < 1e-9:
         raise ConfigError(path, "dm.direction", "must not be the zero vector")
@@ -352,7 +361,10 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
             solver=q.string("solver", d.qp.solver, SOLVER_NAMES),
             alpha=q.number("alpha", d.qp.alpha, lo=1e-6, hi=1.0 - 1e-6),
             arm_first=q.boolean("arm_first", d.qp.arm_first),
+            slack_l1=q.number("slack_l1", d.qp.slack_l1, positive=True),
             slack_weight=q.number("slack_weight", d.qp.slack_weight, positive=True),
+            task_speed_max=q.number("task_speed_max", d.qp.task_speed_max, positive=True),
+            singular_arm_weight=q.number("singular_arm_weight", d.qp.singular_arm_weight, lo=0.0),
             eps_abs=q.number("eps_abs", d.qp.eps_abs, positive=True),
         ),
     )

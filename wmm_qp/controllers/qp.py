@@ -1,32 +1,46 @@
 """The product's controller: the weighted pseudoinverse and the α switch recast as a QP.
 
-Decision variable z = [v_b; v_m; s] (wheel speeds, joint rates, task slack). Every tick:
+Decision variable z = [v_b; v_m; s⁺; s⁻] (wheel speeds, joint rates, task slack s = s⁺ − s⁻).
+Every tick:
 
-    minimize    ½ vᵀ W_x⁻¹ v − (W_x⁻¹ v_n)ᵀ v  [+ ½ ρ ‖s‖²]
-    subject to  J v + s = ẋ_ref                           task, eq. (5)
-                Q_min(q) ≤ v_m ≤ Q_max(q)                  eq. (13)
-                wheel speed and acceleration bounds
-                x_min ≤ x + Δt·J v ≤ x_max                 EE box (DM_CARTESIAN, eq. (17))
+    minimize    ½ vᵀ W_x⁻¹ v − (W_x⁻¹ v_n)ᵀ v + ρ₁ 1ᵀ(s⁺ + s⁻) + ½ ρ₂ (‖s⁺‖² + ‖s⁻‖²)
+    subject to  J v + s⁺ − s⁻ = ẋ_ref                      task, eq. (5)
+                Q_min(q) ≤ v_m ≤ Q_max(q)                    eq. (13)
+                wheel speed and acceleration bounds, s± ≥ 0
+                x_min ≤ x + Δt·J v ≤ x_max                   EE box (DM_CARTESIAN, eq. (17))
 
-with W_x = diag(α I₄, (1−α) I₇) of eq. (12) (α small: the base is expensive) and
-v_n = k_N [0; ∇H2ᵀ] (eq. (19), DM_NULLSPACE only). Without bounds, ½(v − v_n)ᵀW_x⁻¹(v − v_n)
-subject to J v = ẋ_ref has the solution J# ẋ_ref + (I − J#J) v_n — eqs. (11), (18) exactly.
+W_x = diag(α I₄, (1−α) I₇) is eq. (12) (α small: the base is expensive) and
+v_n = k_N [0; ∇H2ᵀ] is eq. (19), in DM_NULLSPACE only. With s ≡ 0 and no bound active,
+½(v − v_n)ᵀW_x⁻¹(v − v_n) subject to J v = ẋ_ref is solved by J# ẋ_ref + (I − J#J) v_n:
+eqs. (11) and (18) exactly.
 
-Stages (strict priorities, each an exact QP):
+The slack carries an exact penalty ρ₁‖s‖₁: when ρ₁ exceeds the task constraint's Lagrange
+multiplier, the optimum has s = 0 exactly whenever the bounds admit the task — then the task
+is a hard equality, the DM term lives in the task's null space only and cannot change the
+achieved task velocity (strict priority without a second solve). When the bounds cannot meet
+the task, the task degrades gracefully instead of the solve failing: every stage is always
+feasible, so no solver ever has to detect infeasibility.
 
-1. arm first (TRACK/HOLD, ``qp.arm_first``): the wheels are held at the admissible speed
-   nearest 0 and the arm alone must meet J_m v_m = ẋ_ref − J_b P v_b inside (13). If it
-   can, that is the command: the base does not move while the arm can do the task. This
-   replaces the α switch (14).
-2. whole robot, exact task: s ≡ 0 (the task is a hard equality), so the DM term lives only in
-   the task's null space and can never change the achieved task velocity.
-3. whole robot, slack: when stage 2 is infeasible (the bounds cannot meet the task) the task
-   degrades gracefully: ρ = ``qp.slack_weight``. Near a singularity (σ_min(J_m) below the
-   threshold) this stage runs directly with ρ = 1/λ², which is exactly the damped least
-   squares J#_λ = W_x Jᵀ(J W_x Jᵀ + λ² I)⁻¹.
+Damping near singularities. The paper's controller replaces J# by damped least squares on the
+whole J when σ_min(J_m) < threshold. On a WMM that is the wrong thing to damp: the whole J is
+rarely singular (the base spans x, y), and damping the task lets the EE lag while the base
+could have moved it (a wheel speed moves the EE by only ~R/4 per rad/s, so λ² swamps the
+base's share). The QP instead damps the *arm*: below the threshold the arm's cost is
+multiplied by 1 + κ·(λ/λ_max)² (κ = ``qp.singular_arm_weight``, λ from the same variable-
+damping law), so arm motion grows expensive as the arm approaches its singularity and the
+base takes over, with the task still exact. The joint velocity bounds (13) already rule out
+the unbounded joint rates DLS exists to prevent. Arm-first is skipped below the threshold.
 
-If every stage fails, the command is a safe stop. Every result is clipped to the box bounds
-(a no-op for exact solvers; the guarantee for OSQP's tolerances).
+Stages:
+
+1. arm first (TRACK/HOLD, ``qp.arm_first``, not near a singularity): the wheels are held at
+   the admissible speed nearest 0 and the arm alone tries to meet the task inside (13). If its
+   slack is 0, that is the command: the base does not move while the arm can do the task.
+   This replaces the α switch (14).
+2. whole robot: the QP above.
+
+A solver failure yields a safe stop. Every result is clipped to the box bounds (a no-op for
+exact solvers; the guarantee for iterative solvers' tolerances).
 """
 
 from __future__ import annotations
@@ -41,6 +55,8 @@ from ..types import Command, Mode, Reference, RobotState, Status
 from .base import Controller, TickContext
 
 N_V = N_WHEELS + N_ARM
+N_S = 6  # s⁺, s⁻ ∈ R³
+SLACK_ACCEPT = 1e-7  # [m/s] slack below this counts as "the task is met"
 
 
 class QpController(Controller):
@@ -61,11 +77,8 @@ class QpController(Controller):
         qp = config.qp
         # One backend (workspace) per stage: shapes differ, warm starts stay meaningful.
         self._arm = make_backend(qp.solver, qp.eps_abs)
-        self._exact = make_backend(qp.solver, qp.eps_abs)
-        self._slack = make_backend(qp.solver, qp.eps_abs)
-        w = weight_matrix_diag(qp.alpha)  # eq. (12)
-        self._w_inv = 1.0 / w
-        self._H_exact = np.diag(self._w_inv)
+        self._full = make_backend(qp.solver, qp.eps_abs)
+        self._w_inv = 1.0 / weight_matrix_diag(qp.alpha)  # W_x⁻¹, eq. (12)
         self._last_problem: QPProblem | None = None
         self.last_stage = ""
 
@@ -79,104 +92,117 @@ class QpController(Controller):
         return self._last_problem
 
     def reset(self) -> None:
-        for b in (self._arm, self._exact, self._slack):
-            b.reset()
+        self._arm.reset()
+        self._full.reset()
 
     # ------------------------------------------------------------------ building
     def box(self, ctx: TickContext) -> tuple[FloatArray, FloatArray]:
         """Hard bounds on v = [v_b; v_m]: wheel bounds and eq. (13)."""
         return np.concatenate([ctx.wheel_lo, ctx.arm_lo]), np.concatenate([ctx.wheel_hi, ctx.arm_hi])
 
-    def ee_box_rows(self, ctx: TickContext, mode: Mode) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """C, l, u of the EE box x_min ≤ x + Δt J v ≤ x_max (DM_CARTESIAN only; never further out)."""
+    def ee_box_rows(self, ctx: TickContext, mode: Mode, lb: FloatArray, ub: FloatArray
+                    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """C, l, u of the EE box x_min ≤ x + Δt J v ≤ x_max, DM_CARTESIAN only.
+
+        Never asks to go further out than the EE already is, and always admits the command
+        nearest zero inside the box bounds (so the QP is always feasible).
+        """
         if mode != Mode.DM_CARTESIAN:
             return np.zeros((0, N_V)), np.zeros(0), np.zeros(0)
         lo, hi, x = self.config.ee_box_lower, self.config.ee_box_upper, ctx.kin.x
         rows = np.flatnonzero(np.isfinite(lo) | np.isfinite(hi))
         C = self.dt * ctx.kin.J[rows]
-        l = np.minimum(lo[rows], x[rows]) - x[rows]
-        u = np.maximum(hi[rows], x[rows]) - x[rows]
+        reach = C @ np.clip(0.0, lb, ub)
+        l = np.minimum(np.minimum(lo[rows], x[rows]) - x[rows], reach)
+        u = np.maximum(np.maximum(hi[rows], x[rows]) - x[rows], reach)
         return C, np.maximum(l, -INF), np.minimum(u, INF)
 
     def linear_term(self, ctx: TickContext, mode: Mode) -> FloatArray:
-        """g = −W_x⁻¹ v_n with v_n of eq. (19) in DM_NULLSPACE, else 0."""
+        """−W_x⁻¹ v_n with v_n of eq. (19) in DM_NULLSPACE, else 0."""
         if mode != Mode.DM_NULLSPACE:
             return np.zeros(N_V)
         assert ctx.grad_q is not None
         v_n = self.config.k_N * np.concatenate([np.zeros(N_WHEELS), ctx.grad_q])  # eq. (19)
         return -self._w_inv * v_n
 
+    def slack_weights(self, ctx: TickContext) -> tuple[float, float]:
+        """(ρ₁, ρ₂): the slack's exact penalty and quadratic weight."""
+        return self.config.qp.slack_l1, self.config.qp.slack_weight
+
+    def cost_diagonal(self, ctx: TickContext) -> FloatArray:
+        """Diagonal of the cost on v: W_x⁻¹ (eq. (12)), the arm block damped near singularities."""
+        if ctx.damping == 0.0 or self.config.damping_max <= 0.0:
+            return self._w_inv
+        scale = 1.0 + self.config.qp.singular_arm_weight * (ctx.damping / self.config.damping_max) ** 2
+        d = self._w_inv.copy()
+        d[N_WHEELS:] *= scale
+        return d
+
+    def reference_velocity(self, ctx: TickContext, reference: Reference) -> FloatArray:
+        """ẋ_ref of the mode, scaled down to ``qp.task_speed_max``."""
+        xdot = self.task_velocity(ctx, reference)
+        n = float(np.linalg.norm(xdot))
+        cap = self.config.qp.task_speed_max
+        return xdot * (cap / n) if n > cap else xdot
+
+    def _with_slack(self, H_v: FloatArray, g_v: FloatArray, A_v: FloatArray, b: FloatArray,
+                    C_v: FloatArray, l: FloatArray, u: FloatArray, lb_v: FloatArray, ub_v: FloatArray,
+                    rho1: float, rho2: float) -> QPProblem:
+        """Append s⁺, s⁻ ≥ 0 to a problem in v (see the module docstring)."""
+        n = H_v.shape[0]
+        H = np.zeros((n + N_S, n + N_S))
+        H[:n, :n] = H_v
+        H[n:, n:] = rho2 * np.eye(N_S)
+        I3 = np.eye(3)
+        return QPProblem(
+            H=H, g=np.concatenate([g_v, np.full(N_S, rho1)]),
+            A=np.hstack([A_v, I3, -I3]), b=b,
+            C=np.hstack([C_v, np.zeros((C_v.shape[0], N_S))]), l=l, u=u,
+            lb=np.concatenate([lb_v, np.zeros(N_S)]), ub=np.concatenate([ub_v, np.full(N_S, INF)]))
+
     def build_arm_first(self, ctx: TickContext, xdot: FloatArray) -> tuple[QPProblem, FloatArray]:
-        """Stage 1: arm alone, wheels held at the admissible speed nearest 0."""
+        """Stage 1: the arm alone, wheels held at the admissible speed nearest 0."""
         w_hold = np.clip(0.0, ctx.wheel_lo, ctx.wheel_hi)
         b = xdot - ctx.kin.J[:, :N_WHEELS] @ w_hold
-        p = QPProblem(H=np.eye(N_ARM), g=np.zeros(N_ARM), A=ctx.kin.J_m, b=b,
-                      C=np.zeros((0, N_ARM)), l=np.zeros(0), u=np.zeros(0), lb=ctx.arm_lo, ub=ctx.arm_hi)
+        rho1, rho2 = self.slack_weights(ctx)
+        p = self._with_slack(np.diag(self._w_inv[N_WHEELS:]), np.zeros(N_ARM), ctx.kin.J_m, b,
+                             np.zeros((0, N_ARM)), np.zeros(0), np.zeros(0), ctx.arm_lo, ctx.arm_hi,
+                             rho1, rho2)
         return p, w_hold
 
-    def build_exact(self, ctx: TickContext, xdot: FloatArray, mode: Mode) -> QPProblem:
-        """Stage 2: whole robot, task as a hard equality."""
+    def build(self, ctx: TickContext, xdot: FloatArray, mode: Mode) -> QPProblem:
+        """Stage 2: the whole robot (see the module docstring)."""
         lb, ub = self.box(ctx)
-        C, l, u = self.ee_box_rows(ctx, mode)
-        return QPProblem(H=self._H_exact, g=self.linear_term(ctx, mode), A=ctx.kin.J, b=xdot,
-                         C=C, l=l, u=u, lb=lb, ub=ub)
-
-    def build_slack(self, ctx: TickContext, xdot: FloatArray, mode: Mode) -> QPProblem:
-        """Stage 3: whole robot with task slack s (ρ = slack weight, or 1/λ² near singularities)."""
-        rho = 1.0 / ctx.damping**2 if ctx.damping > 0.0 else self.config.qp.slack_weight
-        lb, ub = self.box(ctx)
-        C, l, u = self.ee_box_rows(ctx, mode)
-        H = np.zeros((N_V + 3, N_V + 3))
-        H[:N_V, :N_V] = self._H_exact
-        H[N_V:, N_V:] = rho * np.eye(3)
-        return QPProblem(
-            H=H, g=np.concatenate([self.linear_term(ctx, mode), np.zeros(3)]),
-            A=np.hstack([ctx.kin.J, np.eye(3)]), b=xdot,
-            C=np.hstack([C, np.zeros((C.shape[0], 3))]), l=l, u=u,
-            lb=np.concatenate([lb, np.full(3, -INF)]), ub=np.concatenate([ub, np.full(3, INF)]))
+        C, l, u = self.ee_box_rows(ctx, mode, lb, ub)
+        rho1, rho2 = self.slack_weights(ctx)
+        return self._with_slack(np.diag(self.cost_diagonal(ctx)), self.linear_term(ctx, mode), ctx.kin.J, xdot,
+                                C, l, u, lb, ub, rho1, rho2)
 
     # ------------------------------------------------------------------ solving
-    def _solve(self, backend: QPBackend, problem: QPProblem, tol: float) -> FloatArray | None:
+    def _solve(self, backend: QPBackend, problem: QPProblem) -> FloatArray | None:
         self._last_problem = problem
         sol = backend.solve(problem)
         if not sol.ok or sol.z is None:
             return None
-        z = np.clip(sol.z, problem.lb, problem.ub)  # hard bounds exactly, whatever the solver's tolerance
-        if problem.n_eq and np.max(np.abs(problem.A @ z - problem.b)) > tol:
-            return None
-        return z
+        return np.clip(sol.z, problem.lb, problem.ub)  # hard bounds exactly, whatever the tolerance
 
     def _step(self, state: RobotState, reference: Reference) -> Command:
         mode = reference.mode
         ctx = self.context(state, reference, need_gradient=self.needs_gradient(mode))
-        xdot = self.task_velocity(ctx, reference)
-        alpha = self.config.qp.alpha
-        tol = max(1e-7, 100 * self.config.qp.eps_abs)
-        if ctx.damping == 0.0:
-            if self.config.qp.arm_first and mode in (Mode.TRACK, Mode.HOLD):
-                p, w_hold = self.build_arm_first(ctx, xdot)
-                z = self._solve(self._arm, p, tol)
-                if z is not None:
-                    self.last_stage = "arm"
-                    return self.finish(ctx, np.concatenate([w_hold, z]), xdot, alpha=0.0)
-            z = self._solve(self._exact, self.build_exact(ctx, xdot, mode), tol)
-            if z is not None:
-                self.last_stage = "exact"
-                return self.finish(ctx, z, xdot, alpha=alpha)
-        z = self._solve(self._slack, self.build_slack(ctx, xdot, mode), np.inf)
+        xdot = self.reference_velocity(ctx, reference)
+        if ctx.damping == 0.0 and self.config.qp.arm_first and mode in (Mode.TRACK, Mode.HOLD):
+            p, w_hold = self.build_arm_first(ctx, xdot)
+            z = self._solve(self._arm, p)
+            if z is not None and float(np.max(z[N_ARM:])) <= SLACK_ACCEPT:
+                self.last_stage = "arm"
+                return self.finish(ctx, np.concatenate([w_hold, z[:N_ARM]]), xdot, alpha=0.0)
+        z = self._solve(self._full, self.build(ctx, xdot, mode))
         if z is None:
             self.last_stage = "failed"
-            return self.safe_stop(state, f"qp ({self.solver}): no stage could be solved")
-        self.last_stage = "slack"
-        v = z[:N_V]
-        saturated = float(np.linalg.norm(z[N_V:])) > 1e-6
-        status = Status.SATURATED if saturated and ctx.damping == 0.0 else Status.OK
-        reason = "bounds cut the task (best effort)" if status == Status.SATURATED else ""
-        return self.finish(ctx, v, xdot, status=status, reason=reason, alpha=alpha)
-
-
-def make_qp_controller(model: WmmModel, config: ControllerConfig, solver: str | None = None) -> QpController:
-    """A QP controller, optionally with another solver than the config's."""
-    if solver is not None:
-        config = config.with_(qp={"solver": solver})
-    return QpController(model, config)
+            return self.safe_stop(state, f"qp ({self.solver}): the solver failed")
+        self.last_stage = "full"
+        slack = float(np.max(z[N_V:]))
+        status, reason = Status.OK, ""
+        if slack > 1e-6:
+            status, reason = Status.SATURATED, "the bounds cut the task (best effort)"
+        return self.finish(ctx, z[:N_V], xdot, status=status, reason=reason, alpha=self.config.qp.alpha)

@@ -16,8 +16,11 @@ import numpy as np
 from ..config import FloatArray
 
 
+S_MIN = 1e-12  # uᵀ J A Jᵀ u is floored here: H2 ≤ 1e6 where Jᵀu = 0 (a singular direction)
+
+
 def directional_manipulability(J_arm: FloatArray, u: FloatArray, W: FloatArray) -> float:
-    """H2 of eq. (8).
+    """H2 of eq. (8) (capped at 1e6 along a singular direction, where it is infinite).
 
     Args:
         J_arm: 3×7 translational arm Jacobian (arm base frame).
@@ -25,7 +28,7 @@ def directional_manipulability(J_arm: FloatArray, u: FloatArray, W: FloatArray) 
         W: diagonal of the torque scaling W.
     """
     t = W * (J_arm.T @ u)  # W Jᵀ u
-    return float(1.0 / np.sqrt(t @ t))
+    return float(1.0 / np.sqrt(max(float(t @ t), S_MIN)))
 
 
 def torque_norm_per_newton(J_arm: FloatArray, u: FloatArray, W: FloatArray) -> float:
@@ -45,7 +48,7 @@ def dm_gradient(J_arm: FloatArray, dJ_arm: FloatArray, u: FloatArray, W: FloatAr
         W: diagonal of W.
     """
     a = (W * W) * (J_arm.T @ u)  # A Jᵀ u
-    s = float(u @ J_arm @ a)  # uᵀ J A Jᵀ u
+    s = max(float(u @ J_arm @ a), S_MIN)  # uᵀ J A Jᵀ u
     h2 = 1.0 / np.sqrt(s)
     g = (dJ_arm @ a) @ u  # g_k = uᵀ ∂J/∂q_k A Jᵀ u
     return h2, -(h2**3) * g  # eq. (9)

@@ -1,0 +1,34 @@
+"""Shared, cached objects for the core tests (import from test modules)."""
+
+from __future__ import annotations
+
+from functools import cache
+
+import numpy as np
+
+import wmm_qp as w
+
+
+@cache
+def robot() -> w.RobotConfig:
+    return w.load_robot_config()
+
+
+@cache
+def config() -> w.ControllerConfig:
+    return w.load_controller_config()
+
+
+@cache
+def model() -> w.WmmModel:
+    return w.WmmModel(robot())
+
+
+def random_arm_q(rng: np.random.Generator) -> np.ndarray:
+    arm = robot().arm
+    lo = np.where(np.isfinite(arm.position_lower), arm.position_lower, -np.pi)
+    hi = np.where(np.isfinite(arm.position_upper), arm.position_upper, np.pi)
+    return rng.uniform(lo, hi)
+
+
+Q0 = np.array(w.PAPER_START_Q_ARM)

@@ -1,0 +1,92 @@
+"""The paper's controllers, eqs. (11)–(19), and the never-raise guarantee of ``step``."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from core_fixtures import Q0, config, model, random_arm_q
+
+import wmm_qp as w
+from wmm_qp.pseudoinverse import damping_factor, weight_matrix_diag, weighted_pinv
+
+
+@pytest.mark.parametrize("alpha", [0.0, 0.2, 0.5, 0.99])  # α = 1: rank 2, see below
+def test_weighted_pseudoinverse_is_a_right_inverse(alpha: float) -> None:
+    rng = np.random.default_rng(1)
+    kin = model().kinematics(np.array([0.1, 0.2, 0.3]), random_arm_q(rng))
+    Jp = weighted_pinv(kin.J, weight_matrix_diag(alpha))  # eq. (11)
+    np.testing.assert_allclose(kin.J @ Jp, np.eye(3), atol=1e-10)
+
+
+def test_alpha_zero_moves_no_wheel_and_alpha_one_moves_no_joint() -> None:
+    kin = model().kinematics(np.zeros(3), Q0)
+    xdot = np.array([0.05, -0.02, 0.01])
+    v0 = weighted_pinv(kin.J, weight_matrix_diag(0.0)) @ xdot
+    v1 = weighted_pinv(kin.J, weight_matrix_diag(1.0)) @ xdot
+    assert np.abs(v0[:4]).max() == 0.0
+    assert np.abs(v1[4:]).max() == 0.0
+    # α = 1: the base cannot move the EE vertically, so only x, y are realised
+    np.testing.assert_allclose(kin.J @ v0, xdot, atol=1e-12)
+    np.testing.assert_allclose((kin.J @ v1)[:2], xdot[:2], atol=1e-12)
+
+
+def test_paper_alpha_switch_keeps_base_still_while_arm_suffices() -> None:
+    ctl = w.PaperController(model(), config())
+    x = model().ee_position(np.zeros(3), Q0)
+    cmd = ctl.step(w.RobotState(np.zeros(3), Q0), w.Reference("track", x_d=x, xd_d=[1e-3, 0, 0]))
+    assert cmd.alpha == 0.0 and np.abs(cmd.wheel_speeds).max() == 0.0
+    big = ctl.step(w.RobotState(np.zeros(3), Q0), w.Reference("track", x_d=x, xd_d=[0.5, 0, 0]))
+    assert big.alpha == config().alpha and np.abs(big.wheel_speeds).max() > 0
+
+
+def test_dls_engages_below_threshold_only() -> None:
+    assert damping_factor(0.1, 0.08, 0.05) == 0.0
+    assert 0.0 < damping_factor(0.07, 0.08, 0.05) < 0.05
+    assert damping_factor(0.0, 0.08, 0.05) == 0.05
+
+
+@pytest.mark.parametrize("kind", ["traditional", "paper", "qp"])
+@pytest.mark.parametrize("mode", list(w.Mode))
+def test_commands_stay_finite_at_an_exact_singularity(kind: str, mode: w.Mode) -> None:
+    q = np.zeros(7)  # arm stretched straight up: σ_min(J_m) = 0
+    ctl = w.make_controller(kind, model(), config())
+    cmd = ctl.step(w.RobotState(np.zeros(3), q), w.Reference(mode, x_d=[0.3, 0.1, 1.0], xd_d=[0.1, 0, 0]))
+    assert cmd.sigma_min < 1e-9 or cmd.status == w.Status.SAFE_STOP
+    assert np.isfinite(cmd.v).all()
+    if kind == "paper":
+        assert cmd.status == w.Status.DAMPED
+
+
+def test_cartesian_dm_velocity_is_zero_outside_the_box() -> None:
+    ctl = w.PaperController(model(), config())
+    st_in = w.RobotState(np.zeros(3), Q0)  # z = 0.492 inside [0.36, 0.56]
+    cmd = ctl.step(st_in, w.Reference("dm_cartesian"))
+    assert np.abs(cmd.v).max() > 0
+    q_high = Q0.copy()
+    q_high[3] = 0.5  # folds less: EE above 0.56 m
+    assert model().ee_position(np.zeros(3), q_high)[2] > 0.56
+    cmd = ctl.step(w.RobotState(np.zeros(3), q_high), w.Reference("dm_cartesian"))
+    np.testing.assert_allclose(cmd.v, 0.0, atol=1e-15)
+
+
+@pytest.mark.parametrize("kind", ["traditional", "paper", "qp"])
+def test_nan_input_gives_a_safe_stop_not_an_exception(kind: str) -> None:
+    ctl = w.make_controller(kind, model(), config())
+    v = np.full(7, 0.5)
+    st = w.RobotState(np.zeros(3), np.r_[np.nan, Q0[1:]], v_arm=v)
+    cmd = ctl.step(st, w.Reference("track"))
+    assert cmd.status == w.Status.SAFE_STOP and "NaN" in cmd.reason
+    np.testing.assert_allclose(cmd.arm_rates, v - config().dt * np.array(model().config.arm.acceleration_max))
+    cmd = ctl.step(w.RobotState(np.zeros(3), Q0), w.Reference("track", x_d=[np.inf, 0, 0]))
+    assert cmd.status == w.Status.SAFE_STOP
+
+
+def test_an_exception_inside_a_controller_becomes_a_safe_stop(monkeypatch: pytest.MonkeyPatch) -> None:
+    ctl = w.PaperController(model(), config())
+
+    def boom(*_: object, **__: object) -> None:
+        raise RuntimeError("kaboom")
+
+    monkeypatch.setattr(ctl, "context", boom)
+    cmd = ctl.step(w.RobotState(np.zeros(3), Q0), w.Reference("track"))
+    assert cmd.status == w.Status.SAFE_STOP and "kaboom" in cmd.reason

@@ -1,0 +1,89 @@
+"""Joint motion bounds, eq. (13): never empty, contain the braking command, never overshoot."""
+
+from __future__ import annotations
+
+import numpy as np
+from core_fixtures import robot
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from wmm_qp.limits import braking_command, braking_velocity, joint_motion_bounds, wheel_bounds
+
+DT = 0.002
+ARM = robot().arm
+
+
+def bounds(q: np.ndarray, v: np.ndarray, dt: float = DT) -> tuple[np.ndarray, np.ndarray]:
+    return joint_motion_bounds(q, v, ARM.position_lower, ARM.position_upper, ARM.velocity_max,
+                               ARM.acceleration_max, dt)
+
+
+floats = st.floats(min_value=-1.0, max_value=1.0, allow_nan=False)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(floats, min_size=7, max_size=7), st.lists(floats, min_size=7, max_size=7),
+       st.floats(min_value=0.0, max_value=1.6), st.sampled_from([0.001, 0.002, 0.01]))
+def test_bounds_are_never_empty_and_contain_the_braking_command(qs: list[float], vs: list[float],
+                                                                speed: float, dt: float) -> None:
+    # positions anywhere from far inside to 0.2 rad beyond the limits; rates up to 1.6× the limit
+    lo_q = np.where(np.isfinite(ARM.position_lower), ARM.position_lower, -np.pi)
+    hi_q = np.where(np.isfinite(ARM.position_upper), ARM.position_upper, np.pi)
+    q = (lo_q + hi_q) / 2 + np.array(qs) * ((hi_q - lo_q) / 2 + 0.2)
+    v = np.array(vs) * ARM.velocity_max * speed
+    lo, hi = bounds(q, v, dt)
+    assert np.isfinite(lo).all() and np.isfinite(hi).all()
+    assert (lo <= hi).all()
+    b = braking_command(v, ARM.acceleration_max, dt)
+    assert (lo - 1e-12 <= b).all() and (b <= hi + 1e-12).all()
+    # inside the acceleration interval, always
+    assert (lo >= v - ARM.acceleration_max * dt - 1e-12).all()
+    assert (hi <= v + ARM.acceleration_max * dt + 1e-12).all()
+
+
+def test_at_and_beyond_a_limit_no_motion_further_out() -> None:
+    q = np.zeros(7)
+    q[1] = ARM.position_upper[1]  # at the limit
+    lo, hi = bounds(q, np.zeros(7))
+    assert hi[1] == 0.0 and lo[1] < 0
+    q[1] = ARM.position_upper[1] + 0.1  # beyond
+    lo, hi = bounds(q, np.zeros(7))
+    assert hi[1] == 0.0 and lo[1] < 0
+
+
+def test_continuous_joints_have_no_position_bound() -> None:
+    q = np.full(7, 100.0)  # far "beyond" any limit: irrelevant for continuous joints
+    lo, hi = bounds(q, np.zeros(7))
+    a = ARM.acceleration_max * DT
+    np.testing.assert_allclose(hi[[0, 2, 4, 6]], a[[0, 2, 4, 6]])
+
+
+def test_braking_velocity_tends_to_the_continuous_bound() -> None:
+    d, a = np.array([0.5]), np.array([5.0])
+    assert abs(braking_velocity(d, a, 1e-5)[0] - np.sqrt(2 * a[0] * d[0])) < 1e-3
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.floats(min_value=0.0, max_value=0.5), st.floats(min_value=0.0, max_value=1.0),
+       st.sampled_from([0.001, 0.002, 0.005]))
+def test_following_the_upper_bound_then_braking_never_passes_the_limit(start: float, frac: float,
+                                                                       dt: float) -> None:
+    """Drive joint 2 at its upper bound (13) towards the limit, then brake: never beyond."""
+    q = np.zeros(7)
+    q[1] = ARM.position_upper[1] - start
+    v = np.zeros(7)
+    steps = int(frac * 400)
+    for k in range(steps + 400):
+        lo, hi = bounds(q, v, dt)
+        v = hi.copy() if k < steps else braking_command(v, ARM.acceleration_max, dt)
+        v = np.clip(v, lo, hi)
+        q = q + v * dt
+        assert q[1] <= ARM.position_upper[1] + 1e-12
+
+
+def test_wheel_bounds_acceleration_wins_beyond_speed_limit() -> None:
+    base = robot().base
+    w = np.full(4, base.wheel_speed_max * 1.5)
+    lo, hi = wheel_bounds(w, base, DT)
+    np.testing.assert_allclose(lo, hi)
+    np.testing.assert_allclose(lo, w - base.wheel_acceleration_max * DT)

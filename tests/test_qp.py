@@ -1,0 +1,168 @@
+"""The QP controller (DESIGN.md §2): the six properties of issue 3, for every solver."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from core_fixtures import Q0, config, model, random_arm_q
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+
+import wmm_qp as w
+from wmm_qp.pseudoinverse import weight_matrix_diag, weighted_pinv
+from wmm_qp.solvers import available_solvers
+from wmm_qp.verify import check_command
+
+SOLVERS = available_solvers()
+
+
+def qp(solver: str, **qp_changes: object) -> w.QpController:
+    return w.QpController(model(), config().with_(qp={"solver": solver, **qp_changes}))
+
+
+# 1 ------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("solver", SOLVERS)
+@pytest.mark.parametrize("alpha", [0.1, 0.2, 0.6])
+@pytest.mark.parametrize("seed", range(3))
+def test_bounds_inactive_qp_equals_weighted_pseudoinverse(solver: str, alpha: float, seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    qa = Q0 + rng.normal(scale=0.2, size=7)
+    qb = np.array([*rng.normal(size=2), rng.uniform(-np.pi, np.pi)])
+    kin = model().kinematics(qb, qa)
+    xdot = rng.normal(scale=0.02, size=3)
+    expected = weighted_pinv(kin.J, weight_matrix_diag(alpha)) @ xdot  # eq. (11)
+    # the robot already moves at that command: acceleration bounds centred on it, inactive
+    state = w.RobotState(qb, qa, v_arm=expected[4:], wheel_speeds=expected[:4])
+    ctl = qp(solver, alpha=alpha, arm_first=False)
+    cmd = ctl.step(state, w.Reference("track", x_d=kin.x, xd_d=xdot))
+    assert cmd.status == w.Status.OK, cmd.reason
+    np.testing.assert_allclose(cmd.v, expected, atol=1e-8, rtol=0)
+
+
+# 2 ------------------------------------------------------------------------------------------
+ARM = model().config.arm
+LO = np.where(np.isfinite(ARM.position_lower), ARM.position_lower, -np.pi)
+HI = np.where(np.isfinite(ARM.position_upper), ARM.position_upper, np.pi)
+unit = arrays(np.float64, 7, elements=st.floats(-1.0, 1.0))
+
+
+@st.composite
+def states_and_references(draw: st.DrawFn) -> tuple[w.RobotState, w.Reference]:
+    # positions from inside to 0.1 rad beyond the limits; rates up to 1.3× the limits
+    q = (LO + HI) / 2 + draw(unit) * ((HI - LO) / 2 + 0.1)
+    if draw(st.booleans()):
+        q[[1, 3, 5]] *= draw(st.sampled_from([0.0, 0.01]))  # at or near a singularity
+    v = draw(unit) * ARM.velocity_max * draw(st.sampled_from([0.0, 0.5, 1.0, 1.3]))
+    wmax = model().config.base.wheel_speed_max
+    wheels = draw(arrays(np.float64, 4, elements=st.floats(-1.3, 1.3))) * wmax
+    qb = draw(arrays(np.float64, 3, elements=st.floats(-3.0, 3.0)))
+    x = model().ee_position(qb, q)
+    scale = draw(st.sampled_from([1e-3, 0.1, 10.0, 1e3]))
+    dx = draw(arrays(np.float64, 3, elements=st.floats(-1.0, 1.0))) * scale
+    xd = draw(arrays(np.float64, 3, elements=st.floats(-1.0, 1.0))) * draw(st.sampled_from([0.0, 0.1, 10.0]))
+    mode = draw(st.sampled_from(list(w.Mode)))
+    direction = draw(st.sampled_from([None, [1.0, 0, 0], [0, 0, 1.0], [0.3, -0.5, 0.8]]))
+    return w.RobotState(qb, q, v, wheels), w.Reference(mode, x_d=x + dx, xd_d=xd, direction=direction)
+
+
+CONTROLLERS = {s: qp(s) for s in SOLVERS}
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(case=states_and_references())
+def test_every_command_respects_every_hard_bound(solver: str, case: tuple[w.RobotState, w.Reference]) -> None:
+    state, ref = case
+    ctl = CONTROLLERS[solver]
+    cmd = ctl.step(state, ref)
+    assert sum(check_command(model().config, ctl.dt, state, cmd, tol=1e-9).values()) == 0, (cmd.status, cmd.reason)
+
+
+# 3 ------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("solver", SOLVERS)
+@pytest.mark.parametrize("seed", range(4))
+def test_dm_term_never_changes_the_achieved_task_velocity(solver: str, seed: int) -> None:
+    rng = np.random.default_rng(10 + seed)
+    qa = Q0 + rng.normal(scale=0.3, size=7)
+    qb = np.zeros(3)
+    kin = model().kinematics(qb, qa)
+    xdot = rng.normal(scale=0.01, size=3)
+    v_prev = np.linalg.pinv(kin.J) @ xdot  # moving: the task is feasible from here
+    state = w.RobotState(qb, qa, v_arm=v_prev[4:], wheel_speeds=v_prev[:4])
+    with_dm = qp(solver).step(state, w.Reference("dm_nullspace", x_d=kin.x, xd_d=xdot, direction=rng.normal(size=3)))
+    without = qp(solver, arm_first=False).step(state, w.Reference("track", x_d=kin.x, xd_d=xdot))
+    assert without.task_error < 1e-8  # feasible
+    np.testing.assert_allclose(kin.J @ with_dm.v, kin.J @ without.v, atol=1e-8, rtol=0)
+    assert np.linalg.norm(with_dm.v - without.v) > 1e-6  # the DM term did act, in the null space
+
+
+# 4 ------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_wheels_still_while_the_arm_suffices_then_base_supplies_the_rest(solver: str) -> None:
+    ctl = qp(solver)
+    dt = ctl.dt
+    qb, qa, va, wh = np.zeros(3), Q0.copy(), np.zeros(7), np.zeros(4)
+    x0 = model().ee_position(qb, qa)
+    # +x at 0.15 m/s, ramped in over 1 s (as the service's Ruckig smoothing does): the arm alone
+    # can follow at first, then runs out of reach
+    wheels_zero_until, errs = None, []
+    for k in range(int(8.0 / dt)):
+        t = k * dt
+        speed = 0.15 * min(t, 1.0)
+        pos = 0.075 * t**2 if t < 1.0 else 0.075 + 0.15 * (t - 1.0)
+        ref = w.Reference("track", x_d=x0 + [pos, 0, 0], xd_d=[speed, 0, 0])
+        cmd = ctl.step(w.RobotState(qb, qa, va, wh), ref)
+        assert cmd.status != w.Status.SAFE_STOP, cmd.reason
+        if wheels_zero_until is None and np.abs(cmd.wheel_speeds).max() >= 1e-9:
+            wheels_zero_until = t
+        va, wh = cmd.arm_rates, cmd.wheel_speeds
+        qa = qa + va * dt
+        qb = qb + model().base.P(qb[2]) @ wh * dt
+        errs.append(np.linalg.norm(model().ee_position(qb, qa) - ref.x_d))
+    assert wheels_zero_until is not None and wheels_zero_until > 1.0  # arm alone at first: |w| < 1e-9
+    assert np.abs(wh).max() > 0.1  # base supplies the remainder at the end
+    assert max(errs[-500:]) < 1e-3  # and the task is still met
+
+
+# 5 ------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_solver_failure_gives_a_safe_stop_inside_the_acceleration_bounds(solver: str,
+                                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    from wmm_qp.solvers import QPSolution
+
+    ctl = qp(solver)
+    for backend in (ctl._arm, ctl._full):
+        monkeypatch.setattr(backend, "solve", lambda p: QPSolution(z=None, ok=False, status="forced failure"))
+    v = np.linspace(-1, 1, 7)
+    state = w.RobotState(np.zeros(3), Q0, v_arm=v, wheel_speeds=np.full(4, 3.0))
+    cmd = ctl.step(state, w.Reference("track", x_d=[1, 0, 0.5]))
+    assert cmd.status == w.Status.SAFE_STOP and "failed" in cmd.reason
+    assert sum(check_command(model().config, ctl.dt, state, cmd).values()) == 0
+    assert (np.abs(cmd.arm_rates) < np.abs(v) + 1e-15).all()  # braking
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_backend_exception_never_leaks(solver: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    ctl = qp(solver)
+    monkeypatch.setattr(ctl, "build", lambda *a: (_ for _ in ()).throw(np.linalg.LinAlgError("singular")))
+    monkeypatch.setattr(ctl, "build_arm_first", lambda *a: (_ for _ in ()).throw(np.linalg.LinAlgError("singular")))
+    cmd = ctl.step(w.RobotState(np.zeros(3), Q0), w.Reference("track", x_d=[1, 0, 0.5]))
+    assert cmd.status == w.Status.SAFE_STOP and "singular" in cmd.reason
+
+
+def test_unknown_solver_is_a_clear_error() -> None:
+    with pytest.raises(w.SolverNotFound, match="choose one of"):
+        qp("cplex")
+
+
+# 6 is tests/test_cli.py::test_verify_reports_zero_violations_for_every_qp_solver
+
+def test_the_problem_is_inspectable() -> None:
+    ctl = qp(SOLVERS[0], arm_first=False)
+    x = model().ee_position(np.zeros(3), Q0)
+    ctl.step(w.RobotState(np.zeros(3), Q0), w.Reference("track", x_d=x, xd_d=[1e-3, 0, 0]))
+    p = ctl.last_problem
+    assert p is not None and p.n == 17 and p.n_eq == 3
+    assert p.violation(np.zeros(p.n)) > 0  # zero does not meet the task: the equality is real
+    assert random_arm_q is not None

@@ -1,0 +1,164 @@
+"""Constraint-satisfaction referee and random state sampler (``wmm-qp verify``).
+
+The referee re-derives every hard bound from the raw robot config, independently of
+:mod:`wmm_qp.limits` (which the controllers use), and checks one command against one state.
+It asks of a command only what is physically possible from the state:
+
+* acceleration: |v − v_prev| ≤ A·dt;
+* velocity: |v| ≤ V, or — if the joint is already faster than V — it slows down at A;
+* position: the next position q + v·dt stays inside the limits (or, beyond a limit, does not
+  go further out), unless even full braking at A cannot achieve it, in which case the
+  command must be that full braking;
+* wheel: wheel speed and acceleration, the same way.
+
+Tolerance: 1e-9 (absolute, in rad/s).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .config import N_ARM, N_WHEELS, RobotConfig
+from .model.wmm import WmmModel
+from .types import Command, Mode, Reference, RobotState
+
+KINDS = ("position", "velocity", "acceleration", "wheel")
+TOL = 1e-9
+
+
+def check_command(robot: RobotConfig, dt: float, state: RobotState, cmd: Command,
+                  tol: float = TOL) -> dict[str, int]:
+    """Number of joints (or wheels) whose command violates each kind of hard bound."""
+    arm, base = robot.arm, robot.base
+    v, v0, q = np.asarray(cmd.arm_rates), state.v_arm, state.q_arm
+    a = arm.acceleration_max * dt
+    out = dict.fromkeys(KINDS, 0)
+    finite = np.isfinite(v)
+    out["acceleration"] = int(np.sum(~finite | (np.abs(v - v0) > a + tol)))
+    out["velocity"] = int(np.sum(~finite | (np.abs(v) > np.maximum(arm.velocity_max, np.abs(v0) - a) + tol)))
+    with np.errstate(invalid="ignore"):
+        up = np.maximum(arm.position_upper - q, 0.0) / dt  # never further out
+        lo = np.minimum(arm.position_lower - q, 0.0) / dt
+        too_high = v > np.maximum(up, v0 - a) + tol
+        too_low = v < np.minimum(lo, v0 + a) - tol
+    out["position"] = int(np.sum(~finite | too_high | too_low))
+    w, w0 = np.asarray(cmd.wheel_speeds), state.wheel_speeds
+    aw = base.wheel_acceleration_max * dt
+    bad_w = (~np.isfinite(w) | (np.abs(w - w0) > aw + tol)
+             | (np.abs(w) > np.maximum(base.wheel_speed_max, np.abs(w0) - aw) + tol))
+    out["wheel"] = int(np.sum(bad_w))
+    return out
+
+
+@dataclass
+class Sample:
+    """One random test case: a state, a reference, and what kind of case it is."""
+
+    state: RobotState
+    reference: Reference
+    case: str
+
+
+def sample_states(model: WmmModel, n: int, seed: int, modes: tuple[Mode, ...] = tuple(Mode)) -> Iterator[Sample]:
+    """Random states and references covering the corners the bounds must survive.
+
+    States: inside the limits, exactly at and just beyond a position limit, at and beyond
+    the velocity limits, at the acceleration limits (large previous rates), near and at
+    arm singularities (joints 2, 4, 6 near 0: the arm stretched straight). References: small,
+    huge, discontinuous (a random jump each sample), in every mode.
+    """
+    rng = np.random.default_rng(seed)
+    arm, base = model.config.arm, model.config.base
+    lo = np.where(np.isfinite(arm.position_lower), arm.position_lower, -np.pi)
+    hi = np.where(np.isfinite(arm.position_upper), arm.position_upper, np.pi)
+    vmax, wmax = arm.velocity_max, base.wheel_speed_max
+    cases = ("inside", "at_limit", "beyond_limit", "at_velocity_limit", "beyond_velocity_limit",
+             "near_singular", "singular")
+    for i in range(n):
+        case = cases[i % len(cases)]
+        q = rng.uniform(lo, hi)
+        v = rng.uniform(-1, 1, N_ARM) * vmax * rng.uniform(0, 1)
+        w = rng.uniform(-1, 1, N_WHEELS) * wmax * rng.uniform(0, 1)
+        limited = np.flatnonzero(np.isfinite(arm.position_upper))
+        j = rng.choice(limited)
+        side = rng.choice([-1.0, 1.0])
+        edge = arm.position_upper[j] if side > 0 else arm.position_lower[j]
+        if case == "at_limit":
+            q[j] = edge
+            v[j] = side * rng.uniform(0, vmax[j])
+        elif case == "beyond_limit":
+            q[j] = edge + side * rng.uniform(1e-6, 0.05)
+            v[j] = side * rng.uniform(0, vmax[j])
+        elif case == "at_velocity_limit":
+            v = rng.choice([-1.0, 1.0], N_ARM) * vmax
+            w = rng.choice([-1.0, 1.0], N_WHEELS) * wmax
+        elif case == "beyond_velocity_limit":
+            v = rng.choice([-1.0, 1.0], N_ARM) * vmax * rng.uniform(1.0, 1.5, N_ARM)
+            w = rng.choice([-1.0, 1.0], N_WHEELS) * wmax * rng.uniform(1.0, 1.5, N_WHEELS)
+        elif case in ("near_singular", "singular"):
+            eps = 0.0 if case == "singular" else 0.05
+            q[[1, 3, 5]] = rng.uniform(-eps, eps, 3)
+        q_base = np.array([*rng.uniform(-2, 2, 2), rng.uniform(-np.pi, np.pi)])
+        state = RobotState(q_base=q_base, q_arm=q, v_arm=v, wheel_speeds=w)
+        x = model.ee_position(q_base, q)
+        scale = rng.choice([1e-3, 0.05, 10.0])  # small, ordinary, huge
+        x_d = x + rng.normal(size=3) * scale
+        xd_d = rng.normal(size=3) * rng.choice([0.0, 0.05, 5.0])
+        direction = rng.normal(size=3)
+        for mode in modes:
+            yield Sample(state, Reference(mode, x_d=x_d, xd_d=xd_d, direction=direction), case)
+
+
+@dataclass
+class VerifyReport:
+    """Violations found by :func:`verify_controller`."""
+
+    samples: int = 0
+    steps: int = 0
+    violations: int = 0
+    by_kind: dict[str, int] = field(default_factory=lambda: dict.fromkeys(KINDS, 0))
+    by_mode: dict[str, dict[str, int]] = field(default_factory=dict)
+    by_case: dict[str, int] = field(default_factory=dict)
+    statuses: dict[str, int] = field(default_factory=dict)
+    examples: list[dict[str, object]] = field(default_factory=list)
+
+
+def verify_controller(controller: object, model: WmmModel, n: int, seed: int,
+                      progress: object = None) -> VerifyReport:
+    """Run one step of ``controller`` for each of n random states in every mode; referee each.
+
+    Args:
+        controller: anything with ``step(state, reference) → Command`` and ``dt``.
+        model: the robot.
+        n: number of random states.
+        seed: RNG seed.
+        progress: optional callable(i, n) called after each state.
+    """
+    rep = VerifyReport(by_mode={m.value: dict.fromkeys(KINDS, 0) for m in Mode})
+    dt = float(controller.dt)  # type: ignore[attr-defined]
+    modes = tuple(Mode)
+    for k, s in enumerate(sample_states(model, n, seed, modes)):
+        cmd = controller.step(s.state, s.reference)  # type: ignore[attr-defined]
+        rep.steps += 1
+        rep.statuses[cmd.status.value] = rep.statuses.get(cmd.status.value, 0) + 1
+        res = check_command(model.config, dt, s.state, cmd)
+        total = sum(res.values())
+        if total:
+            rep.violations += total
+            rep.by_case[s.case] = rep.by_case.get(s.case, 0) + total
+            for kind, c in res.items():
+                rep.by_kind[kind] += c
+                rep.by_mode[s.reference.mode.value][kind] += c
+            if len(rep.examples) < 3:
+                rep.examples.append({"case": s.case, "mode": s.reference.mode.value,
+                                     "violations": {k: c for k, c in res.items() if c}})
+        if (k + 1) % len(modes) == 0:
+            rep.samples += 1
+            if progress is not None:
+                progress(rep.samples, n)  # type: ignore[operator]
+    return rep
+
+
