@@ -25,4 +25,8 @@ def run(ticks: int, rates: tuple[float, ...] = (500.0, 1000.0)) -> dict[str, Any
             "available": False,
             "reason": f"not available: wmm-qp {', '.join(missing)} not implemented in this install",
         }
-    return {"available": False, "reason": "not available: end-to-end driver not written yet"}
+    return {
+        "available": False,
+        "reason": "not available: the daemon exists but the bench's end-to-end driver "
+        "(start sim + serve, read status --json) is not written yet",
+    }
