@@ -1,0 +1,53 @@
+"""``wmm-qp status [--json]``: show the daemon's status."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+import msgspec
+
+HELP = "show the daemon's status"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from ..cli_common import add_service_arguments
+
+    parser.add_argument("--json", action="store_true", help="print one JSON object (status + config)")
+    parser.add_argument("--timeout", type=float, default=3.0, help="[s] wait for the daemon")
+    add_service_arguments(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..cli_common import service_config
+    from ..client import Client
+
+    svc = service_config(args)
+    with Client(svc, name="status-cli") as c:
+        info = c.wait_for_daemon(args.timeout)
+    if info is None:
+        print(f"wmm-qp status: error: no daemon answers on {svc.prefix}/{svc.robot}/info",
+              file=sys.stderr)
+        return 1
+    if args.json:
+        print(json.dumps(msgspec.to_builtins(info), default=str))
+        return 0
+    s, lp = info.status, info.status.loop
+    total_viol = sum(s.sim_violations.values())
+    print(f"robot      {svc.prefix}/{svc.robot}   controller {info.config['controller']['kind']}")
+    print(f"mode       {s.mode}   state {'ok' if s.state_ok else 'NOT OK'}"
+          f"{'   SAFE STOP' if s.safe_stop else ''}   sim {'alive' if s.sim_alive else 'not seen'}")
+    print(f"command    {s.controller_status} {s.reason}".rstrip())
+    print(f"loop       {lp.rate_hz:g} Hz (measured {lp.measured_hz:.1f})   ticks {lp.ticks}   "
+          f"deadline misses {lp.deadline_misses}")
+    print(f"tick time  p50 {lp.tick_p50_us:.0f} µs   p99 {lp.tick_p99_us:.0f} µs   "
+          f"max {lp.tick_max_us:.0f} µs")
+    rej = ", ".join(f"{k} {v}" for k, v in sorted(s.rejected.items())) or "none"
+    print(f"rejected   {rej}")
+    print(f"last fault {s.last_fault or 'none'}")
+    print(f"sim        violations {total_viol} {s.sim_violations if total_viol else ''}".rstrip())
+    if s.x:
+        print(f"EE         x {[round(v, 4) for v in s.x]}   x_d {[round(v, 4) for v in s.x_d]}"
+              f"   DM {s.dm:.3f}")
+    return 0

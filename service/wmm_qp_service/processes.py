@@ -1,0 +1,108 @@
+"""Start and stop the sim and the daemon as separate processes on loopback.
+
+Used by ``wmm-qp demo`` and the integration tests: unique ports and key prefix per run, so
+runs never collide; clean shutdown with SIGINT, then SIGKILL as a last resort.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import uuid
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .config import ServiceConfig, load_service_config
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that is free right now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def isolated_config(base: ServiceConfig | None = None, prefix: str | None = None) -> ServiceConfig:
+    """A service config with a unique key prefix and fresh loopback ports."""
+    base = base or load_service_config()
+    return base.with_(prefix=prefix or f"wmmrun{uuid.uuid4().hex[:10]}",
+                      zenoh={"daemon_endpoint": f"tcp/127.0.0.1:{free_port()}",
+                             "sim_endpoint": f"tcp/127.0.0.1:{free_port()}"})
+
+
+def _service_args(svc: ServiceConfig) -> list[str]:
+    return ["--prefix", svc.prefix, "--robot", svc.robot,
+            "--daemon-endpoint", svc.zenoh.daemon_endpoint, "--sim-endpoint", svc.zenoh.sim_endpoint]
+
+
+@dataclass
+class Stack:
+    """A sim and a daemon process (a context manager that always stops them).
+
+    Attributes:
+        svc: the config both run with.
+        rate_hz: [Hz] daemon rate.
+        log_dir: where their stderr goes (None: discarded).
+    """
+
+    svc: ServiceConfig
+    rate_hz: float = 500.0
+    log_dir: Path | None = None
+    extra_daemon_args: list[str] = field(default_factory=list)
+    extra_sim_args: list[str] = field(default_factory=list)
+    procs: dict[str, subprocess.Popen[bytes]] = field(default_factory=dict)
+
+    def _spawn(self, name: str, argv: list[str]) -> subprocess.Popen[bytes]:
+        err = subprocess.DEVNULL if self.log_dir is None else open(self.log_dir / f"{name}.log", "ab")  # noqa: SIM115
+        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        p = subprocess.Popen([sys.executable, "-m", "wmm_qp_service.cli", *argv],
+                             stdin=subprocess.DEVNULL, stdout=err, stderr=err, env=env)
+        self.procs[name] = p
+        return p
+
+    def start_sim(self) -> subprocess.Popen[bytes]:
+        """Start (or restart) the sim."""
+        return self._spawn("sim", ["sim", *_service_args(self.svc), *self.extra_sim_args])
+
+    def start_daemon(self) -> subprocess.Popen[bytes]:
+        """Start (or restart) the daemon."""
+        return self._spawn("daemon", ["serve", *_service_args(self.svc), "--rate", f"{self.rate_hz:g}",
+                                      *self.extra_daemon_args])
+
+    def start(self) -> Stack:
+        """Start both."""
+        self.start_sim()
+        self.start_daemon()
+        return self
+
+    def kill(self, name: str, sig: int = signal.SIGKILL) -> None:
+        """Send a signal to one process and, for SIGKILL, reap it."""
+        p = self.procs.get(name)
+        if p is not None and p.poll() is None:
+            p.send_signal(sig)
+            if sig == signal.SIGKILL:
+                p.wait(timeout=10)
+
+    def stop(self, timeout: float = 10.0) -> dict[str, int | None]:
+        """SIGINT everything, wait, SIGKILL what is left; returns the exit codes."""
+        for p in self.procs.values():
+            if p.poll() is None:
+                p.send_signal(signal.SIGINT)
+        codes: dict[str, int | None] = {}
+        for name, p in self.procs.items():
+            try:
+                codes[name] = p.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait(timeout=5)
+                codes[name] = None
+        return codes
+
+    def __enter__(self) -> Stack:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
