@@ -1,0 +1,66 @@
+"""``wmm-qp verify``: random states through a controller, every command refereed."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+import wmm_qp as w
+from wmm_qp.controllers.qp import QpController
+from wmm_qp.solvers import SOLVER_NAMES
+from wmm_qp.verify import KINDS, verify_controller
+
+from .common import add_config_arguments, load_configs
+
+HELP = "sample random states and check every command against every hard bound"
+
+
+def _positive(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if n <= 0:
+        raise argparse.ArgumentTypeError("must be > 0")
+    return n
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--controller", choices=w.config.CONTROLLER_KINDS, default="qp")
+    parser.add_argument("--solver", choices=SOLVER_NAMES, default=None, help="QP backend (default: config's)")
+    parser.add_argument("--samples", type=_positive, default=1000, help="random states (each run in every mode)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    add_config_arguments(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    robot, cfg = load_configs(args)
+    if args.solver:
+        cfg = cfg.with_(qp={"solver": args.solver})
+    model = w.WmmModel(robot)
+    ctl = w.make_controller(args.controller, model, cfg)
+    tty = sys.stderr.isatty() and not args.json
+
+    def progress(i: int, n: int) -> None:
+        if tty and (i % 50 == 0 or i == n):
+            print(f"\rverify: {i}/{n} states", end="" if i < n else "\n", file=sys.stderr, flush=True)
+
+    rep = verify_controller(ctl, model, args.samples, args.seed, progress)
+    label = args.controller + (f" ({ctl.solver})" if isinstance(ctl, QpController) else "")
+    if args.json:
+        print(json.dumps({"controller": args.controller,
+                          "solver": ctl.solver if isinstance(ctl, QpController) else None,
+                          "samples": rep.samples, "steps": rep.steps, "violations": rep.violations,
+                          "by_kind": rep.by_kind, "by_mode": rep.by_mode, "by_case": rep.by_case,
+                          "statuses": rep.statuses, "seed": args.seed}))
+    else:
+        print(f"{label}: {rep.samples} states x {len(rep.by_mode)} modes = {rep.steps} commands, seed {args.seed}")
+        print(f"{'mode':<14}" + "".join(f"{k:>14}" for k in KINDS))
+        for mode, counts in rep.by_mode.items():
+            print(f"{mode:<14}" + "".join(f"{counts[k]:>14}" for k in KINDS))
+        print(f"{'total':<14}" + "".join(f"{rep.by_kind[k]:>14}" for k in KINDS))
+        print("command statuses: " + ", ".join(f"{k} {v}" for k, v in sorted(rep.statuses.items())))
+        print(f"violations: {rep.violations}")
+    return 1 if rep.violations else 0

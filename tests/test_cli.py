@@ -1,0 +1,84 @@
+"""The ``wmm-qp`` CLI: inspect, verify, and its error handling (one line, exit 2)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from wmm_qp.solvers import available_solvers
+from wmm_qp_service.cli import main
+
+START = "0,0.5235987755982988,0,1.5707963267948966,0,-0.5235987755982988,0"
+
+
+def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
+    try:
+        code = main(list(argv))
+    except SystemExit as e:  # argparse errors
+        code = int(e.code or 0)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_inspect_json_at_the_paper_start(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run(capsys, "inspect", "--arm-q", START, "--direction", "0,0,1", "--json")
+    assert code == 0
+    d = json.loads(out)
+    assert d["ee_position"][0] == pytest.approx(0.650, abs=1e-3)
+    assert d["ee_position"][2] == pytest.approx(0.492, abs=1e-3)
+    assert d["dm"] == pytest.approx(1.124, abs=2e-3)
+    assert len(d["dm_gradient"]) == 7 and len(d["dm_cartesian_gradient"]) == 3
+    assert 10 * d["torque_norm_per_newton"] == pytest.approx(8.89, abs=0.01)
+    assert d["sigma_min"] > 0.08
+
+
+def test_inspect_text_output(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run(capsys, "inspect", "--arm-q", START)
+    assert code == 0 and "DM H2" in out and "eq. (9)" in out
+
+
+@pytest.mark.parametrize("argv", [
+    ["inspect", "--arm-q", "1,2,3"],
+    ["inspect", "--arm-q", "a,b,c,d,e,f,g"],
+    ["inspect", "--arm-q", "nan,0,0,0,0,0,0"],
+    ["inspect", "--arm-q", START, "--direction", "0,0,0"],
+    ["inspect"],
+    ["verify", "--samples", "-3"],
+    ["verify", "--solver", "cplex"],
+    ["inspect", "--arm-q", START, "--robot-config", "/nonexistent/robot.toml"],
+])
+def test_bad_arguments_get_one_line_and_exit_2(capsys: pytest.CaptureFixture[str], argv: list[str]) -> None:
+    code, out, err = run(capsys, *argv)
+    assert code == 2
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_bad_config_names_file_and_key(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:  # type: ignore[no-untyped-def]
+    bad = tmp_path / "controller.toml"
+    bad.write_text("[gains]\nk_N = 'fast'\n")
+    code, _, err = run(capsys, "inspect", "--arm-q", START, "--controller-config", str(bad))
+    assert code == 2 and str(bad) in err and "gains.k_N" in err
+
+
+@pytest.mark.parametrize("solver", available_solvers())
+def test_verify_reports_zero_violations_for_every_qp_solver(solver: str, capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run(capsys, "verify", "--solver", solver, "--samples", "2000", "--json")
+    d = json.loads(out)
+    assert d["samples"] == 2000 and d["steps"] == 8000
+    assert d["violations"] == 0 and code == 0, d["by_kind"]
+
+
+@pytest.mark.parametrize("controller", ["traditional", "paper"])
+def test_verify_finds_violations_in_the_baselines(controller: str, capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run(capsys, "verify", "--controller", controller, "--samples", "100", "--json")
+    d = json.loads(out)
+    assert code == 1 and d["violations"] > 0 and d["by_kind"]["acceleration"] > 0
+
+
+def test_console_script_runs_without_traceback() -> None:
+    r = subprocess.run([sys.executable, "-m", "wmm_qp_service.cli", "inspect", "--arm-q", "1"],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
