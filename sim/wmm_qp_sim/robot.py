@@ -150,6 +150,10 @@ class SimRobot:
         self.stalled_joint: int | None = None
         return self.state()
 
+    def place_box(self, box: BoxConfig | None) -> None:
+        """Put a box in the scene now (or remove it with None), keeping the robot's state."""
+        self.box = Box(box) if box is not None else None
+
     # ------------------------------------------------------------------ stepping
     def step(self, command: SimCommand | None, dt: float) -> SimState:
         """Advance by dt [s]: take the new command (None = keep the held one), integrate.

@@ -1,0 +1,149 @@
+"""``wmm-qp experiment circle|dm|push``: reproduce one of the paper's experiments in-process.
+
+Deterministic (seeded slip), faster than real time, a progress bar on stderr when it is a
+terminal. Prints a summary, or one JSON object with ``--json``; ``--log`` writes the per-tick
+CSV, ``--plots`` PNG figures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+HELP = "reproduce one of the paper's experiments (circle, dm, push)"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("name", choices=("circle", "dm", "push"), help="which experiment")
+    parser.add_argument("--controller", choices=("traditional", "paper", "qp"), default="qp")
+    parser.add_argument("--solver", default=None, help="QP backend (qp controller only)")
+    parser.add_argument("--direction", choices=("x", "z"), default="x", help="DM direction (dm)")
+    parser.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        help="run length [s] (circle 40, dm 20; push: the DM phase, 20)",
+    )
+    parser.add_argument(
+        "--seed", type=int, default=None, help="slip/drift seed (default: sim.toml)"
+    )
+    parser.add_argument("--no-slip", action="store_true", help="turn the base slip/drift off")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument(
+        "--log",
+        type=Path,
+        default=None,
+        help="per-tick CSV log (push: FILE gets _with_dm/_without_dm suffixes)",
+    )
+    parser.add_argument("--plots", type=Path, default=None, help="folder for PNG plots")
+    parser.add_argument(
+        "--realtime",
+        action="store_true",
+        help="run through the daemon and sim over Zenoh (not available yet)",
+    )
+
+
+def _fail(msg: str) -> int:
+    print(f"wmm-qp experiment: error: {msg}", file=sys.stderr)
+    return 2
+
+
+def _suffixed(path: Path, suffix: str) -> Path:
+    return path.with_name(f"{path.stem}_{suffix}{path.suffix or '.csv'}")
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..experiments import circle, dm, log, push
+    from ..experiments.runner import make_setup
+
+    if args.realtime:
+        return _fail("--realtime is not available yet: run the in-process experiment (no flag)")
+    if args.duration is not None and not (np.isfinite(args.duration) and args.duration > 0):
+        return _fail(f"--duration must be > 0, got {args.duration}")
+    if args.solver is not None and args.controller != "qp":
+        return _fail("--solver only applies to --controller qp")
+    if args.plots is not None:
+        args.plots.mkdir(parents=True, exist_ok=True)
+        from ..experiments import plots
+
+        plots._plt()
+
+    def setup() -> Any:
+        return make_setup(args.controller, args.solver, slip=not args.no_slip, seed=args.seed)
+
+    tty = not args.json or sys.stderr.isatty()
+    tag = args.controller
+    result: dict[str, Any] = {"experiment": args.name, "controller": args.controller}
+    if args.controller == "qp":
+        result["solver"] = args.solver
+    if args.name == "circle":
+        s = setup()
+        tr = circle.run_circle(s, args.duration or circle.DEFAULT_DURATION, progress=tty)
+        result |= {"duration": float(tr.t[-1] + s.ctl_cfg.dt), **circle.circle_metrics(tr)}
+        traces = {"": tr}
+        if args.plots:
+            from ..experiments.plots import plot_circle
+
+            plot_circle(tr, args.plots, tag)
+    elif args.name == "dm":
+        s = setup()
+        duration = args.duration or dm.DEFAULT_DURATION
+        tr = dm.run_dm(s, args.direction, duration, progress=tty)
+        result |= {
+            "duration": duration,
+            **dm.dm_metrics(tr, s, args.direction, dm.cartesian_end(duration)),
+        }
+        traces = {"": tr}
+        tag = f"{args.controller}_{args.direction}"
+        if args.plots:
+            from ..experiments.plots import plot_dm
+
+            plot_dm(tr, args.plots, tag)
+    else:
+        runs = push.run_push(setup, args.duration or push.DEFAULT_DM_DURATION, progress=tty)
+        for name, (s, tr, i0) in runs.items():
+            result[name] = push.push_metrics(s, tr, i0)
+        result["box"] = {"mass": push.MASS, "mu": push.MU, "target": push.TARGET}
+        result["violations"] = {
+            k: sum(r[1].violations[k] for r in runs.values()) for k in runs["with_dm"][1].violations
+        }
+        traces = {name: r[1] for name, r in runs.items()}
+        if args.plots:
+            from ..experiments.plots import plot_push
+
+            s0 = runs["with_dm"][0]
+            plot_push(
+                {n: (r[1], r[2]) for n, r in runs.items()},
+                np.asarray(s0.ctl_cfg.W),
+                np.asarray(s0.model.config.arm.torque_limit),
+                args.plots,
+                tag,
+            )
+    if args.log is not None:
+        for name, tr in traces.items():
+            log.write_csv(tr, _suffixed(args.log, name) if name else args.log)
+    result["controller_reasons"] = {k: v for r in traces.values() for k, v in r.reasons.items()}
+    if args.json:
+        print(json.dumps(result))
+    else:
+        _summary(result)
+    return 0
+
+
+def _summary(result: dict[str, Any]) -> None:
+    def fmt(v: Any) -> str:
+        if isinstance(v, float):
+            return f"{v:.4g}"
+        if isinstance(v, list):
+            return "[" + ", ".join(fmt(x) for x in v) + "]"
+        if isinstance(v, dict):
+            return "{" + ", ".join(f"{k}: {fmt(x)}" for k, x in v.items()) + "}"
+        return str(v)
+
+    for k, v in result.items():
+        print(f"{k:28s} {fmt(v)}")

@@ -1,0 +1,86 @@
+"""The circle beyond the arm's workspace (paper Sec. IV-B, Table I, Figs. 5–6).
+
+x_d(t) = x0 + [0.25(cos ωt − 1), 0.25 sin ωt, 0], ω = π/20 rad/s, with its feed-forward
+velocity, TRACK mode, from the paper's start configuration, base slip on. x0 is the true EE
+position at t = 0.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+import wmm_qp
+from wmm_qp.config import FloatArray
+
+from .runner import Setup, Trace, rms, run
+
+RADIUS = 0.25  # [m]
+OMEGA = math.pi / 20.0  # [rad/s]
+DEFAULT_DURATION = 40.0  # [s] one full circle
+BASE_MOVING = 1e-4  # [m/s] / [rad/s]: the base counts as moving above this commanded speed
+
+
+def circle(x0: FloatArray, t: float) -> tuple[FloatArray, FloatArray]:
+    """x_d(t) [m] and ẋ_d(t) [m/s]."""
+    c, s = math.cos(OMEGA * t), math.sin(OMEGA * t)
+    x_d = x0 + np.array([RADIUS * (c - 1.0), RADIUS * s, 0.0])
+    xd_d = np.array([-RADIUS * OMEGA * s, RADIUS * OMEGA * c, 0.0])
+    return x_d, xd_d
+
+
+def run_circle(setup: Setup, duration: float = DEFAULT_DURATION, progress: bool = True) -> Trace:
+    """Run the circle and return its trace."""
+    x0 = setup.model.ee_position(np.zeros(3), np.array(wmm_qp.PAPER_START_Q_ARM))
+
+    def reference(t: float, _st: Any, _cmd: Any) -> wmm_qp.Reference:
+        x_d, xd_d = circle(x0, t)
+        return wmm_qp.Reference(mode=wmm_qp.Mode.TRACK, x_d=x_d, xd_d=xd_d)
+
+    return run(
+        setup,
+        reference,
+        duration,
+        dm_direction=np.asarray(setup.ctl_cfg.direction),
+        progress="circle" if progress else None,
+    )
+
+
+def circle_metrics(trace: Trace) -> dict[str, Any]:
+    """Table I and Figs. 5–6 metrics (JSON keys of issue 5).
+
+    - ``base_velocity``: max |·| and RMS of the commanded body twist (vx, vy [m/s], wz [rad/s]).
+    - ``ee_error_max``: max |x_d − x_true| in x and y [m] (ground truth EE).
+    - ``base_motion_window``: first and last tick [s] the commanded base twist exceeds
+      1e-4 (null if the base never moves).
+    - ``base_error_integral``: ∫ |e_b| dt over that window [m·s], e_b = true − odometry base
+      position (the base's own tracking error, what slip costs).
+    """
+    tw = trace.base_twist_cmd
+    err = np.abs(trace.ee_des - trace.ee_true)
+    moving = np.flatnonzero(np.abs(tw).max(axis=1) > BASE_MOVING)
+    e_b = np.abs(trace.base_true[:, :2] - trace.base_odom[:, :2])
+    dt = float(trace.t[1] - trace.t[0]) if len(trace.t) > 1 else 0.0
+    if moving.size:
+        i0, i1 = int(moving[0]), int(moving[-1])
+        window: list[float] | None = [float(trace.t[i0]), float(trace.t[i1])]
+        integral = e_b[i0 : i1 + 1].sum(axis=0) * dt
+    else:
+        window, integral = None, np.zeros(2)
+    return {
+        "base_velocity": {
+            name: {"max": float(np.abs(tw[:, i]).max()), "rms": rms(tw[:, i])}
+            for i, name in enumerate(("vx", "vy", "wz"))
+        },
+        "ee_error_max": {
+            "x": float(err[:, 0].max()),
+            "y": float(err[:, 1].max()),
+            "z": float(err[:, 2].max()),
+        },
+        "ee_error_rms": {"x": rms(err[:, 0]), "y": rms(err[:, 1])},
+        "base_motion_window": window,
+        "base_error_integral": {"x": float(integral[0]), "y": float(integral[1])},
+        "violations": trace.violations,
+    }

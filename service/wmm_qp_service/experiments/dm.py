@@ -1,0 +1,92 @@
+"""Directional-manipulability enhancement (paper Sec. IV-C, Fig. 9).
+
+Phase 1, 0–5 s: Cartesian-space DM enhancement (Mode.DM_CARTESIAN, eqs. (16)–(17)), the EE
+moves along the Cartesian DM gradient with z kept in [0.36, 0.56] m (the controller config's
+EE box). Phase 2, 5–20 s: null-space enhancement (Mode.DM_NULLSPACE, eqs. (18)–(19)) holding
+x_d = the EE position at t = 5 s (the controller's own estimate, odometry-based: what a real
+controller knows). u = x (base, yaw-compensated frame) or u = z.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+import wmm_qp
+from wmm_qp.config import FloatArray
+
+from .runner import Setup, Trace, run
+
+CARTESIAN_END = 5.0  # [s]
+DEFAULT_DURATION = 20.0  # [s]
+DIRECTIONS = {"x": np.array([1.0, 0.0, 0.0]), "z": np.array([0.0, 0.0, 1.0])}
+
+
+def dm_reference(
+    model: wmm_qp.WmmModel, u: FloatArray, t_switch: float = CARTESIAN_END
+) -> Callable[[float, Any, Any], wmm_qp.Reference]:
+    """The DM scenario's reference function (Cartesian phase, then null space holding the EE)."""
+    hold: list[FloatArray] = []
+
+    def reference(t: float, st: Any, _cmd: Any) -> wmm_qp.Reference:
+        if t < t_switch - 1e-9:
+            x = model.ee_position(st.base_odom, st.q_arm)
+            return wmm_qp.Reference(mode=wmm_qp.Mode.DM_CARTESIAN, x_d=x, direction=u)
+        if not hold:
+            hold.append(model.ee_position(st.base_odom, st.q_arm))
+        return wmm_qp.Reference(mode=wmm_qp.Mode.DM_NULLSPACE, x_d=hold[0], direction=u)
+
+    return reference
+
+
+def run_dm(
+    setup: Setup, direction: str = "x", duration: float = DEFAULT_DURATION, progress: bool = True
+) -> Trace:
+    """Run both DM phases (the Cartesian phase is shortened when duration < 10 s)."""
+    u = DIRECTIONS[direction]
+    ref = dm_reference(setup.model, u, cartesian_end(duration))
+    return run(
+        setup, ref, duration, dm_direction=u, progress=f"dm {direction}" if progress else None
+    )
+
+
+def cartesian_end(duration: float) -> float:
+    """[s] end of the Cartesian phase: 5 s, or a quarter of a run shorter than 10 s."""
+    return CARTESIAN_END if duration >= 2 * CARTESIAN_END else duration / 4.0
+
+
+def dm_metrics(trace: Trace, setup: Setup, direction: str, t_switch: float) -> dict[str, Any]:
+    """Fig. 9 metrics (JSON keys of issue 5).
+
+    - ``dm_start``, ``dm_after_cartesian``, ``dm_final``: H2 along u (true joint angles).
+    - ``z_after_cartesian``: [m] true EE height at the end of the Cartesian phase.
+    - ``ee_drift_max``: [m] max ‖x_true(t) − x_true(t_5)‖ in the null-space phase (ground truth,
+      so base slip counts); ``ee_drift_max_model``: the same from the odometry-based model EE.
+    - ``torque_norm_per_10N_*``: [N·m] ‖W J_mᵀ u‖·10 N = 10 / H2.
+    """
+    i5 = trace.at(t_switch)
+    ns = slice(i5, None)
+    drift = np.linalg.norm(trace.ee_true[ns] - trace.ee_true[i5], axis=1)
+    m = setup.model
+    x_model = np.array(
+        [m.ee_position(b, q) for b, q in zip(trace.base_odom[ns], trace.q[ns], strict=True)]
+    )
+    drift_model = np.linalg.norm(
+        x_model - trace.ee_des[i5 + 1] if i5 + 1 < len(trace.t) else x_model, axis=1
+    )
+    return {
+        "direction": direction,
+        "dm_start": float(trace.dm[0]),
+        "dm_after_cartesian": float(trace.dm[i5]),
+        "z_start": float(trace.ee_true[0, 2]),
+        "z_after_cartesian": float(trace.ee_true[i5, 2]),
+        "dm_final": float(trace.dm[-1]),
+        "ee_drift_max": float(drift.max()) if drift.size else 0.0,
+        "ee_drift_max_model": float(drift_model.max()) if drift_model.size else 0.0,
+        "base_travel": float(np.linalg.norm(trace.base_true[-1, :2] - trace.base_true[0, :2])),
+        "torque_norm_per_10N_start": 10.0 / float(trace.dm[0]),
+        "torque_norm_per_10N_final": 10.0 / float(trace.dm[-1]),
+        "violations": trace.violations,
+    }
