@@ -7,9 +7,9 @@ import subprocess
 import sys
 
 import pytest
+from wmm_qp_service.cli import main
 
 from wmm_qp.solvers import available_solvers
-from wmm_qp_service.cli import main
 
 START = "0,0.5235987755982988,0,1.5707963267948966,0,-0.5235987755982988,0"
 
@@ -40,18 +40,21 @@ def test_inspect_text_output(capsys: pytest.CaptureFixture[str]) -> None:
     assert code == 0 and "DM H2" in out and "eq. (9)" in out
 
 
-@pytest.mark.parametrize("argv", [
-    ["inspect", "--arm-q", "1,2,3"],
-    ["inspect", "--arm-q", "a,b,c,d,e,f,g"],
-    ["inspect", "--arm-q", "nan,0,0,0,0,0,0"],
-    ["inspect", "--arm-q", START, "--direction", "0,0,0"],
-    ["inspect"],
-    ["verify", "--samples", "-3"],
-    ["verify", "--solver", "cplex"],
-    ["inspect", "--arm-q", START, "--robot-config", "/nonexistent/robot.toml"],
-])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["inspect", "--arm-q", "1,2,3"],
+        ["inspect", "--arm-q", "a,b,c,d,e,f,g"],
+        ["inspect", "--arm-q", "nan,0,0,0,0,0,0"],
+        ["inspect", "--arm-q", START, "--direction", "0,0,0"],
+        ["inspect"],
+        ["verify", "--samples", "-3"],
+        ["verify", "--solver", "cplex"],
+        ["inspect", "--arm-q", START, "--robot-config", "/nonexistent/robot.toml"],
+    ],
+)
 def test_bad_arguments_get_one_line_and_exit_2(capsys: pytest.CaptureFixture[str], argv: list[str]) -> None:
-    code, out, err = run(capsys, *argv)
+    code, _, err = run(capsys, *argv)
     assert code == 2
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
 
@@ -79,6 +82,10 @@ def test_verify_finds_violations_in_the_baselines(controller: str, capsys: pytes
 
 
 def test_console_script_runs_without_traceback() -> None:
-    r = subprocess.run([sys.executable, "-m", "wmm_qp_service.cli", "inspect", "--arm-q", "1"],
-                       capture_output=True, text=True, timeout=60)
+    r = subprocess.run(
+        [sys.executable, "-m", "wmm_qp_service.cli", "inspect", "--arm-q", "1"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert r.returncode == 2 and "Traceback" not in r.stderr

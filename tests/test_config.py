@@ -42,15 +42,18 @@ def test_robot_limits_agree_with_the_urdf() -> None:
             assert m.upperPositionLimit[m.joints[j + 1].idx_q] == pytest.approx(hi)
 
 
-@pytest.mark.parametrize("text, key", [
-    ("rate_hz = -5\n", "rate_hz"),
-    ("[gains]\nalpha = 2.0\n", "gains.alpha"),
-    ("[dm]\nW = [1, 2]\n", "dm.W"),
-    ("[dm]\ndirection = [0, 0, 0]\n", "dm.direction"),
-    ("[qp]\nsolver = 'cplex'\n", "qp.solver"),
-    ("[qp]\nbogus = 1\n", "qp.bogus"),
-    ("controller = 'magic'\n", "controller"),
-])
+@pytest.mark.parametrize(
+    "text, key",
+    [
+        ("rate_hz = -5\n", "rate_hz"),
+        ("[gains]\nalpha = 2.0\n", "gains.alpha"),
+        ("[dm]\nW = [1, 2]\n", "dm.W"),
+        ("[dm]\ndirection = [0, 0, 0]\n", "dm.direction"),
+        ("[qp]\nsolver = 'cplex'\n", "qp.solver"),
+        ("[qp]\nbogus = 1\n", "qp.bogus"),
+        ("controller = 'magic'\n", "controller"),
+    ],
+)
 def test_controller_config_errors_name_file_and_key(tmp_path: Path, text: str, key: str) -> None:
     p = tmp_path / "controller.toml"
     p.write_text(text)

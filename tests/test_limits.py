@@ -14,18 +14,22 @@ ARM = robot().arm
 
 
 def bounds(q: np.ndarray, v: np.ndarray, dt: float = DT) -> tuple[np.ndarray, np.ndarray]:
-    return joint_motion_bounds(q, v, ARM.position_lower, ARM.position_upper, ARM.velocity_max,
-                               ARM.acceleration_max, dt)
+    return joint_motion_bounds(q, v, ARM.position_lower, ARM.position_upper, ARM.velocity_max, ARM.acceleration_max, dt)
 
 
 floats = st.floats(min_value=-1.0, max_value=1.0, allow_nan=False)
 
 
 @settings(max_examples=300, deadline=None)
-@given(st.lists(floats, min_size=7, max_size=7), st.lists(floats, min_size=7, max_size=7),
-       st.floats(min_value=0.0, max_value=1.6), st.sampled_from([0.001, 0.002, 0.01]))
-def test_bounds_are_never_empty_and_contain_the_braking_command(qs: list[float], vs: list[float],
-                                                                speed: float, dt: float) -> None:
+@given(
+    st.lists(floats, min_size=7, max_size=7),
+    st.lists(floats, min_size=7, max_size=7),
+    st.floats(min_value=0.0, max_value=1.6),
+    st.sampled_from([0.001, 0.002, 0.01]),
+)
+def test_bounds_are_never_empty_and_contain_the_braking_command(
+    qs: list[float], vs: list[float], speed: float, dt: float
+) -> None:
     # positions anywhere from far inside to 0.2 rad beyond the limits; rates up to 1.6× the limit
     lo_q = np.where(np.isfinite(ARM.position_lower), ARM.position_lower, -np.pi)
     hi_q = np.where(np.isfinite(ARM.position_upper), ARM.position_upper, np.pi)
@@ -53,7 +57,7 @@ def test_at_and_beyond_a_limit_no_motion_further_out() -> None:
 
 def test_continuous_joints_have_no_position_bound() -> None:
     q = np.full(7, 100.0)  # far "beyond" any limit: irrelevant for continuous joints
-    lo, hi = bounds(q, np.zeros(7))
+    _, hi = bounds(q, np.zeros(7))
     a = ARM.acceleration_max * DT
     np.testing.assert_allclose(hi[[0, 2, 4, 6]], a[[0, 2, 4, 6]])
 
@@ -64,10 +68,12 @@ def test_braking_velocity_tends_to_the_continuous_bound() -> None:
 
 
 @settings(max_examples=200, deadline=None)
-@given(st.floats(min_value=0.0, max_value=0.5), st.floats(min_value=0.0, max_value=1.0),
-       st.sampled_from([0.001, 0.002, 0.005]))
-def test_following_the_upper_bound_then_braking_never_passes_the_limit(start: float, frac: float,
-                                                                       dt: float) -> None:
+@given(
+    st.floats(min_value=0.0, max_value=0.5),
+    st.floats(min_value=0.0, max_value=1.0),
+    st.sampled_from([0.001, 0.002, 0.005]),
+)
+def test_following_the_upper_bound_then_braking_never_passes_the_limit(start: float, frac: float, dt: float) -> None:
     """Drive joint 2 at its upper bound (13) towards the limit, then brake: never beyond."""
     q = np.zeros(7)
     q[1] = ARM.position_upper[1] - start

@@ -96,8 +96,9 @@ class TestMecanum:
         np.testing.assert_allclose(model().base.body_twist(np.array([-1.0, 1, 1, -1])), [0, self.R, 0], atol=1e-15)
 
     def test_spin_pattern_turns_counter_clockwise(self) -> None:
-        np.testing.assert_allclose(model().base.body_twist(np.array([-1.0, 1, -1, 1])), [0, 0, self.R / self.L],
-                                   atol=1e-15)
+        np.testing.assert_allclose(
+            model().base.body_twist(np.array([-1.0, 1, -1, 1])), [0, 0, self.R / self.L], atol=1e-15
+        )
 
     def test_P_rotates_body_twist_into_world(self) -> None:
         yaw = 0.8

@@ -127,8 +127,9 @@ def test_wheels_still_while_the_arm_suffices_then_base_supplies_the_rest(solver:
 
 # 5 ------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("solver", SOLVERS)
-def test_solver_failure_gives_a_safe_stop_inside_the_acceleration_bounds(solver: str,
-                                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+def test_solver_failure_gives_a_safe_stop_inside_the_acceleration_bounds(
+    solver: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
     from wmm_qp.solvers import QPSolution
 
     ctl = qp(solver)
@@ -157,6 +158,7 @@ def test_unknown_solver_is_a_clear_error() -> None:
 
 
 # 6 is tests/test_cli.py::test_verify_reports_zero_violations_for_every_qp_solver
+
 
 def test_the_problem_is_inspectable() -> None:
     ctl = qp(SOLVERS[0], arm_first=False)

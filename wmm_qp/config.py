@@ -209,8 +209,9 @@ class _Reader:
             return default
         return self.data[k]
 
-    def number(self, k: str, default: Any = ..., *, positive: bool = False, lo: float | None = None,
-               hi: float | None = None) -> float:
+    def number(
+        self, k: str, default: Any = ..., *, positive: bool = False, lo: float | None = None, hi: float | None = None
+    ) -> float:
         v = self.get(k, default)
         if isinstance(v, bool) or not isinstance(v, int | float):
             raise ConfigError(self.path, self._key(k), f"must be a number, got {v!r}")
@@ -225,8 +226,7 @@ class _Reader:
             raise ConfigError(self.path, self._key(k), f"must be <= {hi}, got {v}")
         return v
 
-    def vector(self, k: str, n: int, default: Any = ..., *, positive: bool = False,
-               finite: bool = True) -> FloatArray:
+    def vector(self, k: str, n: int, default: Any = ..., *, positive: bool = False, finite: bool = True) -> FloatArray:
         v = self.get(k, default)
         if not isinstance(v, list | tuple | np.ndarray) or len(v) != n:
             raise ConfigError(self.path, self._key(k), f"must be a list of {n} numbers, got {v!r}")
@@ -284,8 +284,18 @@ def load_robot_config(path: Path | str | None = None) -> RobotConfig:
     r = _Reader(path, _read_toml(path))
     r.unknown({"name", "arm", "base"})
     a = r.table("arm")
-    a.unknown({"urdf", "ee_frame", "mount_offset", "position_lower", "position_upper", "velocity_max",
-               "acceleration_max", "torque_limit"})
+    a.unknown(
+        {
+            "urdf",
+            "ee_frame",
+            "mount_offset",
+            "position_lower",
+            "position_upper",
+            "velocity_max",
+            "acceleration_max",
+            "torque_limit",
+        }
+    )
     urdf = (path.parent / a.string("urdf")).resolve()
     if not urdf.is_file():
         raise ConfigError(path, "arm.urdf", f"file not found: {urdf}")
@@ -335,8 +345,9 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
     s = r.table("singularity", required=False)
     s.unknown({"sigma_threshold", "damping_max"})
     q = r.table("qp", required=False)
-    q.unknown({"solver", "alpha", "arm_first", "slack_l1", "slack_weight", "task_speed_max", "singular_arm_weight",
-              "eps_abs"})
+    q.unknown(
+        {"solver", "alpha", "arm_first", "slack_l1", "slack_weight", "task_speed_max", "singular_arm_weight", "eps_abs"}
+    )
     direction = dm.vector("direction", 3, d.direction)
     if np.linalg.norm(direction) < 1e-9:
         raise ConfigError(path, "dm.direction", "must not be the zero vector")

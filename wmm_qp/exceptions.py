@@ -45,9 +45,7 @@ class SolverNotFound(WmmQpError):
         self.name = name
         self.available = available
         self.hint = hint
-        super().__init__(
-            f"QP solver {name!r} is not available ({hint}); available: {', '.join(available) or 'none'}"
-        )
+        super().__init__(f"QP solver {name!r} is not available ({hint}); available: {', '.join(available) or 'none'}")
 
 
 class SolverFailed(WmmQpError):

@@ -56,8 +56,10 @@ class RobotState:
 
     def is_finite(self) -> bool:
         return bool(
-            np.isfinite(self.q_base).all() and np.isfinite(self.q_arm).all()
-            and np.isfinite(self.v_arm).all() and np.isfinite(self.wheel_speeds).all()
+            np.isfinite(self.q_base).all()
+            and np.isfinite(self.q_arm).all()
+            and np.isfinite(self.v_arm).all()
+            and np.isfinite(self.wheel_speeds).all()
         )
 
 
@@ -86,8 +88,11 @@ class Reference:
 
     def is_finite(self) -> bool:
         d = self.direction
-        return bool(np.isfinite(self.x_d).all() and np.isfinite(self.xd_d).all()
-                    and (d is None or (np.isfinite(d).all() and np.linalg.norm(d) > 1e-9)))
+        return bool(
+            np.isfinite(self.x_d).all()
+            and np.isfinite(self.xd_d).all()
+            and (d is None or (np.isfinite(d).all() and np.linalg.norm(d) > 1e-9))
+        )
 
 
 class Status(enum.StrEnum):

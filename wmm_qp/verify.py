@@ -29,8 +29,7 @@ KINDS = ("position", "velocity", "acceleration", "wheel")
 TOL = 1e-9
 
 
-def check_command(robot: RobotConfig, dt: float, state: RobotState, cmd: Command,
-                  tol: float = TOL) -> dict[str, int]:
+def check_command(robot: RobotConfig, dt: float, state: RobotState, cmd: Command, tol: float = TOL) -> dict[str, int]:
     """Number of joints (or wheels) whose command violates each kind of hard bound."""
     arm, base = robot.arm, robot.base
     v, v0, q = np.asarray(cmd.arm_rates), state.v_arm, state.q_arm
@@ -47,8 +46,11 @@ def check_command(robot: RobotConfig, dt: float, state: RobotState, cmd: Command
     out["position"] = int(np.sum(~finite | too_high | too_low))
     w, w0 = np.asarray(cmd.wheel_speeds), state.wheel_speeds
     aw = base.wheel_acceleration_max * dt
-    bad_w = (~np.isfinite(w) | (np.abs(w - w0) > aw + tol)
-             | (np.abs(w) > np.maximum(base.wheel_speed_max, np.abs(w0) - aw) + tol))
+    bad_w = (
+        ~np.isfinite(w)
+        | (np.abs(w - w0) > aw + tol)
+        | (np.abs(w) > np.maximum(base.wheel_speed_max, np.abs(w0) - aw) + tol)
+    )
     out["wheel"] = int(np.sum(bad_w))
     return out
 
@@ -75,8 +77,15 @@ def sample_states(model: WmmModel, n: int, seed: int, modes: tuple[Mode, ...] = 
     lo = np.where(np.isfinite(arm.position_lower), arm.position_lower, -np.pi)
     hi = np.where(np.isfinite(arm.position_upper), arm.position_upper, np.pi)
     vmax, wmax = arm.velocity_max, base.wheel_speed_max
-    cases = ("inside", "at_limit", "beyond_limit", "at_velocity_limit", "beyond_velocity_limit",
-             "near_singular", "singular")
+    cases = (
+        "inside",
+        "at_limit",
+        "beyond_limit",
+        "at_velocity_limit",
+        "beyond_velocity_limit",
+        "near_singular",
+        "singular",
+    )
     for i in range(n):
         case = cases[i % len(cases)]
         q = rng.uniform(lo, hi)
@@ -126,8 +135,7 @@ class VerifyReport:
     examples: list[dict[str, object]] = field(default_factory=list)
 
 
-def verify_controller(controller: object, model: WmmModel, n: int, seed: int,
-                      progress: object = None) -> VerifyReport:
+def verify_controller(controller: object, model: WmmModel, n: int, seed: int, progress: object = None) -> VerifyReport:
     """Run one step of ``controller`` for each of n random states in every mode; referee each.
 
     Args:
@@ -153,12 +161,11 @@ def verify_controller(controller: object, model: WmmModel, n: int, seed: int,
                 rep.by_kind[kind] += c
                 rep.by_mode[s.reference.mode.value][kind] += c
             if len(rep.examples) < 3:
-                rep.examples.append({"case": s.case, "mode": s.reference.mode.value,
-                                     "violations": {k: c for k, c in res.items() if c}})
+                rep.examples.append(
+                    {"case": s.case, "mode": s.reference.mode.value, "violations": {k: c for k, c in res.items() if c}}
+                )
         if (k + 1) % len(modes) == 0:
             rep.samples += 1
             if progress is not None:
                 progress(rep.samples, n)  # type: ignore[operator]
     return rep
-
-

@@ -14,6 +14,7 @@ import argparse
 import importlib
 import sys
 from collections.abc import Sequence
+from typing import Any
 
 # name → module (under wmm_qp_service.commands), in the order `wmm-qp --help` lists them.
 COMMANDS: dict[str, str] = {
@@ -52,7 +53,7 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
-def _load(name: str):  # type: ignore[no-untyped-def]
+def _load(name: str) -> Any:
     try:
         return importlib.import_module(f"wmm_qp_service.commands.{COMMANDS[name]}")
     except ModuleNotFoundError as e:

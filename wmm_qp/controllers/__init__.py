@@ -9,8 +9,14 @@ from .paper import PaperController
 from .qp import QpController
 from .traditional import TraditionalController
 
-__all__ = ["CONTROLLER_KINDS", "Controller", "PaperController", "QpController", "TraditionalController",
-           "make_controller"]
+__all__ = [
+    "CONTROLLER_KINDS",
+    "Controller",
+    "PaperController",
+    "QpController",
+    "TraditionalController",
+    "make_controller",
+]
 
 
 def make_controller(kind: str, model: WmmModel, config: ControllerConfig) -> Controller:
@@ -21,7 +27,10 @@ def make_controller(kind: str, model: WmmModel, config: ControllerConfig) -> Con
         SolverNotFound: kind "qp" with a solver that cannot be used here.
     """
     classes: dict[str, type[Controller]] = {
-        "qp": QpController, "paper": PaperController, "traditional": TraditionalController}
+        "qp": QpController,
+        "paper": PaperController,
+        "traditional": TraditionalController,
+    }
     if kind not in classes:
         raise ValueError(f"unknown controller {kind!r}; choose one of {', '.join(CONTROLLER_KINDS)}")
     return classes[kind](model, config)

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import ControllerConfig, FloatArray, RobotConfig
-from ..limits import braking_command, joint_motion_bounds, wheel_braking_command, wheel_bounds
-from ..manipulability import dm_cartesian_gradient, dm_gradient, directional_manipulability
+from ..limits import braking_command, joint_motion_bounds, wheel_bounds, wheel_braking_command
+from ..manipulability import directional_manipulability, dm_cartesian_gradient, dm_gradient
 from ..model.wmm import Kinematics, WmmModel
 from ..pseudoinverse import damping_factor, sigma_min
 from ..types import Command, Mode, Reference, RobotState, Status
@@ -53,7 +53,7 @@ class Controller(ABC):
         self.config = config
         self.dt = config.dt
 
-    def reset(self) -> None:
+    def reset(self) -> None:  # noqa: B027 (optional hook, no-op by default)
         """Forget any state carried between ticks (warm starts, mode latches)."""
 
     # ------------------------------------------------------------------ entry point
@@ -103,12 +103,28 @@ class Controller(ABC):
             dm, grad_q = directional_manipulability(kin.J_arm, u, W), None  # eq. (8)
         sig = sigma_min(kin.J_m)
         arm = self.robot.arm
-        lo, hi = joint_motion_bounds(state.q_arm, state.v_arm, arm.position_lower, arm.position_upper,
-                                     arm.velocity_max, arm.acceleration_max, self.dt)  # eq. (13)
+        lo, hi = joint_motion_bounds(
+            state.q_arm,
+            state.v_arm,
+            arm.position_lower,
+            arm.position_upper,
+            arm.velocity_max,
+            arm.acceleration_max,
+            self.dt,
+        )  # eq. (13)
         wlo, whi = wheel_bounds(state.wheel_speeds, self.robot.base, self.dt)
-        return TickContext(kin=kin, u=u, dm=dm, grad_q=grad_q, sigma=sig,
-                           damping=damping_factor(sig, self.config.sigma_threshold, self.config.damping_max),
-                           arm_lo=lo, arm_hi=hi, wheel_lo=wlo, wheel_hi=whi)
+        return TickContext(
+            kin=kin,
+            u=u,
+            dm=dm,
+            grad_q=grad_q,
+            sigma=sig,
+            damping=damping_factor(sig, self.config.sigma_threshold, self.config.damping_max),
+            arm_lo=lo,
+            arm_hi=hi,
+            wheel_lo=wlo,
+            wheel_hi=whi,
+        )
 
     def task_velocity(self, ctx: TickContext, reference: Reference) -> FloatArray:
         """ẋ_ref of the mode: ẋ_d + K_x (x_d − x) (eq. (18)) or v_c (eq. (17))."""
@@ -130,14 +146,30 @@ class Controller(ABC):
     def needs_gradient(mode: Mode) -> bool:
         return mode in (Mode.DM_CARTESIAN, Mode.DM_NULLSPACE)
 
-    def finish(self, ctx: TickContext, v: FloatArray, xdot_ref: FloatArray, status: Status = Status.OK,
-               reason: str = "", alpha: float = 0.0) -> Command:
+    def finish(
+        self,
+        ctx: TickContext,
+        v: FloatArray,
+        xdot_ref: FloatArray,
+        status: Status = Status.OK,
+        reason: str = "",
+        alpha: float = 0.0,
+    ) -> Command:
         """Wrap v = [v_b; v_m] into a Command with diagnostics."""
         err = float(np.linalg.norm(ctx.kin.J @ v - xdot_ref))
         if status == Status.OK and ctx.damping > 0.0:
             status, reason = Status.DAMPED, reason or f"sigma_min {ctx.sigma:.3g} below threshold"
-        return Command(wheel_speeds=v[:4].copy(), arm_rates=v[4:].copy(), status=status, reason=reason,
-                       alpha=alpha, task_error=err, x=ctx.kin.x.copy(), dm=ctx.dm, sigma_min=ctx.sigma)
+        return Command(
+            wheel_speeds=v[:4].copy(),
+            arm_rates=v[4:].copy(),
+            status=status,
+            reason=reason,
+            alpha=alpha,
+            task_error=err,
+            x=ctx.kin.x.copy(),
+            dm=ctx.dm,
+            sigma_min=ctx.sigma,
+        )
 
 
 def is_finite_number(x: float) -> bool:

@@ -100,8 +100,9 @@ class QpController(Controller):
         """Hard bounds on v = [v_b; v_m]: wheel bounds and eq. (13)."""
         return np.concatenate([ctx.wheel_lo, ctx.arm_lo]), np.concatenate([ctx.wheel_hi, ctx.arm_hi])
 
-    def ee_box_rows(self, ctx: TickContext, mode: Mode, lb: FloatArray, ub: FloatArray
-                    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    def ee_box_rows(
+        self, ctx: TickContext, mode: Mode, lb: FloatArray, ub: FloatArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """C, l, u of the EE box x_min ≤ x + Δt J v ≤ x_max, DM_CARTESIAN only.
 
         Never asks to go further out than the EE already is, and always admits the command
@@ -145,9 +146,20 @@ class QpController(Controller):
         cap = self.config.qp.task_speed_max
         return xdot * (cap / n) if n > cap else xdot
 
-    def _with_slack(self, H_v: FloatArray, g_v: FloatArray, A_v: FloatArray, b: FloatArray,
-                    C_v: FloatArray, l: FloatArray, u: FloatArray, lb_v: FloatArray, ub_v: FloatArray,
-                    rho1: float, rho2: float) -> QPProblem:
+    def _with_slack(
+        self,
+        H_v: FloatArray,
+        g_v: FloatArray,
+        A_v: FloatArray,
+        b: FloatArray,
+        C_v: FloatArray,
+        l: FloatArray,
+        u: FloatArray,
+        lb_v: FloatArray,
+        ub_v: FloatArray,
+        rho1: float,
+        rho2: float,
+    ) -> QPProblem:
         """Append s⁺, s⁻ ≥ 0 to a problem in v (see the module docstring)."""
         n = H_v.shape[0]
         H = np.zeros((n + N_S, n + N_S))
@@ -155,19 +167,35 @@ class QpController(Controller):
         H[n:, n:] = rho2 * np.eye(N_S)
         I3 = np.eye(3)
         return QPProblem(
-            H=H, g=np.concatenate([g_v, np.full(N_S, rho1)]),
-            A=np.hstack([A_v, I3, -I3]), b=b,
-            C=np.hstack([C_v, np.zeros((C_v.shape[0], N_S))]), l=l, u=u,
-            lb=np.concatenate([lb_v, np.zeros(N_S)]), ub=np.concatenate([ub_v, np.full(N_S, INF)]))
+            H=H,
+            g=np.concatenate([g_v, np.full(N_S, rho1)]),
+            A=np.hstack([A_v, I3, -I3]),
+            b=b,
+            C=np.hstack([C_v, np.zeros((C_v.shape[0], N_S))]),
+            l=l,
+            u=u,
+            lb=np.concatenate([lb_v, np.zeros(N_S)]),
+            ub=np.concatenate([ub_v, np.full(N_S, INF)]),
+        )
 
     def build_arm_first(self, ctx: TickContext, xdot: FloatArray) -> tuple[QPProblem, FloatArray]:
         """Stage 1: the arm alone, wheels held at the admissible speed nearest 0."""
         w_hold = np.clip(0.0, ctx.wheel_lo, ctx.wheel_hi)
         b = xdot - ctx.kin.J[:, :N_WHEELS] @ w_hold
         rho1, rho2 = self.slack_weights(ctx)
-        p = self._with_slack(np.diag(self._w_inv[N_WHEELS:]), np.zeros(N_ARM), ctx.kin.J_m, b,
-                             np.zeros((0, N_ARM)), np.zeros(0), np.zeros(0), ctx.arm_lo, ctx.arm_hi,
-                             rho1, rho2)
+        p = self._with_slack(
+            np.diag(self._w_inv[N_WHEELS:]),
+            np.zeros(N_ARM),
+            ctx.kin.J_m,
+            b,
+            np.zeros((0, N_ARM)),
+            np.zeros(0),
+            np.zeros(0),
+            ctx.arm_lo,
+            ctx.arm_hi,
+            rho1,
+            rho2,
+        )
         return p, w_hold
 
     def build(self, ctx: TickContext, xdot: FloatArray, mode: Mode) -> QPProblem:
@@ -175,8 +203,9 @@ class QpController(Controller):
         lb, ub = self.box(ctx)
         C, l, u = self.ee_box_rows(ctx, mode, lb, ub)
         rho1, rho2 = self.slack_weights(ctx)
-        return self._with_slack(np.diag(self.cost_diagonal(ctx)), self.linear_term(ctx, mode), ctx.kin.J, xdot,
-                                C, l, u, lb, ub, rho1, rho2)
+        return self._with_slack(
+            np.diag(self.cost_diagonal(ctx)), self.linear_term(ctx, mode), ctx.kin.J, xdot, C, l, u, lb, ub, rho1, rho2
+        )
 
     # ------------------------------------------------------------------ solving
     def _solve(self, backend: QPBackend, problem: QPProblem) -> FloatArray | None:

@@ -9,6 +9,6 @@ __all__ = [
     "braking_velocity",
     "intersect_by_priority",
     "joint_motion_bounds",
-    "wheel_braking_command",
     "wheel_bounds",
+    "wheel_braking_command",
 ]

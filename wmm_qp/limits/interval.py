@@ -7,7 +7,9 @@ import numpy as np
 from ..config import FloatArray
 
 
-def intersect_by_priority(lo: FloatArray, hi: FloatArray, lo2: FloatArray, hi2: FloatArray) -> tuple[FloatArray, FloatArray]:
+def intersect_by_priority(
+    lo: FloatArray, hi: FloatArray, lo2: FloatArray, hi2: FloatArray
+) -> tuple[FloatArray, FloatArray]:
     """[lo, hi] ∩ [lo2, hi2] element-wise; where empty, the point of [lo, hi] nearest to [lo2, hi2].
 
     So the result is never empty and always inside [lo, hi]: the earlier interval has priority.

@@ -1,6 +1,6 @@
 """Manipulability measures: directional (eqs. (8)–(10)) and Yoshikawa's."""
 
-from .directional import dm_cartesian_gradient, dm_gradient, directional_manipulability, torque_norm_per_newton
+from .directional import directional_manipulability, dm_cartesian_gradient, dm_gradient, torque_norm_per_newton
 from .yoshikawa import yoshikawa_manipulability
 
 __all__ = [

@@ -15,7 +15,6 @@ import numpy as np
 
 from ..config import FloatArray
 
-
 S_MIN = 1e-12  # uᵀ J A Jᵀ u is floored here: H2 ≤ 1e6 where Jᵀu = 0 (a singular direction)
 
 
@@ -60,4 +59,5 @@ def dm_cartesian_gradient(grad_q: FloatArray, J_m: FloatArray) -> FloatArray:
     J_m⁺ = J_mᵀ (J_m J_mᵀ)⁻¹ is the plain right pseudoinverse (Moore–Penrose, via lstsq
     so that it stays finite near singularities).
     """
-    return np.linalg.lstsq(J_m.T, grad_q, rcond=1e-10)[0]  # solves J_mᵀ y = gᵀ: y = (J_m⁺)ᵀ gᵀ
+    y: FloatArray = np.asarray(np.linalg.lstsq(J_m.T, grad_q, rcond=1e-10)[0], dtype=np.float64)
+    return y  # solves J_mᵀ y = gᵀ: y = (J_m⁺)ᵀ gᵀ

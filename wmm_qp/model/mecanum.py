@@ -35,7 +35,7 @@ class MecanumBase:
         )
         self.M.setflags(write=False)
         # Right inverse (M has full row rank): the wheel speeds of a body twist.
-        self.M_pinv: FloatArray = np.linalg.pinv(self.M)
+        self.M_pinv: FloatArray = np.asarray(np.linalg.pinv(self.M), dtype=np.float64)
         self.M_pinv.setflags(write=False)
 
     def P(self, yaw: float) -> FloatArray:

@@ -90,5 +90,16 @@ class WmmModel:
         J_m = R @ J_arm
         J = np.hstack([J_b @ P, J_m])  # eq. (5)
         dJ = self.arm.jacobian_derivatives(q_arm) if hessian else None
-        return Kinematics(q_base=np.asarray(q_base, float), q_arm=np.asarray(q_arm, float), R=R,
-                          p_arm=p_arm, x=x, J_arm=J_arm, J_m=J_m, J_b=J_b, P=P, J=J, dJ_arm=dJ)
+        return Kinematics(
+            q_base=np.asarray(q_base, float),
+            q_arm=np.asarray(q_arm, float),
+            R=R,
+            p_arm=p_arm,
+            x=x,
+            J_arm=J_arm,
+            J_m=J_m,
+            J_b=J_b,
+            P=P,
+            J=J,
+            dJ_arm=dJ,
+        )

@@ -26,5 +26,5 @@ class QPBackend(ABC):
     def solve(self, problem: QPProblem) -> QPSolution:
         """Solve; never raises (a backend exception becomes ``ok=False`` with its message)."""
 
-    def reset(self) -> None:
+    def reset(self) -> None:  # noqa: B027 (optional hook, no-op by default)
         """Drop warm-start information (next solve starts cold)."""

@@ -13,8 +13,16 @@ from .base import QPBackend
 from .problem import QPProblem, QPSolution
 
 _EQUALITY = 5
-_FLAGS = {1: "solved", 2: "solved (soft constraints)", -1: "infeasible", -2: "cycling",
-          -3: "unbounded", -4: "iteration limit", -5: "nonconvex", -6: "initial working set overdetermined"}
+_FLAGS = {
+    1: "solved",
+    2: "solved (soft constraints)",
+    -1: "infeasible",
+    -2: "cycling",
+    -3: "unbounded",
+    -4: "iteration limit",
+    -5: "nonconvex",
+    -6: "initial working set overdetermined",
+}
 
 
 class DaqpBackend(QPBackend):
@@ -34,16 +42,19 @@ class DaqpBackend(QPBackend):
             upper = np.concatenate([p.ub, p.b, p.u])
             lower = np.concatenate([p.lb, p.b, p.l])
             sense = np.zeros(upper.size, dtype=np.int32)
-            sense[p.n:p.n + p.n_eq] = _EQUALITY
+            sense[p.n : p.n + p.n_eq] = _EQUALITY
             kwargs = {}
             if self._prev is not None and self._prev.size == p.n:
                 kwargs["primal_start"] = self._prev
-            x, _f, flag, info = daqp.solve(p.H, p.g, A, upper, lower, sense, iter_limit=self.max_iter,
-                                           **kwargs)
+            x, _f, flag, info = daqp.solve(p.H, p.g, A, upper, lower, sense, iter_limit=self.max_iter, **kwargs)
             ok = flag == 1 and bool(np.isfinite(x).all())
             self._prev = np.array(x) if ok else None
-            return QPSolution(z=np.array(x) if ok else None, ok=ok, status=_FLAGS.get(flag, f"exitflag {flag}"),
-                              iterations=int(info.get("iterations", 0)))
+            return QPSolution(
+                z=np.array(x) if ok else None,
+                ok=ok,
+                status=_FLAGS.get(flag, f"exitflag {flag}"),
+                iterations=int(info.get("iterations", 0)),
+            )
         except Exception as e:
             self.reset()
             return QPSolution(z=None, ok=False, status=f"daqp raised {type(e).__name__}: {e}")

@@ -51,9 +51,21 @@ class OsqpBackend(QPBackend):
                 Ms = sp.csc_matrix(np.ones_like(M))
                 Ms.data[:] = M.T.ravel()
                 s = osqp.OSQP()
-                s.setup(P=P, q=problem.g, A=Ms, l=lo, u=hi, verbose=False, eps_abs=self.eps_abs,
-                        eps_rel=0.0, max_iter=self.max_iter, polishing=True, warm_starting=True,
-                        eps_prim_inf=1e-9, eps_dual_inf=1e-9)
+                s.setup(
+                    P=P,
+                    q=problem.g,
+                    A=Ms,
+                    l=lo,
+                    u=hi,
+                    verbose=False,
+                    eps_abs=self.eps_abs,
+                    eps_rel=0.0,
+                    max_iter=self.max_iter,
+                    polishing=True,
+                    warm_starting=True,
+                    eps_prim_inf=1e-9,
+                    eps_dual_inf=1e-9,
+                )
                 self._solver, self._shape = s, shape
             else:
                 s = self._solver
@@ -67,8 +79,7 @@ class OsqpBackend(QPBackend):
                 # ADMM stalls on the slack's exact penalty, but its iterate already meets the
                 # constraints to 1e-6 (and the controller clips it into the hard box bounds).
                 ok, status = True, f"iteration cap, accepted (primal residual {res.info.prim_res:.1e})"
-            return QPSolution(z=np.array(res.x) if ok else None, ok=ok, status=status,
-                              iterations=int(res.info.iter))
+            return QPSolution(z=np.array(res.x) if ok else None, ok=ok, status=status, iterations=int(res.info.iter))
         except Exception as e:
             self.reset()
             return QPSolution(z=None, ok=False, status=f"osqp raised {type(e).__name__}: {e}")

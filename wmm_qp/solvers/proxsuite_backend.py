@@ -41,8 +41,12 @@ class ProxsuiteBackend(QPBackend):
             qp.solve()
             info = qp.results.info
             ok = info.status == _OUT.PROXQP_SOLVED
-            return QPSolution(z=np.array(qp.results.x) if ok else None, ok=ok,
-                              status=str(info.status).rsplit(".", 1)[-1], iterations=int(info.iter))
+            return QPSolution(
+                z=np.array(qp.results.x) if ok else None,
+                ok=ok,
+                status=str(info.status).rsplit(".", 1)[-1],
+                iterations=int(info.iter),
+            )
         except Exception as e:  # a backend's exception never leaks
             self.reset()
             return QPSolution(z=None, ok=False, status=f"proxsuite raised {type(e).__name__}: {e}")

@@ -10,7 +10,7 @@ import numpy as np
 from wmm_qp import ControllerConfig, RobotConfig, load_controller_config, load_robot_config
 
 
-def floats(n: int, name: str):  # type: ignore[no-untyped-def]
+def floats(n: int, name: str):
     """An argparse type: a comma-separated list of exactly n finite floats."""
 
     def parse(text: str) -> np.ndarray:
@@ -30,10 +30,16 @@ def floats(n: int, name: str):  # type: ignore[no-untyped-def]
 
 
 def add_config_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--robot-config", type=Path, default=None, metavar="FILE",
-                        help="robot.toml (default: configs/robot.toml)")
-    parser.add_argument("--controller-config", type=Path, default=None, metavar="FILE",
-                        help="controller.toml (default: configs/controller.toml)")
+    parser.add_argument(
+        "--robot-config", type=Path, default=None, metavar="FILE", help="robot.toml (default: configs/robot.toml)"
+    )
+    parser.add_argument(
+        "--controller-config",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="controller.toml (default: configs/controller.toml)",
+    )
 
 
 def load_configs(args: argparse.Namespace) -> tuple[RobotConfig, ControllerConfig]:

@@ -17,12 +17,23 @@ HELP = "kinematics and directional manipulability at one configuration"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--arm-q", required=True, type=floats(7, "--arm-q"), metavar="Q1,...,Q7",
-                        help="arm joint angles [rad]")
-    parser.add_argument("--base-q", type=floats(3, "--base-q"), default=np.zeros(3), metavar="X,Y,YAW",
-                        help="base pose [m, m, rad] (default 0,0,0)")
-    parser.add_argument("--direction", type=floats(3, "--direction"), default=None, metavar="UX,UY,UZ",
-                        help="DM direction u in the base frame (default: the controller config's)")
+    parser.add_argument(
+        "--arm-q", required=True, type=floats(7, "--arm-q"), metavar="Q1,...,Q7", help="arm joint angles [rad]"
+    )
+    parser.add_argument(
+        "--base-q",
+        type=floats(3, "--base-q"),
+        default=np.zeros(3),
+        metavar="X,Y,YAW",
+        help="base pose [m, m, rad] (default 0,0,0)",
+    )
+    parser.add_argument(
+        "--direction",
+        type=floats(3, "--direction"),
+        default=None,
+        metavar="UX,UY,UZ",
+        help="DM direction u in the base frame (default: the controller config's)",
+    )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     add_config_arguments(parser)
 
@@ -55,7 +66,9 @@ def run(args: argparse.Namespace) -> int:
         return 0
     f = lambda v: "[" + ", ".join(f"{x:+.4f}" for x in v) + "]"  # noqa: E731
     print(f"EE position (world)         {f(kin.x)} m")
-    print(f"sigma_min(J_m)              {out['sigma_min']:.4f}" + ("  (below threshold: DLS)" if out["singular"] else ""))
+    print(
+        f"sigma_min(J_m)              {out['sigma_min']:.4f}" + ("  (below threshold: DLS)" if out["singular"] else "")
+    )
     print(f"direction u (base frame)    {f(u)}")
     print(f"DM H2 along u               {dm:.4f}                  eq. (8)")
     print(f"dH2/dq                      {f(grad)}  eq. (9)")

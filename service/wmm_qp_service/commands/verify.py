@@ -50,11 +50,22 @@ def run(args: argparse.Namespace) -> int:
     rep = verify_controller(ctl, model, args.samples, args.seed, progress)
     label = args.controller + (f" ({ctl.solver})" if isinstance(ctl, QpController) else "")
     if args.json:
-        print(json.dumps({"controller": args.controller,
-                          "solver": ctl.solver if isinstance(ctl, QpController) else None,
-                          "samples": rep.samples, "steps": rep.steps, "violations": rep.violations,
-                          "by_kind": rep.by_kind, "by_mode": rep.by_mode, "by_case": rep.by_case,
-                          "statuses": rep.statuses, "seed": args.seed}))
+        print(
+            json.dumps(
+                {
+                    "controller": args.controller,
+                    "solver": ctl.solver if isinstance(ctl, QpController) else None,
+                    "samples": rep.samples,
+                    "steps": rep.steps,
+                    "violations": rep.violations,
+                    "by_kind": rep.by_kind,
+                    "by_mode": rep.by_mode,
+                    "by_case": rep.by_case,
+                    "statuses": rep.statuses,
+                    "seed": args.seed,
+                }
+            )
+        )
     else:
         print(f"{label}: {rep.samples} states x {len(rep.by_mode)} modes = {rep.steps} commands, seed {args.seed}")
         print(f"{'mode':<14}" + "".join(f"{k:>14}" for k in KINDS))
