@@ -1,0 +1,116 @@
+"""Protocol round trips and validation on receipt: every rejection reason."""
+
+from __future__ import annotations
+
+import math
+
+import msgspec
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from wmm_qp_service.config import ValidationConfig
+from wmm_qp_service.keys import Keys
+from wmm_qp_service.protocol import (
+    PROTOCOL_VERSION,
+    CommandMsg,
+    ModeMsg,
+    SetpointMsg,
+    StateMsg,
+    encode,
+)
+from wmm_qp_service.validation import Reject, Rejected, Validator
+
+LIM = ValidationConfig()
+
+
+def state(**kw: object) -> StateMsg:
+    d: dict[str, object] = dict(robot="r1", t=0.0, q_base=[0.0] * 3, q_arm=[0.1] * 7, v_arm=[0.0] * 7,
+                                wheel_speeds=[0.0] * 4, base_true=[0.0] * 3, ee_true=[0.6, 0, 0.5],
+                                tau=[0.0] * 7, contact_force=[0.0] * 3, box_position=0.0)
+    d.update(kw)
+    return StateMsg(**d)  # type: ignore[arg-type]
+
+
+def check(cls: type, data: bytes) -> Reject | None:
+    try:
+        Validator(cls, "r1", LIM).check(data)
+    except Rejected as e:
+        return e.reason
+    return None
+
+
+def test_valid_messages_round_trip() -> None:
+    for cls, msg in [
+        (StateMsg, state()),
+        (SetpointMsg, SetpointMsg(robot="r1", x=[0.6, 0.0, 0.5])),
+        (SetpointMsg, SetpointMsg(robot="r1", x=[0.6, 0.0, 0.5], xd=[0.01, 0.0, 0.0])),
+        (ModeMsg, ModeMsg(robot="r1", mode="dm_nullspace", direction=[0, 0, 1.0])),
+        (CommandMsg, CommandMsg(robot="r1", wheel_speeds=[0.0] * 4, arm_rates=[0.1] * 7)),
+    ]:
+        v = Validator(cls, "r1", LIM)
+        assert v(encode(msg)) == msg
+        assert v.accepted == 1 and not v.rejected
+
+
+@pytest.mark.parametrize(
+    ("cls", "payload", "reason"),
+    [
+        (SetpointMsg, b"\xc1garbage", Reject.DECODE),
+        (SetpointMsg, b"", Reject.DECODE),
+        (SetpointMsg, encode(ModeMsg(robot="r1", mode="hold")), Reject.SCHEMA),
+        (SetpointMsg, msgspec.msgpack.encode({"type": "setpoint", "robot": "r1"}), Reject.SCHEMA),
+        (SetpointMsg, msgspec.msgpack.encode([1, 2, 3]), Reject.SCHEMA),
+        (SetpointMsg, msgspec.msgpack.encode({"type": "setpoint", "v": 1, "robot": "r1",
+                                              "x": [0.6, 0.0, 0.5], "evil": 1}), Reject.SCHEMA),
+        (SetpointMsg, encode(SetpointMsg(robot="r1", v=PROTOCOL_VERSION + 1, x=[0.6, 0, 0.5])),
+         Reject.VERSION),
+        (SetpointMsg, msgspec.msgpack.encode({"type": "setpoint", "v": 99, "robot": "r1",
+                                              "x": "new-format"}), Reject.VERSION),
+        (SetpointMsg, encode(SetpointMsg(robot="other", x=[0.6, 0, 0.5])), Reject.ROBOT),
+        (SetpointMsg, encode(SetpointMsg(robot="r1", x=[0.6, 0.5])), Reject.SIZE),
+        (SetpointMsg, encode(SetpointMsg(robot="r1", x=[0.6, 0, 0.5], xd=[0.0] * 4)), Reject.SIZE),
+        (SetpointMsg, encode(SetpointMsg(robot="r1", x=[math.nan, 0, 0.5])), Reject.NON_FINITE),
+        (SetpointMsg, encode(SetpointMsg(robot="r1", x=[0.6, math.inf, 0.5])), Reject.NON_FINITE),
+        (SetpointMsg, encode(SetpointMsg(robot="r1", x=[1e9, 0, 0.5])), Reject.RANGE),
+        (SetpointMsg, encode(SetpointMsg(robot="r1", x=[0.6, 0, 50.0])), Reject.RANGE),
+        (SetpointMsg, encode(SetpointMsg(robot="r1", x=[0.6, 0, 0.5], xd=[10.0, 0, 0])), Reject.RANGE),
+        (ModeMsg, encode(ModeMsg(robot="r1", mode="dance")), Reject.MODE),
+        (ModeMsg, encode(ModeMsg(robot="r1", mode="track", direction=[0.0, 0.0, 0.0])), Reject.RANGE),
+        (ModeMsg, encode(ModeMsg(robot="r1", mode="track", direction=[1.0, math.nan, 0.0])),
+         Reject.NON_FINITE),
+        (StateMsg, encode(state(q_arm=[0.0] * 6)), Reject.SIZE),
+        (StateMsg, encode(state(v_arm=[math.nan] * 7)), Reject.NON_FINITE),
+        (StateMsg, encode(state(wheel_speeds=[1e12] * 4)), Reject.RANGE),
+        (StateMsg, encode(state(tau=[0.0] * 3)), Reject.SIZE),
+        (StateMsg, encode(state(robot="r2")), Reject.ROBOT),
+        (CommandMsg, encode(CommandMsg(robot="r1", wheel_speeds=[0.0] * 4, arm_rates=[1e6] * 7)),
+         Reject.RANGE),
+    ],
+)
+def test_rejections(cls: type, payload: bytes, reason: Reject) -> None:
+    assert check(cls, payload) == reason
+
+
+def test_rejections_are_counted_by_reason() -> None:
+    v = Validator(SetpointMsg, "r1", LIM)
+    assert v(b"\xc1junk") is None
+    assert v(encode(SetpointMsg(robot="x", x=[0.6, 0, 0.5]))) is None
+    assert v(encode(SetpointMsg(robot="x", x=[0.6, 0, 0.5]))) is None
+    assert dict(v.rejected) == {"decode": 1, "robot": 2}
+    assert v.accepted == 0 and "robot" in v.last_rejection
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.binary(max_size=200))
+def test_random_bytes_never_raise_and_never_pass(data: bytes) -> None:
+    v = Validator(SetpointMsg, "r1", LIM)
+    out = v(data)  # must not raise
+    assert out is None or isinstance(out, SetpointMsg)
+    assert v.accepted + sum(v.rejected.values()) == 1
+
+
+def test_keys_live_under_prefix_and_robot() -> None:
+    k = Keys.of("lab/", "r1")
+    assert k.state == "lab/r1/state" and k.cmd == "lab/r1/cmd" and k.setpoint == "lab/r1/setpoint"
+    assert k.mode == "lab/r1/mode" and k.info == "lab/r1/info" and k.alive("sim") == "lab/r1/alive/sim"
