@@ -1,0 +1,25 @@
+"""Shared fixtures: a sim + daemon stack on loopback with a unique prefix and ports."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+
+@pytest.fixture
+def service_stack(tmp_path: Path) -> Iterator[Callable[..., object]]:
+    """Factory of started :class:`wmm_qp_service.processes.Stack`; all stopped at teardown."""
+    from wmm_qp_service.processes import Stack, isolated_config
+
+    stacks: list[Stack] = []
+
+    def make(rate_hz: float = 500.0) -> Stack:
+        s = Stack(isolated_config(), rate_hz=rate_hz, log_dir=tmp_path)
+        stacks.append(s)
+        return s.start()
+
+    yield make
+    for s in stacks:
+        s.stop()

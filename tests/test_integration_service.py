@@ -1,0 +1,170 @@
+"""The real daemon and the real sim as processes on loopback, driven through the client API.
+
+No timing asserts: generous timeouts, figures checked only for correctness.
+"""
+
+from __future__ import annotations
+
+import signal
+import time
+from collections.abc import Callable
+from typing import Any
+
+import msgspec
+import numpy as np
+import pytest
+
+import wmm_qp as w
+from wmm_qp_service.client import Client
+from wmm_qp_service.protocol import ModeMsg, SetpointMsg, StateMsg, TelemetryMsg, encode
+
+pytestmark = pytest.mark.integration
+
+TIMEOUT = 30.0
+
+
+def until(pred: Callable[[], Any], timeout: float = TIMEOUT, period: float = 0.05) -> Any:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        v = pred()
+        if v:
+            return v
+        time.sleep(period)
+    raise AssertionError(f"condition not met within {timeout} s")
+
+
+def ready(c: Client) -> Any:
+    assert c.wait_for_daemon(TIMEOUT) is not None, "daemon did not answer"
+    return until(lambda: (i := c.info()) is not None and i.status.state_ok and i)
+
+
+def test_stream_tracked_mode_change_smooth_and_malformed_rejected(service_stack: Any) -> None:
+    stack = service_stack(500.0)
+    robot = w.load_robot_config()
+    dt = 1.0 / 500.0
+    with Client(stack.svc, name="test", telemetry=True) as c:
+        info = ready(c)
+        x0 = np.array(info.status.x)
+        # ---- a setpoint stream is tracked
+        c.set_mode("track")
+        until(lambda: c.info().status.mode == "track")
+        tel: list[TelemetryMsg] = []
+        t0 = time.monotonic()
+        while (t := time.monotonic() - t0) < 3.0:
+            c.send_setpoint(x0 + np.array([0.04 * np.sin(0.8 * t), 0.03 * (1 - np.cos(0.8 * t)), 0.0]))
+            tel += c.telemetry()
+            time.sleep(0.01)
+        last = x0 + np.array([0.04 * np.sin(0.8 * 3.0), 0.03 * (1 - np.cos(0.8 * 3.0)), 0.0])
+        for _ in range(30):  # keep the last target standing
+            c.send_setpoint(last)
+            time.sleep(0.02)
+        tel += c.telemetry()
+        errs = [m.ee_error for m in tel if m.mode == "track" and np.isfinite(m.ee_error)]
+        assert len(errs) > 100
+        assert max(errs) < 0.02  # ground truth within 2 cm of the smoothed target
+        st = until(lambda: c.wait_state(2.0))
+        assert np.linalg.norm(np.array(st.ee_true) - last) < 0.01
+        # ---- mode changes take effect without a command jump
+        c.telemetry()
+        for mode in ("hold", "dm_nullspace", "track", "dm_cartesian", "hold"):
+            c.set_mode(mode)
+            until(lambda m=mode: c.info().status.mode == m)
+            time.sleep(0.3)
+        time.sleep(0.2)
+        tel = c.telemetry()
+        modes = {m.mode for m in tel}
+        assert {"hold", "dm_nullspace", "track", "dm_cartesian"} <= modes
+        a_max = np.asarray(robot.arm.acceleration_max)
+        wa_max = robot.base.wheel_acceleration_max
+        worst = 0.0
+        for p, q in zip(tel, tel[1:], strict=False):
+            if q.seq != p.seq + 1:
+                continue  # a telemetry message was dropped: no consecutive pair
+            da = np.abs(np.subtract(q.arm_rates, p.arm_rates)) / (a_max * dt)
+            dw = np.abs(np.subtract(q.wheel_speeds, p.wheel_speeds)) / (wa_max * dt)
+            worst = max(worst, float(da.max()), float(dw.max()))
+        # each command is inside the acceleration bounds around the *executed* rates, which
+        # may lag the previous command by a tick of transport jitter: < 2 A·dt, never a jump
+        assert worst <= 2.0 + 1e-6, worst
+        # ---- malformed messages: rejected, counted, the loop keeps running
+        before = c.info()
+        assert before is not None
+        bad = {
+            "decode": [("setpoint", b"\xc1\x00garbage"), ("mode", b"\xc1")],
+            "schema": [("setpoint", encode(ModeMsg(robot=stack.svc.robot, mode="hold")))],
+            "non_finite": [("setpoint", encode(SetpointMsg(robot=stack.svc.robot, x=[np.nan, 0, 0.5])))],
+            "range": [("setpoint", encode(SetpointMsg(robot=stack.svc.robot, x=[1e12, 0, 0.5])))],
+            "mode": [("mode", encode(ModeMsg(robot=stack.svc.robot, mode="fly")))],
+            "robot": [("mode", encode(ModeMsg(robot="someone-else", mode="track")))],
+            "size": [("setpoint", encode(SetpointMsg(robot=stack.svc.robot, x=[0.6, 0.5])))],
+        }
+        for items in bad.values():
+            for key, payload in items:
+                c.put_raw(key, payload)
+                time.sleep(0.03)  # ring channels of depth 1: one at a time
+        st_bad = StateMsg(robot=stack.svc.robot, t=0.0, q_base=[0.0] * 3, q_arm=[np.inf] * 7,
+                          v_arm=[0.0] * 7, wheel_speeds=[0.0] * 4, base_true=[0.0] * 3,
+                          ee_true=[0.0] * 3, tau=[0.0] * 7, contact_force=[0.0] * 3)
+        for _ in range(50):  # the sim's own states overwrite the ring: send a burst
+            c.put_raw("state", encode(st_bad))
+            time.sleep(0.001)
+
+        def all_counted() -> Any:
+            i = c.info()
+            if i is None:
+                return None
+            r = i.status.rejected
+            ok = all(r.get(k, 0) - before.status.rejected.get(k, 0) >= 1 for k in bad)
+            return i if ok and r.get("non_finite", 0) >= 2 else None
+
+        after = until(all_counted, timeout=10.0)
+        assert after.status.loop.ticks > before.status.loop.ticks
+        assert after.status.mode == "hold"  # neither the unknown mode nor the foreign one applied
+        assert after.status.state_ok and not after.status.safe_stop
+        st = c.wait_state(5.0)
+        assert st is not None and sum(st.violations.values()) == 0, st.violations if st else None
+
+
+def test_killing_the_sim_makes_the_daemon_safe(service_stack: Any) -> None:
+    stack = service_stack(500.0)
+    with Client(stack.svc, name="test") as c:
+        info = ready(c)
+        c.set_mode("track")
+        x0 = np.array(info.status.x)
+        for k in range(50):
+            c.send_setpoint(x0 + np.array([0.002 * k, 0.0, 0.0]))
+            time.sleep(0.01)
+        stack.kill("sim", signal.SIGKILL)
+        i = until(lambda: (i := c.info()) is not None and i.status.safe_stop and i)
+        assert not i.status.state_ok
+        assert "sim lost" in i.status.last_fault or "state stale" in i.status.last_fault
+        # the daemon keeps running its loop while safe
+        t1 = i.status.loop.ticks
+        until(lambda: c.info().status.loop.ticks > t1)
+        # the sim comes back: the daemon resumes from the measured state
+        stack.start_sim()
+        until(lambda: (i := c.info()) is not None and i.status.state_ok and not i.status.safe_stop)
+
+
+def test_killing_the_daemon_makes_the_sim_stop_the_robot(service_stack: Any) -> None:
+    stack = service_stack(500.0)
+    with Client(stack.svc, name="test") as c:
+        info = ready(c)
+        c.set_mode("track")
+        x0 = np.array(info.status.x)
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 1.0:  # get the robot moving
+            c.send_setpoint(x0 + np.array([0.2, 0.1, 0.0]))
+            time.sleep(0.01)
+        st = c.wait_state(5.0)
+        assert st is not None and np.abs(st.v_arm).max() + np.abs(st.wheel_speeds).max() > 1e-3
+        stack.kill("daemon", signal.SIGKILL)
+
+        def stopped() -> Any:
+            s = c.wait_state(1.0)
+            return (s is not None and s.stale_stop and np.abs(s.v_arm).max() == 0.0
+                    and np.abs(s.wheel_speeds).max() == 0.0 and s)
+
+        s = until(stopped)
+        assert sum(s.violations.values()) == 0, s.violations
+        assert msgspec.to_builtins(s)["stale_stop"] is True
