@@ -5,6 +5,7 @@ No timing asserts: generous timeouts, figures checked only for correctness.
 
 from __future__ import annotations
 
+import itertools
 import signal
 import time
 from collections.abc import Callable
@@ -13,10 +14,10 @@ from typing import Any
 import msgspec
 import numpy as np
 import pytest
-
-import wmm_qp as w
 from wmm_qp_service.client import Client
 from wmm_qp_service.protocol import ModeMsg, SetpointMsg, StateMsg, TelemetryMsg, encode
+
+import wmm_qp as w
 
 pytestmark = pytest.mark.integration
 
@@ -77,7 +78,7 @@ def test_stream_tracked_mode_change_smooth_and_malformed_rejected(service_stack:
         a_max = np.asarray(robot.arm.acceleration_max)
         wa_max = robot.base.wheel_acceleration_max
         worst = 0.0
-        for p, q in zip(tel, tel[1:], strict=False):
+        for p, q in itertools.pairwise(tel):
             if q.seq != p.seq + 1:
                 continue  # a telemetry message was dropped: no consecutive pair
             da = np.abs(np.subtract(q.arm_rates, p.arm_rates)) / (a_max * dt)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import pytest
-
 from wmm_qp_service.rate_loop import RateLoop
 
 

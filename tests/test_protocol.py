@@ -8,7 +8,6 @@ import msgspec
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
 from wmm_qp_service.config import ValidationConfig
 from wmm_qp_service.keys import Keys
 from wmm_qp_service.protocol import (

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
 from wmm_qp_service.smoother import SetpointSmoother, VelocityEstimator
 
 DT, V, A, J = 0.002, 0.25, 1.0, 10.0

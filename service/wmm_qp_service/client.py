@@ -15,9 +15,11 @@ Example::
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Sequence
 from types import TracebackType
+from typing import Any
 
 import msgspec
 import zenoh
@@ -85,7 +87,7 @@ class Client:
         return self._seq
 
     # ------------------------------------------------------------------ commands
-    def send_setpoint(self, x: Sequence[float], xd: Sequence[float] | None = None) -> None:
+    def send_setpoint(self, x: Sequence[float] | Any, xd: Sequence[float] | Any | None = None) -> None:
         """Stream an EE target x [m] (world); xd [m/s] its velocity (None: the daemon estimates)."""
         msg = SetpointMsg(robot=self.svc.robot, seq=self._next(), stamp=time.time(),
                           x=[float(v) for v in x], xd=None if xd is None else [float(v) for v in xd])
@@ -128,20 +130,16 @@ class Client:
         """The sim's most recent state (kept from earlier calls when nothing new arrived)."""
         s = self._sub_state.try_recv()
         if s is not None:
-            try:
+            with contextlib.suppress(msgspec.DecodeError):
                 self._last_state = self._dec_state.decode(s.payload.to_bytes())
-            except msgspec.DecodeError:
-                pass
         return self._last_state
 
     def latest_status(self) -> StatusMsg | None:
         """The daemon's most recent published status."""
         s = self._sub_status.try_recv()
         if s is not None:
-            try:
+            with contextlib.suppress(msgspec.DecodeError):
                 self._last_status = self._dec_status.decode(s.payload.to_bytes())
-            except msgspec.DecodeError:
-                pass
         return self._last_status
 
     def wait_state(self, timeout: float = 5.0) -> StateMsg | None:
@@ -164,10 +162,8 @@ class Client:
         if self._sub_tel is None:
             return out
         while (s := self._sub_tel.try_recv()) is not None:
-            try:
+            with contextlib.suppress(msgspec.DecodeError):
                 out.append(self._dec_tel.decode(s.payload.to_bytes()))
-            except msgspec.DecodeError:
-                pass
         return out
 
     def alive(self, timeout: float = 1.0) -> list[str]:

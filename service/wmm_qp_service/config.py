@@ -129,7 +129,7 @@ def _section(path: Path, data: dict[str, Any], name: str, cls: type, base: Any) 
     out = {}
     for k, v in raw.items():
         key = f"{name}.{k}"
-        if k not in cls.__dataclass_fields__:
+        if k not in cls.__dataclass_fields__:  # type: ignore[attr-defined]
             raise ConfigError(path, key, "unknown key")
         default = getattr(base, k)
         if k == "config":

@@ -9,6 +9,7 @@ Nothing in the loop raises: failures become a safe stop and a reason in the stat
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import math
 import threading
@@ -87,8 +88,8 @@ class ControlCore:
     def on_state(self, msg: StateMsg, now: float) -> None:
         """A validated state arrived at ``now`` [s]."""
         self.state_msg = msg
-        self.state = w.RobotState(q_base=msg.q_base, q_arm=msg.q_arm, v_arm=msg.v_arm,
-                                  wheel_speeds=msg.wheel_speeds)
+        self.state = w.RobotState(q_base=np.array(msg.q_base), q_arm=np.array(msg.q_arm),
+                                  v_arm=np.array(msg.v_arm), wheel_speeds=np.array(msg.wheel_speeds))
         self.state_time = now
 
     def on_mode(self, msg: ModeMsg) -> None:
@@ -320,8 +321,6 @@ class Daemon:
             final = core.status(loop, self.rejected(), self.accepted())
             for ent in (token, sub_state, sub_setpoint, sub_mode, queryable, alive_sub,
                         pub_cmd, pub_status, pub_tel):
-                try:
+                with contextlib.suppress(Exception):
                     ent.undeclare()
-                except Exception:
-                    pass
         return final

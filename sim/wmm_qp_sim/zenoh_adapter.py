@@ -14,19 +14,20 @@ commands 1 ms apart instead of 2 ms would otherwise double the executed accelera
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 
 import numpy as np
 import zenoh
-
-import wmm_qp as w
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.keys import Keys
 from wmm_qp_service.protocol import CommandMsg, StateMsg, encode
 from wmm_qp_service.rate_loop import RateLoop
 from wmm_qp_service.transport import ROLE_SIM, open_session
 from wmm_qp_service.validation import Validator
+
+import wmm_qp as w
 
 from .config import SimConfig
 from .robot import SimCommand, SimRobot, SimState
@@ -62,7 +63,8 @@ class SimNode:
         """The command handed to the pure model this step (None: nothing new)."""
         if new is not None:
             self.cmd_seq = new.seq
-            self.target = SimCommand(wheel_speeds=new.wheel_speeds, arm_rates=new.arm_rates)
+            self.target = SimCommand(wheel_speeds=np.array(new.wheel_speeds),
+                                     arm_rates=np.array(new.arm_rates))
             if not self.ramp:
                 return self.target
         if not self.ramp or self.target is None:
@@ -108,8 +110,6 @@ class SimNode:
                     self.loop.wait()
             finally:
                 for ent in (token, sub, pub):
-                    try:
+                    with contextlib.suppress(Exception):
                         ent.undeclare()
-                    except Exception:
-                        pass
             return st

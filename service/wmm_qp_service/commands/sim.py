@@ -20,9 +20,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import wmm_qp as w
     from wmm_qp_sim import load_sim_config
     from wmm_qp_sim.zenoh_adapter import SimNode
+
+    import wmm_qp as w
 
     from ..cli_common import service_config, stop_on_signals
 
