@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -11,7 +12,7 @@ from wmm_qp.exceptions import WmmQpError
 from .runner import Trace
 
 
-def _plt():  # type: ignore[no-untyped-def]
+def _plt() -> Any:
     try:
         import matplotlib
 
