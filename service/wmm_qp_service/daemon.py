@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import gc
 import math
+import sys
 import threading
 import time
 from collections import Counter
@@ -118,6 +119,9 @@ class ControlCore:
         self.sim_alive = alive
 
     def _fault(self, what: str) -> None:
+        """Record a fault (and say it once on stderr when it is new)."""
+        if what != self.last_fault:
+            print(f"wmm-qp serve: fault: {what}", file=sys.stderr, flush=True)
         self.last_fault = what
         self.faults[what.split(" (")[0]] += 1
 

@@ -1,8 +1,9 @@
 """``wmm-qp demo``: sim and daemon on loopback, every mode driven, a summary printed.
 
-Scenario (phase lengths scale with --duration; 30 s by default): hold → track a haptic-like
-stream (jitter, jumps) → hold → track the paper's circle (feed-forward velocity) →
-Cartesian DM enhancement → null-space DM enhancement → hold.
+Scenario (phase lengths scale with --duration; 30 s by default), from the paper's start
+configuration: hold → Cartesian DM enhancement → null-space DM enhancement (the paper's
+Fig. 9 sequence, DM along x) → track a haptic-like stream (jitter, jumps) → hold → track
+the paper's circle (feed-forward velocity) → hold.
 """
 
 from __future__ import annotations
@@ -18,8 +19,8 @@ from typing import Any
 
 HELP = "start sim and daemon on loopback, drive every mode, print a summary"
 
-PHASES = (("hold", 2.0), ("track_haptic", 7.0), ("hold", 1.0), ("track_circle", 8.0),
-          ("dm_cartesian", 4.0), ("dm_nullspace", 7.0), ("hold", 1.0))
+PHASES = (("hold", 1.0), ("dm_cartesian", 4.0), ("dm_nullspace", 9.0), ("track_haptic", 6.0),
+          ("hold", 1.0), ("track_circle", 8.0), ("hold", 1.0))
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -134,7 +135,7 @@ def _drive(svc: Any, duration: float, quiet: bool) -> dict[str, Any] | None:
         "violations_total": int(sum(violations.values())),
         "ee_error_max": max(ee_err, default=float("nan")),
         "dm_start": dm_start,
-        "dm_end": per_phase[-2]["dm"],
+        "dm_end": next(p["dm"] for p in per_phase if p["phase"] == "dm_nullspace"),
         "rejected": final.status.rejected,
         "last_fault": final.status.last_fault,
         "phases": per_phase,
