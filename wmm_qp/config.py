@@ -259,7 +259,8 @@ class _Reader:
             raise ConfigError(self.path, self._key(extra[0]), f"unknown key (allowed: {', '.join(sorted(allowed))})")
 
 
-def _read_toml(path: Path) -> dict[str, Any]:
+def read_toml(path: Path) -> dict[str, Any]:
+    """Parse a TOML file; every failure is a :class:`ConfigError` naming the file."""
     try:
         with open(path, "rb") as f:
             return tomllib.load(f)
@@ -281,7 +282,7 @@ def load_robot_config(path: Path | str | None = None) -> RobotConfig:
         ConfigError: naming the file and key of the first problem found.
     """
     path = Path(path) if path is not None else default_config_dir() / "robot.toml"
-    r = _Reader(path, _read_toml(path))
+    r = _Reader(path, read_toml(path))
     r.unknown({"name", "arm", "base"})
     a = r.table("arm")
     a.unknown(
@@ -335,7 +336,7 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
     from .solvers import SOLVER_NAMES
 
     path = Path(path) if path is not None else default_config_dir() / "controller.toml"
-    r = _Reader(path, _read_toml(path))
+    r = _Reader(path, read_toml(path))
     r.unknown({"rate_hz", "controller", "gains", "dm", "singularity", "qp"})
     d = ControllerConfig()
     g = r.table("gains", required=False)

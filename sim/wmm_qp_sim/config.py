@@ -7,12 +7,12 @@ Absent keys keep the defaults below (the same values ``configs/sim.toml`` docume
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from wmm_qp import default_config_dir
+from wmm_qp.config import read_toml
 from wmm_qp.exceptions import ConfigError
 
 
@@ -169,15 +169,7 @@ def load_sim_config(path: Path | str | None = None) -> SimConfig:
         if not path.is_file():
             return SimConfig()
     path = Path(path)
-    try:
-        with open(path, "rb") as f:
-            data = tomllib.load(f)
-    except FileNotFoundError:
-        raise ConfigError(path, "", "file not found") from None
-    except tomllib.TOMLDecodeError as e:
-        raise ConfigError(path, "", f"not valid TOML: {e}") from None
-    except OSError as e:
-        raise ConfigError(path, "", f"cannot read: {e.strerror}") from None
+    data = read_toml(path)
     extra = sorted(set(data) - {"rate_hz", "seed", "stale_timeout", "slip", "referee", "box"})
     if extra:
         raise ConfigError(path, extra[0], "unknown key")
