@@ -42,10 +42,13 @@ class SimNode:
         robot: robot config.
         seed: noise seed; None = the sim config's.
         ramp: ramp executed rates at the acceleration limits (see module docstring).
+        spin_s: [s] spin before each deadline. Default 0 (sleep only): the sim integrates
+            with a fixed dt whatever the wake-up jitter, and on a small machine a spinning
+            sim would take CPU from the daemon.
     """
 
     def __init__(self, svc: ServiceConfig, sim_cfg: SimConfig, robot: w.RobotConfig,
-                 seed: int | None = None, ramp: bool = True) -> None:
+                 seed: int | None = None, ramp: bool = True, spin_s: float = 0.0) -> None:
         self.svc = svc
         self.cfg = sim_cfg
         self.model = w.WmmModel(robot)
@@ -53,7 +56,7 @@ class SimNode:
         self.keys = Keys.of(svc.prefix, svc.robot)
         self.validate = Validator(CommandMsg, svc.robot, svc.validation)
         self.ramp = ramp
-        self.loop = RateLoop(sim_cfg.rate_hz, svc.loop.spin_us * 1e-6)
+        self.loop = RateLoop(sim_cfg.rate_hz, spin_s)
         self.a_max = np.asarray(robot.arm.acceleration_max, dtype=float)
         self.wa_max = float(robot.base.wheel_acceleration_max)
         self.target: SimCommand | None = None
