@@ -84,6 +84,8 @@ class ControlCore:
         self.ref_valid = False  # self.ref was computed from the current latch
         self.ee_error = math.nan
         self.faults: Counter[str] = Counter()
+        self.now = 0.0
+        self.state_fresh = False
 
     # ------------------------------------------------------------------ inputs
     def on_state(self, msg: StateMsg, now: float) -> None:
@@ -92,6 +94,7 @@ class ControlCore:
         self.state = w.RobotState(q_base=np.array(msg.q_base), q_arm=np.array(msg.q_arm),
                                   v_arm=np.array(msg.v_arm), wheel_speeds=np.array(msg.wheel_speeds))
         self.state_time = now
+        self.state_fresh = True
 
     def on_mode(self, msg: ModeMsg) -> None:
         """A validated mode change: switch and re-latch the target from the current EE."""
@@ -116,12 +119,17 @@ class ControlCore:
         if self.sim_alive and not alive:
             self._fault("sim lost (liveliness)")
             self.state_time = -math.inf
+            self.safe = self.state is not None  # the next ticks brake (see _safe_stop)
         self.sim_alive = alive
 
     def _fault(self, what: str) -> None:
         """Record a fault (and say it once on stderr when it is new)."""
         if what != self.last_fault:
-            print(f"wmm-qp serve: fault: {what}", file=sys.stderr, flush=True)
+            st = self.state
+            where = (f" [t={self.now:.3f} s, mode {self.mode.value}, q_base "
+                     f"{np.round(st.q_base, 4).tolist()}, q_arm {np.round(st.q_arm, 4).tolist()}]"
+                     if st is not None else "")
+            print(f"wmm-qp serve: fault: {what}{where}", file=sys.stderr, flush=True)
         self.last_fault = what
         self.faults[what.split(" (")[0]] += 1
 
@@ -141,6 +149,7 @@ class ControlCore:
     def tick(self, now: float) -> w.Command | None:
         """One control tick at ``now`` [s]; returns the command to publish (None: nothing)."""
         wd = self.svc.watchdog
+        self.now = now
         if self.state is None:
             return None
         if now - self.state_time > wd.state_timeout:
@@ -148,6 +157,9 @@ class ControlCore:
         if self.safe:  # the state is back: resume from the measured state
             self.safe = False
             self.need_latch = True
+        if not self.state_fresh and self.cmd is not None:
+            self._predict_state()
+        self.state_fresh = False
         if self.need_latch:
             self._latch()
         if (not self.smoother.resting and self.mode in (w.Mode.TRACK, w.Mode.DM_NULLSPACE)
@@ -169,6 +181,19 @@ class ControlCore:
             self.smoother.reset(cmd.x if np.isfinite(cmd.x).all() else x_d)
         self.cmd = cmd
         return cmd
+
+    def _predict_state(self) -> None:
+        """No new state this tick: assume the last command executed for one period.
+
+        The controller's acceleration bounds start from the state's rates; starting them
+        again from an old state would let two consecutive commands differ by 2·A·dt.
+        """
+        assert self.state is not None and self.cmd is not None
+        st, cmd = self.state, self.cmd
+        twist = self.model.base.P(float(st.q_base[2])) @ cmd.wheel_speeds
+        self.state = w.RobotState(q_base=st.q_base + self.dt * twist,
+                                  q_arm=st.q_arm + self.dt * cmd.arm_rates,
+                                  v_arm=cmd.arm_rates.copy(), wheel_speeds=cmd.wheel_speeds.copy())
 
     def _safe_stop(self, why: str) -> w.Command:
         """Brake from the last command at the acceleration limits (the state is not trusted)."""
