@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -67,7 +68,7 @@ def max_step_ratio(robot: w.RobotConfig, cmds: list[w.Command]) -> float:
     a = np.asarray(robot.arm.acceleration_max) * DT
     wa = robot.base.wheel_acceleration_max * DT
     worst = 0.0
-    for p, q in zip(cmds, cmds[1:], strict=False):
+    for p, q in itertools.pairwise(cmds):
         worst = max(worst, float(np.max(np.abs(q.arm_rates - p.arm_rates) / a)),
                     float(np.max(np.abs(q.wheel_speeds - p.wheel_speeds) / wa)))
     return worst
