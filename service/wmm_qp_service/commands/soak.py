@@ -1,0 +1,105 @@
+"""``wmm-qp soak``: sim + daemon + a teleop client for a long time; drift in time and memory."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+HELP = "run sim + daemon + client for a long time and report drift in time and memory"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--duration", type=float, default=60.0, help="[s] how long")
+    parser.add_argument("--rate", type=float, default=1000.0, help="[Hz] control rate")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--logs", metavar="DIR", help="keep the processes' logs here")
+
+
+def rss_kib(pid: int) -> int | None:
+    """Resident set size [KiB] of a process (Linux /proc), None if unknown."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1])
+    except OSError:
+        return None
+    return None
+
+
+def run(args: argparse.Namespace) -> int:
+    if not 5.0 <= args.duration <= 7 * 86400:
+        print("wmm-qp soak: error: --duration must be in [5 s, 7 days]", file=sys.stderr)
+        return 2
+    if not 10.0 <= args.rate <= 2000.0:
+        print("wmm-qp soak: error: --rate must be in [10, 2000] Hz", file=sys.stderr)
+        return 2
+    import tempfile
+
+    import numpy as np
+
+    from ..client import Client
+    from ..processes import Stack, isolated_config
+    from ..teleop import stream_circle, stream_haptic
+
+    svc = isolated_config()
+    log_dir = Path(args.logs) if args.logs else Path(tempfile.mkdtemp(prefix="wmm-qp-soak-"))
+    log_dir.mkdir(parents=True, exist_ok=True)
+    stack = Stack(svc, rate_hz=args.rate, log_dir=log_dir)
+    out: dict[str, Any] = {}
+    try:
+        stack.start()
+        with Client(svc, name="soak") as c:
+            info = c.wait_for_daemon(30.0)
+            end = time.monotonic() + 30.0
+            while (info is None or not info.status.state_ok) and time.monotonic() < end:
+                time.sleep(0.1)
+                info = c.info()
+            if info is None or not info.status.state_ok:
+                print(f"wmm-qp soak: error: the stack did not come up (logs: {log_dir})",
+                      file=sys.stderr)
+                return 1
+            c.set_mode("track")
+            time.sleep(0.2)
+            x0 = np.array(info.status.x)
+            pids = {n: p.pid for n, p in stack.procs.items()}
+            rss0 = {n: rss_kib(pid) for n, pid in pids.items()}
+            t0 = time.monotonic()
+            k = 0
+            while (left := args.duration - (time.monotonic() - t0)) > 0:
+                seg = min(20.0, left)
+                if k % 2 == 0:
+                    stream_haptic(c, x0, seg, seed=k)
+                else:
+                    stream_circle(c, x0, seg)
+                k += 1
+                c.set_mode("hold")
+                time.sleep(0.5)
+                c.set_mode("track")
+            final = c.info()
+            st = c.latest_state() or c.wait_state(2.0)
+            rss1 = {n: rss_kib(pid) for n, pid in pids.items()}
+        if final is None:
+            return 1
+        lp = final.status.loop
+        out = {"duration_s": args.duration, "rate_hz": args.rate, "ticks": lp.ticks,
+               "deadline_misses": lp.deadline_misses, "tick_p50_us": lp.tick_p50_us,
+               "tick_p99_us": lp.tick_p99_us, "tick_max_us": lp.tick_max_us,
+               "measured_hz": lp.measured_hz, "rss_kib_start": rss0, "rss_kib_end": rss1,
+               "violations": dict(st.violations) if st else final.status.sim_violations,
+               "rejected": final.status.rejected, "last_fault": final.status.last_fault}
+    finally:
+        out["exit_codes"] = stack.stop()
+    out["logs"] = str(log_dir)
+    if args.json:
+        print(json.dumps(out))
+    else:
+        print(f"soak: {out['duration_s']:g} s at {out['rate_hz']:g} Hz — ticks {out['ticks']}, "
+              f"deadline misses {out['deadline_misses']}, tick p50 {out['tick_p50_us']:.0f} µs, "
+              f"p99 {out['tick_p99_us']:.0f} µs, max {out['tick_max_us']:.0f} µs")
+        print(f"      RSS [KiB] start {out['rss_kib_start']} end {out['rss_kib_end']}")
+        print(f"      violations {out['violations']}; exit codes {out['exit_codes']}")
+    return 0 if sum(out["violations"].values()) == 0 else 1
