@@ -85,6 +85,7 @@ class ControlCore:
         self.ee_error = math.nan
         self.faults: Counter[str] = Counter()
         self.now = 0.0
+        self.t0 = 0.0  # [s] clock value at the loop's start (fault messages say time since)
         self.state_fresh = False
 
     # ------------------------------------------------------------------ inputs
@@ -126,7 +127,7 @@ class ControlCore:
         """Record a fault (and say it once on stderr when it is new)."""
         if what != self.last_fault:
             st = self.state
-            where = (f" [t={self.now:.3f} s, mode {self.mode.value}, q_base "
+            where = (f" [t={self.now - self.t0:.3f} s, mode {self.mode.value}, q_base "
                      f"{np.round(st.q_base, 4).tolist()}, q_arm {np.round(st.q_arm, 4).tolist()}]"
                      if st is not None else "")
             print(f"wmm-qp serve: fault: {what}{where}", file=sys.stderr, flush=True)
@@ -301,7 +302,7 @@ class Daemon:
         gc.freeze()
         loop = self.loop
         t0 = loop.start()
-        now = t0
+        core.t0 = now = t0
         try:
             while not stop.is_set() and (max_ticks is None or loop.ticks < max_ticks):
                 # ---- inputs, all polled from this thread

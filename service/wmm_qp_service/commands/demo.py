@@ -55,18 +55,30 @@ def run(args: argparse.Namespace) -> int:
     summary["exit_codes"] = codes
     summary["logs"] = str(log_dir)
     if args.json:
-        print(json.dumps(summary))
+        print(json.dumps(_finite_or_none(summary), allow_nan=False))
     else:
         lp = summary["loop"]
         print(f"demo: {summary['duration_s']:.1f} s at {lp['rate_hz']:g} Hz — ticks {lp['ticks']}, "
               f"deadline misses {lp['deadline_misses']}, tick p50 {lp['tick_p50_us']:.0f} µs, "
               f"p99 {lp['tick_p99_us']:.0f} µs, max {lp['tick_max_us']:.0f} µs")
         print(f"      violations {summary['violations_total']} {summary['violations']}")
-        print(f"      EE error max (ground truth) {summary['ee_error_max'] * 100:.2f} cm; "
+        e = summary["ee_error_max"]
+        print(f"      EE error max (ground truth) {'n/a' if e is None else f'{e * 100:.2f} cm'}; "
               f"DM along x {summary['dm_start']:.3f} → {summary['dm_end']:.3f}")
         print(f"      rejected {summary['rejected']}; processes exited {codes}")
     ok = summary["violations_total"] == 0 and all(c == 0 for c in codes.values())
     return 0 if ok else 1
+
+
+def _finite_or_none(v: Any) -> Any:
+    """The summary with NaN/inf replaced by None (strict JSON)."""
+    if isinstance(v, dict):
+        return {k: _finite_or_none(x) for k, x in v.items()}
+    if isinstance(v, list | tuple):
+        return [_finite_or_none(x) for x in v]
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    return v
 
 
 def _drive(svc: Any, duration: float, quiet: bool) -> dict[str, Any] | None:
@@ -118,8 +130,8 @@ def _drive(svc: Any, duration: float, quiet: bool) -> dict[str, Any] | None:
             drain()
             i = c.info()
             per_phase.append({"phase": name, "duration_s": round(d, 2),
-                              "ee_error_max": max(ee_err[n0:], default=float("nan")),
-                              "dm": i.status.dm if i else float("nan")})
+                              "ee_error_max": max(ee_err[n0:], default=None),  # None: untracked
+                              "dm": i.status.dm if i else None})
         final = c.info()
         st = c.latest_state()
         if final is None:
@@ -133,7 +145,7 @@ def _drive(svc: Any, duration: float, quiet: bool) -> dict[str, Any] | None:
         "loop": msgspec.to_builtins(final.status.loop),
         "violations": violations,
         "violations_total": int(sum(violations.values())),
-        "ee_error_max": max(ee_err, default=float("nan")),
+        "ee_error_max": max(ee_err, default=None),
         "dm_start": dm_start,
         "dm_end": next(p["dm"] for p in per_phase if p["phase"] == "dm_nullspace"),
         "rejected": final.status.rejected,
