@@ -168,3 +168,29 @@ def test_the_problem_is_inspectable() -> None:
     assert p is not None and p.n == 17 and p.n_eq == 3
     assert p.violation(np.zeros(p.n)) > 0  # zero does not meet the task: the equality is real
     assert random_arm_q is not None
+
+
+def _dm_after(ctl: w.QpController, seconds: float) -> tuple[float, float]:
+    """Null-space DM along x from the paper's start, closed loop; (final DM, max |wheel|)."""
+    dt = ctl.dt
+    qb, qa, va, wh = np.zeros(3), Q0.copy(), np.zeros(7), np.zeros(4)
+    x0 = model().ee_position(qb, qa)
+    ref = w.Reference("dm_nullspace", x_d=x0, direction=[1.0, 0, 0])
+    wmax, cmd = 0.0, None
+    for _ in range(int(seconds / dt)):
+        cmd = ctl.step(w.RobotState(qb, qa, va, wh), ref)
+        va, wh = cmd.arm_rates, cmd.wheel_speeds
+        wmax = max(wmax, float(np.abs(wh).max()))
+        qa = qa + va * dt
+        qb = qb + model().base.P(qb[2]) @ wh * dt
+    assert cmd is not None
+    return cmd.dm, wmax
+
+
+def test_in_nullspace_dm_mode_the_base_serves_the_dm_objective() -> None:
+    """DESIGN §2 item 4: eq. (18)'s projector uses the full J, so the base moves and the arm can
+    stretch beyond what it reaches with the base (nearly) still."""
+    dm_base, wheels_base = _dm_after(qp("daqp"), 8.0)  # dm_alpha = 0.99: the base is cheap here
+    dm_arm, _ = _dm_after(qp("daqp", dm_alpha=0.2), 8.0)
+    assert wheels_base > 0.1
+    assert dm_base > 4.5 > dm_arm  # the arm alone tops out near 4.1

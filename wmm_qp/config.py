@@ -90,6 +90,11 @@ class QpConfig:
     Attributes:
         solver: backend name from :func:`wmm_qp.solvers.available_solvers`.
         alpha: the α of eq. (12) in the QP's cost ½ vᵀ W_x⁻¹ v; small = base expensive.
+        dm_alpha: the α used in the null-space DM mode, where the whole robot's null space,
+            base included, must serve the DM objective (eq. (18)). Wheel speeds are in rad/s
+            and move the EE by only ~R/4 per rad/s, so with α = 0.2 the base barely helps and
+            the arm alone tops out near DM 4.1 along x; α = 0.99 lets the base move so the arm
+            can stretch (the paper's 5.88).
         arm_first: in track mode, keep the wheels still whenever the arm alone can realise
             the task inside its bounds (a first, arm-only stage).
         slack_l1: weight ρ₁ of the exact penalty ρ₁‖s‖₁ on the task slack: above the task's
@@ -103,6 +108,7 @@ class QpConfig:
 
     solver: str = "proxsuite"
     alpha: float = 0.2
+    dm_alpha: float = 0.99
     arm_first: bool = True
     slack_l1: float = 1e4
     slack_weight: float = 1e4
@@ -347,7 +353,7 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
     s.unknown({"sigma_threshold", "damping_max"})
     q = r.table("qp", required=False)
     q.unknown(
-        {"solver", "alpha", "arm_first", "slack_l1", "slack_weight", "task_speed_max", "singular_arm_weight", "eps_abs"}
+        {"solver", "alpha", "dm_alpha", "arm_first", "slack_l1", "slack_weight", "task_speed_max", "singular_arm_weight", "eps_abs"}
     )
     direction = dm.vector("direction", 3, d.direction)
     if np.linalg.norm(direction) < 1e-9:
@@ -372,6 +378,7 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
         qp=QpConfig(
             solver=q.string("solver", d.qp.solver, SOLVER_NAMES),
             alpha=q.number("alpha", d.qp.alpha, lo=1e-6, hi=1.0 - 1e-6),
+            dm_alpha=q.number("dm_alpha", d.qp.dm_alpha, lo=1e-6, hi=1.0 - 1e-6),
             arm_first=q.boolean("arm_first", d.qp.arm_first),
             slack_l1=q.number("slack_l1", d.qp.slack_l1, positive=True),
             slack_weight=q.number("slack_weight", d.qp.slack_weight, positive=True),

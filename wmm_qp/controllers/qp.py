@@ -9,7 +9,8 @@ Every tick:
                 wheel speed and acceleration bounds, s± ≥ 0
                 x_min ≤ x + Δt·J v ≤ x_max                   EE box (DM_CARTESIAN, eq. (17))
 
-W_x = diag(α I₄, (1−α) I₇) is eq. (12) (α small: the base is expensive) and
+W_x = diag(α I₄, (1−α) I₇) is eq. (12) (α = ``qp.alpha`` small: the base is expensive; in
+DM_NULLSPACE α = ``qp.dm_alpha``, close to 1, so the base serves the DM objective) and
 v_n = k_N [0; ∇H2ᵀ] is eq. (19), in DM_NULLSPACE only. With s ≡ 0 and no bound active,
 ½(v − v_n)ᵀW_x⁻¹(v − v_n) subject to J v = ẋ_ref is solved by J# ẋ_ref + (I − J#J) v_n:
 eqs. (11) and (18) exactly.
@@ -79,6 +80,7 @@ class QpController(Controller):
         self._arm = make_backend(qp.solver, qp.eps_abs)
         self._full = make_backend(qp.solver, qp.eps_abs)
         self._w_inv = 1.0 / weight_matrix_diag(qp.alpha)  # W_x⁻¹, eq. (12)
+        self._w_inv_dm = 1.0 / weight_matrix_diag(qp.dm_alpha)  # W_x⁻¹ in DM_NULLSPACE
         self._last_problem: QPProblem | None = None
         self.last_stage = ""
 
@@ -124,18 +126,20 @@ class QpController(Controller):
             return np.zeros(N_V)
         assert ctx.grad_q is not None
         v_n = self.config.k_N * np.concatenate([np.zeros(N_WHEELS), ctx.grad_q])  # eq. (19)
-        return -self._w_inv * v_n
+        return -self.cost_diagonal(ctx, mode) * v_n
 
     def slack_weights(self, ctx: TickContext) -> tuple[float, float]:
         """(ρ₁, ρ₂): the slack's exact penalty and quadratic weight."""
         return self.config.qp.slack_l1, self.config.qp.slack_weight
 
-    def cost_diagonal(self, ctx: TickContext) -> FloatArray:
-        """Diagonal of the cost on v: W_x⁻¹ (eq. (12)), the arm block damped near singularities."""
+    def cost_diagonal(self, ctx: TickContext, mode: Mode) -> FloatArray:
+        """Diagonal of the cost on v: W_x⁻¹ (eq. (12); ``qp.dm_alpha`` in DM_NULLSPACE), the arm
+        block damped near singularities."""
+        w_inv = self._w_inv_dm if mode == Mode.DM_NULLSPACE else self._w_inv
         if ctx.damping == 0.0 or self.config.damping_max <= 0.0:
-            return self._w_inv
+            return w_inv
         scale = 1.0 + self.config.qp.singular_arm_weight * (ctx.damping / self.config.damping_max) ** 2
-        d = self._w_inv.copy()
+        d = w_inv.copy()
         d[N_WHEELS:] *= scale
         return d
 
@@ -204,7 +208,7 @@ class QpController(Controller):
         C, l, u = self.ee_box_rows(ctx, mode, lb, ub)
         rho1, rho2 = self.slack_weights(ctx)
         return self._with_slack(
-            np.diag(self.cost_diagonal(ctx)), self.linear_term(ctx, mode), ctx.kin.J, xdot, C, l, u, lb, ub, rho1, rho2
+            np.diag(self.cost_diagonal(ctx, mode)), self.linear_term(ctx, mode), ctx.kin.J, xdot, C, l, u, lb, ub, rho1, rho2
         )
 
     # ------------------------------------------------------------------ solving
@@ -234,4 +238,5 @@ class QpController(Controller):
         status, reason = Status.OK, ""
         if slack > 1e-6:
             status, reason = Status.SATURATED, "the bounds cut the task (best effort)"
-        return self.finish(ctx, z[:N_V], xdot, status=status, reason=reason, alpha=self.config.qp.alpha)
+        alpha = self.config.qp.dm_alpha if mode == Mode.DM_NULLSPACE else self.config.qp.alpha
+        return self.finish(ctx, z[:N_V], xdot, status=status, reason=reason, alpha=alpha)
