@@ -353,7 +353,17 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
     s.unknown({"sigma_threshold", "damping_max"})
     q = r.table("qp", required=False)
     q.unknown(
-        {"solver", "alpha", "dm_alpha", "arm_first", "slack_l1", "slack_weight", "task_speed_max", "singular_arm_weight", "eps_abs"}
+        {
+            "solver",
+            "alpha",
+            "dm_alpha",
+            "arm_first",
+            "slack_l1",
+            "slack_weight",
+            "task_speed_max",
+            "singular_arm_weight",
+            "eps_abs",
+        }
     )
     direction = dm.vector("direction", 3, d.direction)
     if np.linalg.norm(direction) < 1e-9:

@@ -208,7 +208,17 @@ class QpController(Controller):
         C, l, u = self.ee_box_rows(ctx, mode, lb, ub)
         rho1, rho2 = self.slack_weights(ctx)
         return self._with_slack(
-            np.diag(self.cost_diagonal(ctx, mode)), self.linear_term(ctx, mode), ctx.kin.J, xdot, C, l, u, lb, ub, rho1, rho2
+            np.diag(self.cost_diagonal(ctx, mode)),
+            self.linear_term(ctx, mode),
+            ctx.kin.J,
+            xdot,
+            C,
+            l,
+            u,
+            lb,
+            ub,
+            rho1,
+            rho2,
         )
 
     # ------------------------------------------------------------------ solving
