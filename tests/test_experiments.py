@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import itertools
 import json
 from pathlib import Path
 
@@ -91,10 +92,40 @@ def test_push(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     assert r["without_dm"]["distance"] == 0.0
 
 
-def test_realtime_is_a_clear_error(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["experiment", "circle", "--realtime"]) == 2
+def test_push_realtime_is_a_clear_error(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["experiment", "push", "--realtime"]) == 2
     err = capsys.readouterr().err
-    assert "not available" in err and "Traceback" not in err
+    assert "not available" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_rate_needs_realtime(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["experiment", "circle", "--rate", "1000"]) == 2
+    assert "--realtime" in capsys.readouterr().err
+
+
+@pytest.mark.integration
+@pytest.mark.slow
+def test_circle_realtime(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    """The circle through real sim and daemon processes: same JSON keys and log columns."""
+    log = tmp_path / "rt.csv"
+    r = run_json(capsys, "circle", "--realtime", "--duration", "3", "--log", str(log),
+                 "--process-logs", str(tmp_path / "logs"))  # fmt: skip
+    for k in ("vx", "vy", "wz"):
+        assert set(r["base_velocity"][k]) >= {"max", "rms"}
+    assert set(r["ee_error_max"]) >= {"x", "y"} and set(r["base_error_integral"]) >= {"x", "y"}
+    assert sum(r["violations"].values()) == 0
+    rt = r["realtime"]
+    assert rt["exit_codes"] == {"sim": 0, "daemon": 0}
+    assert rt["ticks"] > 300 and set(rt["state_age_us"]) == {"p50", "p99", "max"}
+    rows = read_log(log)
+    assert {row["mode"] for row in rows} == {"track"}
+    assert 200 < len(rows) <= 1500  # one row per daemon tick of 3 s at 500 Hz (misses skip ticks)
+    t = [float(row["t"]) for row in rows]
+    assert t[0] == 0.0 and all(b > a for a, b in itertools.pairwise(t)) and t[-1] < 3.0
+    # the EE follows the circle from where it stood: it moved along y, the error stayed small
+    y = [float(row["ee_true_y"]) for row in rows]
+    assert y[-1] - y[0] > 0.01
+    assert r["ee_error_max"]["x"] < 0.02 and r["ee_error_max"]["y"] < 0.02
 
 
 def test_bad_duration_is_a_clear_error(capsys: pytest.CaptureFixture[str]) -> None:

@@ -1,8 +1,10 @@
-"""``wmm-qp experiment circle|dm|push``: reproduce one of the paper's experiments in-process.
+"""``wmm-qp experiment circle|dm|push``: reproduce one of the paper's experiments.
 
-Deterministic (seeded slip), faster than real time, a progress bar on stderr when it is a
-terminal. Prints a summary, or one JSON object with ``--json``; ``--log`` writes the per-tick
-CSV, ``--plots`` PNG figures.
+In-process by default: deterministic (seeded slip), faster than real time, a progress bar on
+stderr when it is a terminal. ``--realtime``: circle and dm through the daemon and the sim
+processes over Zenoh on loopback, in real time (push: not available, exit 2). Prints a
+summary, or one JSON object with ``--json``; ``--log`` writes the per-tick CSV, ``--plots``
+PNG figures.
 """
 
 from __future__ import annotations
@@ -29,9 +31,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="run length [s] (circle 40, dm 20; push: the DM phase, 20)",
     )
-    parser.add_argument(
-        "--seed", type=int, default=None, help="slip/drift seed (default: sim.toml)"
-    )
+    parser.add_argument("--seed", type=int, default=None, help="slip/drift seed (default: sim.toml)")
     parser.add_argument("--no-slip", action="store_true", help="turn the base slip/drift off")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument(
@@ -44,8 +44,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--realtime",
         action="store_true",
-        help="run through the daemon and sim over Zenoh (not available yet)",
+        help="circle, dm: run through the daemon and sim processes over Zenoh in real time",
     )
+    parser.add_argument("--rate", type=float, default=None, help="[Hz] control rate with --realtime (default 500)")
+    parser.add_argument("--process-logs", type=Path, default=None, help="--realtime: keep the processes' logs here")
 
 
 def _fail(msg: str) -> int:
@@ -61,8 +63,14 @@ def run(args: argparse.Namespace) -> int:
     from ..experiments import circle, dm, log, push
     from ..experiments.runner import make_setup
 
-    if args.realtime:
-        return _fail("--realtime is not available yet: run the in-process experiment (no flag)")
+    if args.realtime and args.name == "push":
+        from ..experiments.realtime import PUSH_UNAVAILABLE
+
+        return _fail(PUSH_UNAVAILABLE)
+    if args.rate is not None and not args.realtime:
+        return _fail("--rate only applies with --realtime")
+    if args.rate is not None and not (np.isfinite(args.rate) and 10.0 <= args.rate <= 2000.0):
+        return _fail(f"--rate must be in [10, 2000] Hz, got {args.rate}")
     if args.duration is not None and not (np.isfinite(args.duration) and args.duration > 0):
         return _fail(f"--duration must be > 0, got {args.duration}")
     if args.solver is not None and args.controller != "qp":
@@ -81,7 +89,24 @@ def run(args: argparse.Namespace) -> int:
     result: dict[str, Any] = {"experiment": args.name, "controller": args.controller}
     if args.controller == "qp":
         result["solver"] = args.solver
-    if args.name == "circle":
+    if args.realtime:
+        rt = _realtime(args, setup(), tty)
+        tr = rt.trace
+        result["realtime"] = rt.service
+        result["duration"] = float(tr.t[-1] - tr.t[0]) + 1.0 / rt.service["rate_hz"]
+        if args.name == "circle":
+            result |= circle.circle_metrics(tr)
+        else:
+            tag = f"{args.controller}_{args.direction}"
+            t_switch = rt.t_switch if rt.t_switch is not None else float(tr.t[-1])
+            result |= dm.dm_metrics(tr, setup(), args.direction, t_switch)
+        traces = {"": tr}
+        tag = f"{tag}_realtime"
+        if args.plots:
+            from ..experiments import plots
+
+            (plots.plot_circle if args.name == "circle" else _plot_dm)(tr, args.plots, tag)
+    elif args.name == "circle":
         s = setup()
         tr = circle.run_circle(s, args.duration or circle.DEFAULT_DURATION, progress=tty)
         result |= {"duration": float(tr.t[-1] + s.ctl_cfg.dt), **circle.circle_metrics(tr)}
@@ -133,6 +158,33 @@ def run(args: argparse.Namespace) -> int:
     else:
         _summary(result)
     return 0
+
+
+def _plot_dm(tr: Any, out: Path, tag: str) -> None:
+    from ..experiments.plots import plot_dm
+
+    plot_dm(tr, out, tag)
+
+
+def _realtime(args: argparse.Namespace, s: Any, tty: bool) -> Any:
+    """Run circle or dm through the daemon and the sim (a one-line error if they fail)."""
+    from ..experiments import circle, dm
+    from ..experiments.realtime import run_realtime
+
+    default = circle.DEFAULT_DURATION if args.name == "circle" else dm.DEFAULT_DURATION
+    return run_realtime(
+        args.name,
+        s,
+        args.controller,
+        args.solver,
+        args.duration or default,
+        direction=args.direction,
+        slip=not args.no_slip,
+        seed=args.seed,
+        rate_hz=args.rate,
+        progress=tty,
+        log_dir=args.process_logs,
+    )
 
 
 def _summary(result: dict[str, Any]) -> None:
