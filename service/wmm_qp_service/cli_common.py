@@ -5,19 +5,25 @@ from __future__ import annotations
 import argparse
 import signal
 import threading
+from pathlib import Path
 from types import FrameType
+
+from wmm_qp import ConfigError
 
 from .config import ServiceConfig, check_name, load_service_config
 
 
 def add_service_arguments(p: argparse.ArgumentParser) -> None:
-    """--service-config, --robot, --prefix, --daemon-endpoint, --sim-endpoint."""
+    """--service-config, --robot, --prefix, --daemon-endpoint, --sim-endpoint, --zenoh-config."""
     g = p.add_argument_group("service")
     g.add_argument("--service-config", metavar="TOML", help="service config (default: configs/service.toml)")
     g.add_argument("--robot", help="robot id (default: from the service config)")
     g.add_argument("--prefix", help="key-expression prefix (default: from the service config)")
     g.add_argument("--daemon-endpoint", metavar="EP", help="e.g. tcp/127.0.0.1:7448")
     g.add_argument("--sim-endpoint", metavar="EP", help="e.g. tcp/127.0.0.1:7447")
+    g.add_argument("--zenoh-config", metavar="JSON5",
+                   help="base Zenoh session config of this process, e.g. configs/zenoh/acl_sim.json5 "
+                        "(default: the service config's)")
 
 
 def service_config(args: argparse.Namespace) -> ServiceConfig:
@@ -28,7 +34,12 @@ def service_config(args: argparse.Namespace) -> ServiceConfig:
         changes["robot"] = check_name(args.robot, "--robot")
     if getattr(args, "prefix", None):
         changes["prefix"] = check_name(args.prefix, "--prefix")
-    z: dict[str, str] = {}
+    z: dict[str, object] = {}
+    if getattr(args, "zenoh_config", None):
+        zp = Path(args.zenoh_config)
+        if not zp.is_file():
+            raise ConfigError("<command line>", "--zenoh-config", f"no such file: {zp}")
+        z["config"] = zp.resolve()
     if getattr(args, "daemon_endpoint", None):
         z["daemon_endpoint"] = args.daemon_endpoint
     if getattr(args, "sim_endpoint", None):

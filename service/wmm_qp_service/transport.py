@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
+from pathlib import Path
 
 import zenoh
 
@@ -32,6 +33,11 @@ def session_config(cfg: ServiceConfig, role: str) -> zenoh.Config:
     """
     z = cfg.zenoh
     zc = zenoh.Config.from_file(str(z.config)) if z.config is not None else zenoh.Config()
+    if z.config is not None:  # a relative password dictionary is relative to its config file
+        d = json.loads(zc.get_json("transport/auth/usrpwd/dictionary_file"))
+        if isinstance(d, str) and not Path(d).is_absolute():
+            zc.insert_json5("transport/auth/usrpwd/dictionary_file",
+                            json.dumps(str(Path(z.config).parent / d)))
     listen: Sequence[str]
     connect: Sequence[str]
     if role == ROLE_DAEMON:

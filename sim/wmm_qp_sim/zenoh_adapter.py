@@ -10,6 +10,10 @@ the commanded one at the acceleration limit (A·dt per sim step). The controller
 already respects A over its own period, but commands cross the network with jitter: two
 commands 1 ms apart instead of 2 ms would otherwise double the executed acceleration.
 ``ramp=False`` applies each command at once (the referee then sees the transport jitter).
+
+Fault injection (reliability tests, docs/reliability.md): ``state_loss`` drops each state
+publication with that probability (seeded), ``state_delay`` holds every state back for a
+fixed time before publishing it (a slow link).
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
+from collections import deque
 
 import numpy as np
 import zenoh
@@ -45,10 +50,14 @@ class SimNode:
         spin_s: [s] spin before each deadline. Default 0 (sleep only): the sim integrates
             with a fixed dt whatever the wake-up jitter, and on a small machine a spinning
             sim would take CPU from the daemon.
+        state_loss: fault injection: probability in [0, 1) that a state is not published.
+        state_delay: [s] fault injection: publish each state this long after it was computed.
+        fault_seed: seed of the state-loss draws.
     """
 
     def __init__(self, svc: ServiceConfig, sim_cfg: SimConfig, robot: w.RobotConfig,
-                 seed: int | None = None, ramp: bool = True, spin_s: float = 0.0) -> None:
+                 seed: int | None = None, ramp: bool = True, spin_s: float = 0.0,
+                 state_loss: float = 0.0, state_delay: float = 0.0, fault_seed: int = 0) -> None:
         self.svc = svc
         self.cfg = sim_cfg
         self.model = w.WmmModel(robot)
@@ -61,6 +70,13 @@ class SimNode:
         self.wa_max = float(robot.base.wheel_acceleration_max)
         self.target: SimCommand | None = None
         self.cmd_seq = -1
+        if not (0.0 <= state_loss < 1.0 and 0.0 <= state_delay < 10.0):
+            raise ValueError("state_loss must be in [0, 1) and state_delay in [0, 10) s")
+        self.state_loss = state_loss
+        self.state_delay = state_delay
+        self._fault_rng = np.random.default_rng(fault_seed)
+        self._delayed: deque[tuple[float, bytes]] = deque()
+        self.states_dropped = 0
 
     def next_command(self, new: CommandMsg | None, dt: float) -> SimCommand | None:
         """The command handed to the pure model this step (None: nothing new)."""
@@ -92,6 +108,25 @@ class SimNode:
             contact_force=st.contact_force.tolist(), box_position=st.box_position,
             violations=dict(st.violations), stale_stop=st.stale_stop, cmd_seq=self.cmd_seq)
 
+    def outgoing(self, payload: bytes, now: float) -> list[bytes]:
+        """The state payloads to publish now, after the injected loss and delay (if any).
+
+        Args:
+            payload: this step's encoded state.
+            now: [s] monotonic time.
+        """
+        if self.state_loss > 0.0 and self._fault_rng.random() < self.state_loss:
+            self.states_dropped += 1
+            payload = b""
+        if self.state_delay <= 0.0:
+            return [payload] if payload else []
+        if payload:
+            self._delayed.append((now + self.state_delay, payload))
+        out = []
+        while self._delayed and self._delayed[0][0] <= now:
+            out.append(self._delayed.popleft()[1])
+        return out
+
     def run(self, stop: threading.Event, max_ticks: int | None = None) -> SimState:
         """Run until ``stop`` is set (or ``max_ticks``); returns the final state."""
         with open_session(self.svc, ROLE_SIM) as session:
@@ -109,7 +144,9 @@ class SimNode:
                     s = sub.try_recv()
                     new = self.validate(s.payload.to_bytes()) if s is not None else None
                     st = self.sim.step(self.next_command(new, dt), dt)
-                    pub.put(encode(self.state_msg(st, self.loop.ticks)))
+                    for payload in self.outgoing(encode(self.state_msg(st, self.loop.ticks)),
+                                                 time.monotonic()):
+                        pub.put(payload)
                     self.loop.wait()
             finally:
                 for ent in (token, sub, pub):

@@ -17,6 +17,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rate", type=float, help="[Hz] sim rate (default: the sim config's)")
     parser.add_argument("--no-ramp", action="store_true",
                         help="apply each command at once (no drive acceleration ramp)")
+    f = parser.add_argument_group("fault injection (reliability tests)")
+    f.add_argument("--state-loss", type=float, default=0.0, metavar="P",
+                   help="drop each state publication with probability P in [0, 1)")
+    f.add_argument("--state-delay-ms", type=float, default=0.0, metavar="MS",
+                   help="publish every state MS milliseconds late")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -34,11 +39,17 @@ def run(args: argparse.Namespace) -> int:
             print("wmm-qp sim: error: --rate must be > 0", file=sys.stderr)
             return 2
         sim_cfg = sim_cfg.with_(rate_hz=args.rate)
-    node = SimNode(svc, sim_cfg, w.load_robot_config(), seed=args.seed, ramp=not args.no_ramp)
+    if not (0.0 <= args.state_loss < 1.0 and 0.0 <= args.state_delay_ms < 10_000.0):
+        print("wmm-qp sim: error: --state-loss must be in [0, 1) and --state-delay-ms in [0, 10000)",
+              file=sys.stderr)
+        return 2
+    node = SimNode(svc, sim_cfg, w.load_robot_config(), seed=args.seed, ramp=not args.no_ramp,
+                   state_loss=args.state_loss, state_delay=args.state_delay_ms * 1e-3)
     stop = stop_on_signals()
     print(f"wmm-qp sim: {svc.prefix}/{svc.robot} at {sim_cfg.rate_hz:g} Hz, listening on "
           f"{svc.zenoh.sim_endpoint}", file=sys.stderr, flush=True)
     st = node.run(stop)
-    print(f"wmm-qp sim: stopped at t = {st.t:.3f} s, violations {st.violations}",
+    print(f"wmm-qp sim: stopped at t = {st.t:.3f} s, violations {st.violations}, "
+          f"states dropped by fault injection {node.states_dropped}",
           file=sys.stderr, flush=True)
     return 0
