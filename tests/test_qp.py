@@ -133,8 +133,9 @@ def test_solver_failure_gives_a_safe_stop_inside_the_acceleration_bounds(
     from wmm_qp.solvers import QPSolution
 
     ctl = qp(solver)
-    for backend in (ctl._arm, ctl._full):
-        monkeypatch.setattr(backend, "solve", lambda p: QPSolution(z=None, ok=False, status="forced failure"))
+    for backend in (ctl._arm, ctl._full, ctl._fallback):
+        if backend is not None:
+            monkeypatch.setattr(backend, "solve", lambda p: QPSolution(z=None, ok=False, status="forced failure"))
     v = np.linspace(-1, 1, 7)
     state = w.RobotState(np.zeros(3), Q0, v_arm=v, wheel_speeds=np.full(4, 3.0))
     cmd = ctl.step(state, w.Reference("track", x_d=[1, 0, 0.5]))
@@ -194,3 +195,33 @@ def test_in_nullspace_dm_mode_the_base_serves_the_dm_objective() -> None:
     dm_arm, _ = _dm_after(qp("daqp", dm_alpha=0.2), 8.0)
     assert wheels_base > 0.1
     assert dm_base > 4.5 > dm_arm  # the arm alone tops out near 4.1
+
+
+@pytest.mark.parametrize("solver", [s for s in SOLVERS if s != "daqp"])
+def test_a_stage_the_solver_fails_on_is_solved_by_the_fallback(solver: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    from wmm_qp.solvers import QPSolution
+
+    ctl = qp(solver)
+    monkeypatch.setattr(ctl._full, "solve", lambda p: QPSolution(z=None, ok=False, status="forced failure"))
+    x = model().ee_position(np.zeros(3), Q0)
+    cmd = ctl.step(w.RobotState(np.zeros(3), Q0), w.Reference("dm_nullspace", x_d=x))
+    assert cmd.status != w.Status.SAFE_STOP and ctl.fallbacks == 1
+
+
+def test_jumpy_reference_stream_never_needs_a_safe_stop() -> None:
+    """Regression: warm-started ProxQP stalled after reference jumps (now: cold retry, then DAQP)."""
+    ctl = qp("proxsuite").__class__(model(), config().with_(rate_hz=1000.0))
+    rng = np.random.default_rng(0)
+    qb, qa, va, wh = np.zeros(3), Q0.copy(), np.zeros(7), np.zeros(4)
+    x0 = model().ee_position(qb, qa)
+    target, xd = x0.copy(), x0.copy()
+    for _ in range(4000):
+        if rng.random() < 0.01:
+            target = x0 + rng.normal(scale=0.08, size=3)
+        step = np.clip(target - xd, -0.2e-3, 0.2e-3)
+        xd = xd + step
+        cmd = ctl.step(w.RobotState(qb, qa, va, wh), w.Reference("track", x_d=xd, xd_d=step / 1e-3))
+        assert cmd.status != w.Status.SAFE_STOP, cmd.reason
+        va, wh = cmd.arm_rates, cmd.wheel_speeds
+        qa = qa + va * 1e-3
+        qb = qb + model().base.P(qb[2]) @ wh * 1e-3

@@ -40,7 +40,8 @@ Stages:
    This replaces the α switch (14).
 2. whole robot: the QP above.
 
-A solver failure yields a safe stop. Every result is clipped to the box bounds (a no-op for
+A stage the configured solver fails on is solved again by DAQP (when the configured solver is
+another one); only if that fails too is the command a safe stop. Every result is clipped to the box bounds (a no-op for
 exact solvers; the guarantee for iterative solvers' tolerances).
 """
 
@@ -51,7 +52,7 @@ import numpy as np
 from ..config import N_ARM, N_WHEELS, ControllerConfig, FloatArray
 from ..model.wmm import WmmModel
 from ..pseudoinverse import weight_matrix_diag
-from ..solvers import INF, QPBackend, QPProblem, make_backend
+from ..solvers import INF, QPBackend, QPProblem, available_solvers, make_backend
 from ..types import Command, Mode, Reference, RobotState, Status
 from .base import Controller, TickContext
 
@@ -79,6 +80,12 @@ class QpController(Controller):
         # One backend (workspace) per stage: shapes differ, warm starts stay meaningful.
         self._arm = make_backend(qp.solver, qp.eps_abs)
         self._full = make_backend(qp.solver, qp.eps_abs)
+        # A stage the configured solver fails on is re-solved by DAQP (dual active set, exact)
+        # before it becomes a safe stop: iterative solvers stall on rare, hard instances.
+        self._fallback: QPBackend | None = None
+        if qp.solver != "daqp" and "daqp" in available_solvers():
+            self._fallback = make_backend("daqp", qp.eps_abs)
+        self.fallbacks = 0  # stages the fallback solved
         self._w_inv = 1.0 / weight_matrix_diag(qp.alpha)  # W_x⁻¹, eq. (12)
         self._w_inv_dm = 1.0 / weight_matrix_diag(qp.dm_alpha)  # W_x⁻¹ in DM_NULLSPACE
         self._last_problem: QPProblem | None = None
@@ -225,6 +232,9 @@ class QpController(Controller):
     def _solve(self, backend: QPBackend, problem: QPProblem) -> FloatArray | None:
         self._last_problem = problem
         sol = backend.solve(problem)
+        if (not sol.ok or sol.z is None) and self._fallback is not None:
+            sol = self._fallback.solve(problem)
+            self.fallbacks += int(sol.ok)
         if not sol.ok or sol.z is None:
             return None
         return np.clip(sol.z, problem.lb, problem.ub)  # hard bounds exactly, whatever the tolerance

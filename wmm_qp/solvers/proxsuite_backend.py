@@ -23,6 +23,20 @@ class ProxsuiteBackend(QPBackend):
         self._qp, self._shape = None, None
 
     def solve(self, problem: QPProblem) -> QPSolution:
+        sol = self._solve(problem)
+        if not sol.ok and self._qp is not None:
+            # A warm start from a very different previous solution (a jump in the reference)
+            # can stall ProxQP at its iteration cap although the problem solves cold in ~20
+            # iterations: retry once from a fresh workspace.
+            self.reset()
+            cold = self._solve(problem)
+            cold.iterations += sol.iterations
+            if cold.ok:
+                cold.status = f"{cold.status} (cold retry)"
+            return cold
+        return sol
+
+    def _solve(self, problem: QPProblem) -> QPSolution:
         try:
             shape = (problem.n, problem.n_eq, problem.n_in)
             C = problem.C if problem.n_in else None
