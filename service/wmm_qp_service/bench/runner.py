@@ -21,6 +21,7 @@ def run_bench(
     modes: list[str] | None = None,
     breakdown: bool = True,
     max_seconds: float = 30.0,
+    skip: list[str] | None = None,
 ) -> dict[str, Any]:
     """Every section (or ``only`` one); progress goes to stderr.
 
@@ -32,6 +33,7 @@ def run_bench(
         modes: controller modes (default: all four).
         breakdown: also run the instrumented pass of the controller section.
         max_seconds: [s] wall-clock budget per timed pass (a pass stops early past it).
+        skip: sections not to run.
 
     Returns:
         {"machine", "ticks", "tick_us" {solver: {p50, p99, max}} (track mode), "controller",
@@ -41,7 +43,7 @@ def run_bench(
     solvers = solvers or available_solvers()
     modes = modes or list(controller.MODES)
     out: dict[str, Any] = {"machine": machine_info(), "ticks": ticks, "rate_hz": cfg.rate_hz}
-    sections = SECTIONS if only is None else (only,)
+    sections = tuple(s for s in (SECTIONS if only is None else (only,)) if s not in (skip or ()))
     if "controller" in sections:
         res = controller.run(robot, cfg, solvers, modes, ticks, breakdown, max_seconds)
         out["controller"] = res

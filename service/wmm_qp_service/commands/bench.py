@@ -19,6 +19,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     parser.add_argument("--ticks", type=int, default=20000, help="ticks per case (default 20000)")
     parser.add_argument("--only", choices=_SECTIONS, help="run one section only")
+    parser.add_argument("--skip", action="append", choices=_SECTIONS, help="a section not to run (repeatable)")
     parser.add_argument(
         "--solver",
         action="append",
@@ -78,22 +79,26 @@ def _print_report(r: dict[str, Any]) -> None:
         if race.get("available"):
             for k in ("ours", "pink", "pink_accel"):
                 print(f"race       {k:10s} {_fmt(race[k]['tick_us'])}  valid {race[k]['valid']}")
-            print(
-                f"race       pink/ours p50 ×{race['ratio_p50']}  p99 ×{race['ratio_p99']}"
-                f"  fair {race['fair']}"
-            )
+            print(f"race       pink/ours p50 ×{race['ratio_p50']}  p99 ×{race['ratio_p99']}  fair {race['fair']}")
         else:
             print(f"race       {race['reason']}")
     sc = r.get("scaling", {})
     for solver, rows in sc.items():
         if isinstance(rows, dict):
             for n, row in rows.items():
-                print(
-                    f"scaling    {solver:9s} {n:>2s} arm joints ({row['n_vars']} vars) "
-                    f"{_fmt(row['tick_us'])}"
-                )
-    if "e2e" in r:
-        print(f"e2e        {r['e2e']}")
+                print(f"scaling    {solver:9s} {n:>2s} arm joints ({row['n_vars']} vars) {_fmt(row['tick_us'])}")
+    for rate, e in r.get("e2e", {}).items():
+        if not isinstance(e, dict):
+            continue
+        if not e.get("available"):
+            print(f"e2e        {rate} Hz: {e.get('reason')}")
+            continue
+        print(
+            f"e2e        {rate:>4s} Hz: achieved {e['achieved_hz']} Hz, {e['ticks']} ticks, "
+            f"misses {e['deadline_misses']} ({e['misses_per_10k']} / 10k)"
+        )
+        for k in ("tick_us", "state_to_cmd_us", "cmd_to_applied_us"):
+            print(f"           {k:18s} {_fmt(e[k])}")
     print(f"targets    {r['targets']}")
 
 
@@ -125,6 +130,7 @@ def run(args: argparse.Namespace) -> int:
         modes=args.modes,
         breakdown=not args.no_breakdown,
         max_seconds=args.max_seconds,
+        skip=args.skip,
     )
     if args.json:
         json.dump(_clean(result), sys.stdout, indent=1)

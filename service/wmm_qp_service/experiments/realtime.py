@@ -278,7 +278,7 @@ def run_realtime(
     return RealtimeResult(trace=trace, t_switch=t_switch, service=service)
 
 
-def _match_states(states: list[StateMsg], tel: list[TelemetryMsg]) -> list[int]:
+def match_states(states: list[StateMsg], tel: list[TelemetryMsg]) -> list[int]:
     """For each telemetry message, the index of the state the daemon used (see module doc)."""
     by_ee: dict[tuple[float, ...], tuple[list[float], list[int]]] = {}
     for i, s in enumerate(states):
@@ -314,7 +314,7 @@ def build_trace(
         raise RealtimeError("no telemetry of the scenario arrived (is telemetry_every 0?)")
     t0 = tel[first].t
     tel = [m for m in tel[first:] if m.mode in modes and m.t - t0 < duration - 1e-9]
-    idx = _match_states(states, tel)
+    idx = match_states(states, tel)
     m = setup.model
     W = np.asarray(setup.ctl_cfg.W, dtype=float)
     u = np.asarray(u, dtype=float) / np.linalg.norm(u)
