@@ -61,10 +61,12 @@ class VelocityEstimator:
         """
         x = np.asarray(x, dtype=float)
         dt = t - self._t
-        if self.x is None or dt > 0.5 or dt <= 0.0:
-            if self.x is None or dt > 0.5:
-                self.x, self.v = x.copy(), np.zeros(3)
-            self._t = max(self._t, t) if self.x is not None else t
+        if self.x is None or not -0.5 <= dt <= 0.5:
+            # first sample, a pause, or time running backwards by more than a pause (the sender
+            # restarted, or a bogus stamp: never let one stamp freeze the stream): restart
+            self.x, self.v, self._t = x.copy(), np.zeros(3), t
+            return self.x.copy(), self.v.copy()
+        if dt <= 0.0:  # out of order or duplicate: keep the estimate
             return self.x.copy(), self.v.copy()
         predicted = self.x + self.v * dt
         r = x - predicted

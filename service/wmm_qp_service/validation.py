@@ -2,8 +2,8 @@
 
 Nothing malformed reaches the controller. Checks, in order: msgpack at all (``decode``),
 the expected schema (``schema``; ``version`` when the header shows another protocol
-version), the robot id (``robot``), vector sizes (``size``), NaN/inf (``non_finite``),
-ranges (``range``), the mode name (``mode``).
+version), the robot id (``robot``), NaN/inf in the time stamp (``non_finite``), vector
+sizes (``size``), NaN/inf (``non_finite``), ranges (``range``), the mode name (``mode``).
 """
 
 from __future__ import annotations
@@ -118,6 +118,7 @@ class Validator(Generic[M]):
             raise Rejected(Reject.VERSION, f"version {msg.v}, expected {PROTOCOL_VERSION}")  # type: ignore[attr-defined]
         if msg.robot != self.robot:  # type: ignore[attr-defined]
             raise Rejected(Reject.ROBOT, f"robot {msg.robot!r}, expected {self.robot!r}")  # type: ignore[attr-defined]
+        _finite("stamp", [msg.stamp])  # type: ignore[attr-defined]
         self._check_fields(msg)
         return msg
 
@@ -145,7 +146,7 @@ class Validator(Generic[M]):
         elif isinstance(msg, ModeMsg):
             if msg.mode not in Mode._value2member_map_:
                 raise Rejected(Reject.MODE, f"unknown mode {msg.mode!r}")
-            _vector("direction", msg.direction, 3, math.inf)
+            _vector("direction", msg.direction, 3, 1e6)  # normalised later: |u|² must not overflow
             if msg.direction is not None and math.sqrt(sum(v * v for v in msg.direction)) < 1e-9:
                 raise Rejected(Reject.RANGE, "direction is zero")
         elif isinstance(msg, StateMsg):
