@@ -50,6 +50,7 @@ def run(args: argparse.Namespace) -> int:
           f"{svc.zenoh.sim_endpoint}", file=sys.stderr, flush=True)
     st = node.run(stop)
     print(f"wmm-qp sim: stopped at t = {st.t:.3f} s, violations {st.violations}, "
+          f"commands rejected {dict(node.validate.rejected)}, "
           f"states dropped by fault injection {node.states_dropped}",
           file=sys.stderr, flush=True)
     return 0
