@@ -51,7 +51,7 @@ def test_commands_stay_finite_at_an_exact_singularity(kind: str, mode: w.Mode) -
     q = np.zeros(7)  # arm stretched straight up: σ_min(J_m) = 0
     ctl = w.make_controller(kind, model(), config())
     cmd = ctl.step(w.RobotState(np.zeros(3), q), w.Reference(mode, x_d=[0.3, 0.1, 1.0], xd_d=[0.1, 0, 0]))
-    assert cmd.sigma_min < 1e-9 or cmd.status == w.Status.SAFE_STOP
+    assert cmd.sigma_min < 1e-6 or cmd.status == w.Status.SAFE_STOP
     assert np.isfinite(cmd.v).all()
     if kind == "paper":
         assert cmd.status == w.Status.DAMPED
@@ -90,3 +90,14 @@ def test_an_exception_inside_a_controller_becomes_a_safe_stop(monkeypatch: pytes
     monkeypatch.setattr(ctl, "context", boom)
     cmd = ctl.step(w.RobotState(np.zeros(3), Q0), w.Reference("track"))
     assert cmd.status == w.Status.SAFE_STOP and "kaboom" in cmd.reason
+
+
+def test_closed_form_sigma_min_matches_the_svd() -> None:
+    from wmm_qp.pseudoinverse import sigma_min
+
+    rng = np.random.default_rng(5)
+    for i in range(300):
+        J = model().kinematics(np.zeros(3), random_arm_q(rng)).J_m
+        if i % 3 == 0:
+            J[2] = 0.3 * J[0] - 0.7 * J[1] + rng.normal(scale=1e-4, size=7)  # near rank 2
+        assert abs(sigma_min(J) - np.linalg.svd(J, compute_uv=False)[-1]) < 1e-7

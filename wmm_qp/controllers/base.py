@@ -94,7 +94,7 @@ class Controller(ABC):
         """Kinematics, DM (and its gradient when needed), σ_min, damping and bounds (13)."""
         kin = self.model.kinematics(state.q_base, state.q_arm, hessian=need_gradient)
         u = self.config.direction if reference.direction is None else reference.direction
-        u = u / np.linalg.norm(u)
+        u = u / math.sqrt(float(u @ u))
         W = self.config.W
         if need_gradient:
             assert kin.dJ_arm is not None
@@ -156,7 +156,8 @@ class Controller(ABC):
         alpha: float = 0.0,
     ) -> Command:
         """Wrap v = [v_b; v_m] into a Command with diagnostics."""
-        err = float(np.linalg.norm(ctx.kin.J @ v - xdot_ref))
+        e = ctx.kin.J @ v - xdot_ref
+        err = math.sqrt(float(e @ e))
         if status == Status.OK and ctx.damping > 0.0:
             status, reason = Status.DAMPED, reason or f"sigma_min {ctx.sigma:.3g} below threshold"
         return Command(

@@ -86,6 +86,7 @@ class QpController(Controller):
         if qp.solver != "daqp" and "daqp" in available_solvers():
             self._fallback = make_backend("daqp", qp.eps_abs)
         self.fallbacks = 0  # stages the fallback solved
+        self._templates: dict[tuple[int, int], QPProblem] = {}
         self._w_inv = 1.0 / weight_matrix_diag(qp.alpha)  # W_x⁻¹, eq. (12)
         self._w_inv_dm = 1.0 / weight_matrix_diag(qp.dm_alpha)  # W_x⁻¹ in DM_NULLSPACE
         self._last_problem: QPProblem | None = None
@@ -135,7 +136,7 @@ class QpController(Controller):
         v_n = self.config.k_N * np.concatenate([np.zeros(N_WHEELS), ctx.grad_q])  # eq. (19)
         return -self.cost_diagonal(ctx, mode) * v_n
 
-    def slack_weights(self, ctx: TickContext) -> tuple[float, float]:
+    def slack_weights(self) -> tuple[float, float]:
         """(ρ₁, ρ₂): the slack's exact penalty and quadratic weight."""
         return self.config.qp.slack_l1, self.config.qp.slack_weight
 
@@ -157,76 +158,68 @@ class QpController(Controller):
         cap = self.config.qp.task_speed_max
         return xdot * (cap / n) if n > cap else xdot
 
-    def _with_slack(
-        self,
-        H_v: FloatArray,
-        g_v: FloatArray,
-        A_v: FloatArray,
-        b: FloatArray,
-        C_v: FloatArray,
-        l: FloatArray,
-        u: FloatArray,
-        lb_v: FloatArray,
-        ub_v: FloatArray,
-        rho1: float,
-        rho2: float,
-    ) -> QPProblem:
-        """Append s⁺, s⁻ ≥ 0 to a problem in v (see the module docstring)."""
-        n = H_v.shape[0]
-        H = np.zeros((n + N_S, n + N_S))
-        H[:n, :n] = H_v
-        H[n:, n:] = rho2 * np.eye(N_S)
-        I3 = np.eye(3)
-        return QPProblem(
-            H=H,
-            g=np.concatenate([g_v, np.full(N_S, rho1)]),
-            A=np.hstack([A_v, I3, -I3]),
-            b=b,
-            C=np.hstack([C_v, np.zeros((C_v.shape[0], N_S))]),
-            l=l,
-            u=u,
-            lb=np.concatenate([lb_v, np.zeros(N_S)]),
-            ub=np.concatenate([ub_v, np.full(N_S, INF)]),
-        )
+    def _template(self, n: int, n_in: int) -> QPProblem:
+        """A preallocated problem in z = [v (n); s⁺; s⁻] with the slack's fixed parts filled in.
+
+        Built once per shape; every tick only overwrites the parts that change (in place: the
+        hot path allocates no QP matrices). ``last_problem`` is therefore valid until the next step.
+        """
+        key = (n, n_in)
+        p = self._templates.get(key)
+        if p is None:
+            rho1, rho2 = self.slack_weights()
+            m = n + N_S
+            H = np.zeros((m, m))
+            H[n:, n:] = rho2 * np.eye(N_S)
+            A = np.zeros((3, m))
+            A[:, n : n + 3] = np.eye(3)
+            A[:, n + 3 :] = -np.eye(3)
+            g = np.zeros(m)
+            g[n:] = rho1
+            ub = np.full(m, INF)
+            p = QPProblem(
+                H=H,
+                g=g,
+                A=A,
+                b=np.zeros(3),
+                C=np.zeros((n_in, m)),
+                l=np.zeros(n_in),
+                u=np.zeros(n_in),
+                lb=np.zeros(m),
+                ub=ub,
+            )
+            self._templates[key] = p
+        return p
 
     def build_arm_first(self, ctx: TickContext, xdot: FloatArray) -> tuple[QPProblem, FloatArray]:
         """Stage 1: the arm alone, wheels held at the admissible speed nearest 0."""
         w_hold = np.clip(0.0, ctx.wheel_lo, ctx.wheel_hi)
-        b = xdot - ctx.kin.J[:, :N_WHEELS] @ w_hold
-        rho1, rho2 = self.slack_weights(ctx)
-        p = self._with_slack(
-            np.diag(self._w_inv[N_WHEELS:]),
-            np.zeros(N_ARM),
-            ctx.kin.J_m,
-            b,
-            np.zeros((0, N_ARM)),
-            np.zeros(0),
-            np.zeros(0),
-            ctx.arm_lo,
-            ctx.arm_hi,
-            rho1,
-            rho2,
-        )
+        p = self._template(N_ARM, 0)
+        idx = np.arange(N_ARM)
+        p.H[idx, idx] = self._w_inv[N_WHEELS:]
+        p.A[:, :N_ARM] = ctx.kin.J_m
+        np.subtract(xdot, ctx.kin.J[:, :N_WHEELS] @ w_hold, out=p.b)
+        p.lb[:N_ARM] = ctx.arm_lo
+        p.ub[:N_ARM] = ctx.arm_hi
         return p, w_hold
 
     def build(self, ctx: TickContext, xdot: FloatArray, mode: Mode) -> QPProblem:
         """Stage 2: the whole robot (see the module docstring)."""
         lb, ub = self.box(ctx)
         C, l, u = self.ee_box_rows(ctx, mode, lb, ub)
-        rho1, rho2 = self.slack_weights(ctx)
-        return self._with_slack(
-            np.diag(self.cost_diagonal(ctx, mode)),
-            self.linear_term(ctx, mode),
-            ctx.kin.J,
-            xdot,
-            C,
-            l,
-            u,
-            lb,
-            ub,
-            rho1,
-            rho2,
-        )
+        p = self._template(N_V, C.shape[0])
+        idx = np.arange(N_V)
+        p.H[idx, idx] = self.cost_diagonal(ctx, mode)
+        p.g[:N_V] = self.linear_term(ctx, mode)
+        p.A[:, :N_V] = ctx.kin.J
+        p.b[:] = xdot
+        if C.shape[0]:
+            p.C[:, :N_V] = C
+            p.l[:] = l
+            p.u[:] = u
+        p.lb[:N_V] = lb
+        p.ub[:N_V] = ub
+        return p
 
     # ------------------------------------------------------------------ solving
     def _solve(self, backend: QPBackend, problem: QPProblem) -> FloatArray | None:

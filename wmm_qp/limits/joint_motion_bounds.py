@@ -80,6 +80,6 @@ def joint_motion_bounds(
     step = a_max * dt
     lo, hi = v_prev - step, v_prev + step  # acceleration
     lo, hi = intersect_by_priority(lo, hi, -v_max, v_max)  # velocity
-    pos_hi = braking_velocity(q_max - q, a_max, dt)  # position + braking distance
-    pos_lo = -braking_velocity(q - q_min, a_max, dt)
-    return intersect_by_priority(lo, hi, pos_lo, pos_hi)  # eq. (13)
+    n = q.shape[0]
+    brake = braking_velocity(np.concatenate([q_max - q, q - q_min]), np.concatenate([a_max, a_max]), dt)
+    return intersect_by_priority(lo, hi, -brake[n:], brake[:n])  # eq. (13), position + braking distance

@@ -83,12 +83,20 @@ class WmmModel:
         """FK and Jacobians at (q_b, q_m); with ``hessian`` also ∂J_arm/∂q (for eq. (9))."""
         p_arm, J_arm = self.arm.position_jacobian(q_arm)
         R = rot_z(q_base[2])
-        p = R @ (self.mount + p_arm)
-        x = np.array([q_base[0] + p[0], q_base[1] + p[1], p[2]])
+        c, s = R[0, 0], R[1, 0]
+        pm = self.mount + p_arm
+        p = np.array([c * pm[0] - s * pm[1], s * pm[0] + c * pm[1], pm[2]])  # Rz(ψ)(p_mount + p_m)
+        x = np.array([q_base[0] + p[0], q_base[1] + p[1], p[2]])  # eq. (2)
         J_b = np.array([[1.0, 0.0, -p[1]], [0.0, 1.0, p[0]], [0.0, 0.0, 0.0]])  # eq. (5)
         P = self.base.P(q_base[2])  # eqs. (3), (20)
-        J_m = R @ J_arm
-        J = np.hstack([J_b @ P, J_m])  # eq. (5)
+        J = np.empty((3, N_V))  # eq. (5): [J_b P, J_m], written row by row
+        J[0, :4] = P[0] - p[1] * P[2]
+        J[1, :4] = P[1] + p[0] * P[2]
+        J[2, :4] = 0.0
+        J[0, 4:] = c * J_arm[0] - s * J_arm[1]  # J_m = Rz(ψ) J_arm
+        J[1, 4:] = s * J_arm[0] + c * J_arm[1]
+        J[2, 4:] = J_arm[2]
+        J_m = J[:, 4:]
         dJ = self.arm.jacobian_derivatives(q_arm) if hessian else None
         return Kinematics(
             q_base=np.asarray(q_base, float),

@@ -31,6 +31,10 @@ class DaqpBackend(QPBackend):
     def __init__(self, eps_abs: float = 1e-9, max_iter: int = 200) -> None:
         super().__init__(eps_abs, max_iter)
         self._prev: np.ndarray | None = None
+        self._shape: tuple[int, int, int] | None = None
+        self._A = np.zeros((0, 0))
+        self._upper = self._lower = np.zeros(0)
+        self._sense = np.zeros(0, dtype=np.int32)
 
     def reset(self) -> None:
         self._prev = None
@@ -38,11 +42,19 @@ class DaqpBackend(QPBackend):
     def solve(self, problem: QPProblem) -> QPSolution:
         try:
             p = problem
-            A = np.vstack([p.A, p.C]) if p.n_in else p.A
-            upper = np.concatenate([p.ub, p.b, p.u])
-            lower = np.concatenate([p.lb, p.b, p.l])
-            sense = np.zeros(upper.size, dtype=np.int32)
-            sense[p.n : p.n + p.n_eq] = _EQUALITY
+            shape = (p.n, p.n_eq, p.n_in)
+            if shape != self._shape:  # buffers reused tick after tick
+                m = p.n + p.n_eq + p.n_in
+                self._A = np.zeros((p.n_eq + p.n_in, p.n))
+                self._upper, self._lower = np.zeros(m), np.zeros(m)
+                self._sense = np.zeros(m, dtype=np.int32)
+                self._sense[p.n : p.n + p.n_eq] = _EQUALITY
+                self._shape = shape
+            A, upper, lower, sense = self._A, self._upper, self._lower, self._sense
+            A[: p.n_eq] = p.A
+            A[p.n_eq :] = p.C
+            upper[: p.n], upper[p.n : p.n + p.n_eq], upper[p.n + p.n_eq :] = p.ub, p.b, p.u
+            lower[: p.n], lower[p.n : p.n + p.n_eq], lower[p.n + p.n_eq :] = p.lb, p.b, p.l
             kwargs = {}
             if self._prev is not None and self._prev.size == p.n:
                 kwargs["primal_start"] = self._prev
