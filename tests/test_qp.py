@@ -22,10 +22,13 @@ def qp(solver: str, **qp_changes: object) -> w.QpController:
 
 
 # 1 ------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("closed_form", [True, False])
 @pytest.mark.parametrize("solver", SOLVERS)
 @pytest.mark.parametrize("alpha", [0.1, 0.2, 0.6])
 @pytest.mark.parametrize("seed", range(3))
-def test_bounds_inactive_qp_equals_weighted_pseudoinverse(solver: str, alpha: float, seed: int) -> None:
+def test_bounds_inactive_qp_equals_weighted_pseudoinverse(
+    solver: str, alpha: float, seed: int, closed_form: bool
+) -> None:
     rng = np.random.default_rng(seed)
     qa = Q0 + rng.normal(scale=0.2, size=7)
     qb = np.array([*rng.normal(size=2), rng.uniform(-np.pi, np.pi)])
@@ -34,9 +37,10 @@ def test_bounds_inactive_qp_equals_weighted_pseudoinverse(solver: str, alpha: fl
     expected = weighted_pinv(kin.J, weight_matrix_diag(alpha)) @ xdot  # eq. (11)
     # the robot already moves at that command: acceleration bounds centred on it, inactive
     state = w.RobotState(qb, qa, v_arm=expected[4:], wheel_speeds=expected[:4])
-    ctl = qp(solver, alpha=alpha, arm_first=False)
+    ctl = qp(solver, alpha=alpha, arm_first=False, closed_form_first=closed_form)
     cmd = ctl.step(state, w.Reference("track", x_d=kin.x, xd_d=xdot))
     assert cmd.status == w.Status.OK, cmd.reason
+    assert ctl.closed_form_hits == int(closed_form)  # the solver itself ran when closed_form is off
     np.testing.assert_allclose(cmd.v, expected, atol=1e-8, rtol=0)
 
 
@@ -80,9 +84,10 @@ def test_every_command_respects_every_hard_bound(solver: str, case: tuple[w.Robo
 
 
 # 3 ------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("closed_form", [True, False])
 @pytest.mark.parametrize("solver", SOLVERS)
 @pytest.mark.parametrize("seed", range(4))
-def test_dm_term_never_changes_the_achieved_task_velocity(solver: str, seed: int) -> None:
+def test_dm_term_never_changes_the_achieved_task_velocity(solver: str, seed: int, closed_form: bool) -> None:
     rng = np.random.default_rng(10 + seed)
     qa = Q0 + rng.normal(scale=0.3, size=7)
     qb = np.zeros(3)
@@ -90,8 +95,12 @@ def test_dm_term_never_changes_the_achieved_task_velocity(solver: str, seed: int
     xdot = rng.normal(scale=0.01, size=3)
     v_prev = np.linalg.pinv(kin.J) @ xdot  # moving: the task is feasible from here
     state = w.RobotState(qb, qa, v_arm=v_prev[4:], wheel_speeds=v_prev[:4])
-    with_dm = qp(solver).step(state, w.Reference("dm_nullspace", x_d=kin.x, xd_d=xdot, direction=rng.normal(size=3)))
-    without = qp(solver, arm_first=False).step(state, w.Reference("track", x_d=kin.x, xd_d=xdot))
+    with_dm = qp(solver, closed_form_first=closed_form).step(
+        state, w.Reference("dm_nullspace", x_d=kin.x, xd_d=xdot, direction=rng.normal(size=3))
+    )
+    without = qp(solver, arm_first=False, closed_form_first=closed_form).step(
+        state, w.Reference("track", x_d=kin.x, xd_d=xdot)
+    )
     assert without.task_error < 1e-8  # feasible
     np.testing.assert_allclose(kin.J @ with_dm.v, kin.J @ without.v, atol=1e-8, rtol=0)
     assert np.linalg.norm(with_dm.v - without.v) > 1e-6  # the DM term did act, in the null space

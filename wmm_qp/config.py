@@ -103,6 +103,8 @@ class QpConfig:
         task_speed_max: [m/s] ẋ_ref is scaled down to this norm (keeps the QP well scaled).
         singular_arm_weight: near an arm singularity the arm's cost is multiplied by
             1 + singular_arm_weight·(λ/λ_max)², so the base takes over (the QP's damping).
+        closed_form_first: try the closed-form optimum (no bound active, zero slack) before the
+            solver; it is taken only when it satisfies every KKT condition, so it is exact.
         eps_abs: absolute tolerance handed to iterative backends.
     """
 
@@ -114,6 +116,7 @@ class QpConfig:
     slack_weight: float = 1e4
     task_speed_max: float = 2.0
     singular_arm_weight: float = 100.0
+    closed_form_first: bool = True
     eps_abs: float = 1e-9
 
 
@@ -362,6 +365,7 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
             "slack_weight",
             "task_speed_max",
             "singular_arm_weight",
+            "closed_form_first",
             "eps_abs",
         }
     )
@@ -394,6 +398,7 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
             slack_weight=q.number("slack_weight", d.qp.slack_weight, positive=True),
             task_speed_max=q.number("task_speed_max", d.qp.task_speed_max, positive=True),
             singular_arm_weight=q.number("singular_arm_weight", d.qp.singular_arm_weight, lo=0.0),
+            closed_form_first=q.boolean("closed_form_first", d.qp.closed_form_first),
             eps_abs=q.number("eps_abs", d.qp.eps_abs, positive=True),
         ),
     )

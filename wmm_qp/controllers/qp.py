@@ -40,6 +40,8 @@ Stages:
    This replaces the α switch (14).
 2. whole robot: the QP above.
 
+Each stage first tries the closed-form optimum (no bound active, zero slack), taken only when
+it meets every KKT condition (``qp.closed_form_first``); otherwise the solver runs.
 A stage the configured solver fails on is solved again by DAQP (when the configured solver is
 another one); only if that fails too is the command a safe stop. Every result is clipped to the box bounds (a no-op for
 exact solvers; the guarantee for iterative solvers' tolerances).
@@ -86,6 +88,7 @@ class QpController(Controller):
         if qp.solver != "daqp" and "daqp" in available_solvers():
             self._fallback = make_backend("daqp", qp.eps_abs)
         self.fallbacks = 0  # stages the fallback solved
+        self.closed_form_hits = 0  # stages solved in closed form (no bound active)
         self._templates: dict[tuple[int, int], QPProblem] = {}
         self._w_inv = 1.0 / weight_matrix_diag(qp.alpha)  # W_x⁻¹, eq. (12)
         self._w_inv_dm = 1.0 / weight_matrix_diag(qp.dm_alpha)  # W_x⁻¹ in DM_NULLSPACE
@@ -222,8 +225,43 @@ class QpController(Controller):
         return p
 
     # ------------------------------------------------------------------ solving
+    def closed_form(self, problem: QPProblem) -> FloatArray | None:
+        """The QP's optimum if no bound is active and the slack is zero, else None.
+
+        With D = diag(H) on v (diagonal by construction), the candidate
+        v = D⁻¹(Jᵀλ − g), λ = (J D⁻¹ Jᵀ)⁻¹(b + J D⁻¹ g), s = 0 satisfies stationarity and the
+        task; it is the (unique) optimum by the KKT conditions iff lb ≤ v ≤ ub, l ≤ C v ≤ u and
+        |λᵢ| ≤ ρ₁ (the exact penalty's subgradient condition). This is an active-set solver's
+        first iterate: exact, no tolerance involved.
+        """
+        n = problem.n - N_S
+        d_inv = 1.0 / problem.H.diagonal()[:n]
+        J = problem.A[:, :n]
+        g = problem.g[:n]
+        JD = J * d_inv
+        try:
+            lam = np.linalg.solve(JD @ J.T, problem.b + JD @ g)
+        except np.linalg.LinAlgError:
+            return None
+        v = d_inv * (J.T @ lam - g)
+        rho1 = problem.g[n]
+        if not (np.all(np.abs(lam) <= rho1) and np.all(problem.lb[:n] <= v) and np.all(v <= problem.ub[:n])):
+            return None
+        if problem.n_in:
+            Cv = problem.C[:, :n] @ v
+            if not (np.all(problem.l <= Cv) and np.all(Cv <= problem.u)):
+                return None
+        z = np.zeros(problem.n)
+        z[:n] = v
+        return z
+
     def _solve(self, backend: QPBackend, problem: QPProblem) -> FloatArray | None:
         self._last_problem = problem
+        if self.config.qp.closed_form_first:
+            z = self.closed_form(problem)
+            if z is not None:
+                self.closed_form_hits += 1
+                return z
         sol = backend.solve(problem)
         if (not sol.ok or sol.z is None) and self._fallback is not None:
             sol = self._fallback.solve(problem)
