@@ -110,10 +110,10 @@ class Mutator:
             b = _ENC.encode(msg)
             return b[: int(r.integers(0, len(b)))], kind
         if kind == "bitflip":
-            b = bytearray(_ENC.encode(msg))
+            flipped = bytearray(_ENC.encode(msg))
             for _ in range(int(r.integers(1, 9))):
-                b[int(r.integers(len(b)))] = int(r.integers(256))
-            return bytes(b), kind
+                flipped[int(r.integers(len(flipped)))] = int(r.integers(256))
+            return bytes(flipped), kind
         if kind == "type_swap":
             msg[self._choice(list(msg))] = self._odd_value()
         elif kind == "non_finite":
