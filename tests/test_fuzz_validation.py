@@ -154,3 +154,10 @@ def test_non_finite_stamp_is_rejected() -> None:
     v = validators()["setpoint"]
     bad = msgspec.msgpack.encode(SetpointMsg(robot=ROBOT, stamp=math.inf, x=[0.6, 0.0, 0.5]))
     assert v(bad) is None and v.rejected == Counter({"non_finite": 1})
+
+
+def test_huge_payload_is_rejected_before_decoding() -> None:
+    v = validators()["setpoint"]
+    big = msgspec.msgpack.encode(SetpointMsg(robot=ROBOT, x=[0.5] * 20_000))
+    assert v(big) is None and v.rejected == Counter({"size": 1})
+    assert "bytes exceeds" in v.last_rejection

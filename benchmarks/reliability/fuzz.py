@@ -23,6 +23,8 @@ def main() -> int:
     p.add_argument("--rate", type=float, default=4000.0, help="[1/s] send rate")
     p.add_argument("--loop-rate", type=float, default=1000.0, help="[Hz] daemon rate")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--baseline", type=float, default=10.0,
+                   help="[s] measure ticks and deadline misses this long without the flood first")
     p.add_argument("--json", action="store_true")
     p.add_argument("--out", metavar="FILE", help="also write the JSON here")
     args = p.parse_args()
@@ -43,12 +45,19 @@ def main() -> int:
                 time.sleep(0.1)
             c.set_mode("track")
             time.sleep(0.5)
+            a = c.info()
+            time.sleep(args.baseline)
+            b = c.info()
+            base = ({"ticks": b.status.loop.ticks - a.status.loop.ticks,
+                     "deadline_misses": b.status.loop.deadline_misses - a.status.loop.deadline_misses,
+                     "seconds": args.baseline} if a is not None and b is not None else {})
             rep = fuzz_wire(c, args.n, rate_hz=args.rate, seed=args.seed,
                             alive=lambda: sum(pr.poll() is None for pr in stack.procs.values()),
                             progress=lambda k: print(f"fuzz: {k} sent", file=sys.stderr, flush=True))
     finally:
         codes = stack.stop()
-    out = rep.as_dict() | {"loop_rate_hz": args.loop_rate, "send_rate": args.rate, "seed": args.seed,
+    out = rep.as_dict() | {"baseline_without_flood": base, "loop_rate_hz": args.loop_rate,
+                           "send_rate": args.rate, "seed": args.seed,
                            "exit_codes": codes, "logs": str(log_dir)}
     out["sim_log_tail"] = (log_dir / "sim.log").read_text().strip().splitlines()[-1:]
     if args.out:
@@ -60,6 +69,7 @@ def main() -> int:
         print(f"      daemon rejected {rep.rejected}, accepted {rep.accepted}")
         print(f"      during the flood: {rep.ticks} ticks, {rep.deadline_misses} deadline misses, "
               f"loop {rep.measured_hz:.1f} Hz; crashes {rep.crashes}; violations {rep.violations}")
+        print(f"      baseline without the flood: {base}")
         print(f"      exit codes {codes}")
     ok = rep.crashes == 0 and rep.daemon_answering and all(v == 0 for v in codes.values())
     return 0 if ok else 1

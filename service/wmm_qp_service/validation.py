@@ -1,6 +1,7 @@
 """Validation on receipt: bytes → a checked message, or a rejection reason (counted).
 
-Nothing malformed reaches the controller. Checks, in order: msgpack at all (``decode``),
+Nothing malformed reaches the controller. Checks, in order: the payload's length
+(``size``, before decoding), msgpack at all (``decode``),
 the expected schema (``schema``; ``version`` when the header shows another protocol
 version), the robot id (``robot``), NaN/inf in the time stamp (``non_finite``), vector
 sizes (``size``), NaN/inf (``non_finite``), ranges (``range``), the mode name (``mode``).
@@ -29,7 +30,7 @@ class Reject(enum.StrEnum):
     SCHEMA = "schema"  # msgpack, but not the expected message type / fields / types
     VERSION = "version"  # another protocol version
     ROBOT = "robot"  # addressed to another robot
-    SIZE = "size"  # a vector has the wrong number of entries
+    SIZE = "size"  # a vector has the wrong number of entries, or the payload is too large
     NON_FINITE = "non_finite"  # NaN or inf
     RANGE = "range"  # a value out of its allowed range
     MODE = "mode"  # unknown mode name
@@ -106,6 +107,8 @@ class Validator(Generic[M]):
         Raises:
             Rejected: with the reason.
         """
+        if len(data) > self.limits.payload_max_bytes:  # never spend time decoding a huge payload
+            raise Rejected(Reject.SIZE, f"payload of {len(data)} bytes exceeds {self.limits.payload_max_bytes}")
         try:
             msg = self._decoder.decode(data)
         except msgspec.ValidationError as e:
