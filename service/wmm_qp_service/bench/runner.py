@@ -90,4 +90,8 @@ def targets(r: dict[str, Any]) -> dict[str, Any]:
         t["pink_over_ours_p50"] = race["ratio_p50"]
         t["at_least_3x_faster_than_pink"] = race["ratio_p50"] >= 3.0
         t["race_fair"] = race["fair"]
+    khz = r.get("e2e", {}).get("1000")
+    if khz and khz.get("available"):
+        t["zenoh_1khz_misses_per_10k"] = khz["misses_per_10k"]
+        t["zenoh_1khz_lt_10_misses_per_10k"] = khz["misses_per_10k"] < 10.0
     return t

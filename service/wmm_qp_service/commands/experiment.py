@@ -90,7 +90,8 @@ def run(args: argparse.Namespace) -> int:
     if args.controller == "qp":
         result["solver"] = args.solver
     if args.realtime:
-        rt = _realtime(args, setup(), tty)
+        s = setup()
+        rt = _realtime(args, s, tty)
         tr = rt.trace
         result["realtime"] = rt.service
         result["duration"] = float(tr.t[-1] - tr.t[0]) + 1.0 / rt.service["rate_hz"]
@@ -99,13 +100,16 @@ def run(args: argparse.Namespace) -> int:
         else:
             tag = f"{args.controller}_{args.direction}"
             t_switch = rt.t_switch if rt.t_switch is not None else float(tr.t[-1])
-            result |= dm.dm_metrics(tr, setup(), args.direction, t_switch)
+            result |= dm.dm_metrics(tr, s, args.direction, t_switch)
         traces = {"": tr}
         tag = f"{tag}_realtime"
         if args.plots:
             from ..experiments import plots
 
-            (plots.plot_circle if args.name == "circle" else _plot_dm)(tr, args.plots, tag)
+            if args.name == "circle":
+                plots.plot_circle(tr, args.plots, tag)
+            else:
+                plots.plot_dm(tr, args.plots, tag)
     elif args.name == "circle":
         s = setup()
         tr = circle.run_circle(s, args.duration or circle.DEFAULT_DURATION, progress=tty)
@@ -158,12 +162,6 @@ def run(args: argparse.Namespace) -> int:
     else:
         _summary(result)
     return 0
-
-
-def _plot_dm(tr: Any, out: Path, tag: str) -> None:
-    from ..experiments.plots import plot_dm
-
-    plot_dm(tr, out, tag)
 
 
 def _realtime(args: argparse.Namespace, s: Any, tty: bool) -> Any:
