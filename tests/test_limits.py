@@ -93,3 +93,27 @@ def test_wheel_bounds_acceleration_wins_beyond_speed_limit() -> None:
     lo, hi = wheel_bounds(w, base, DT)
     np.testing.assert_allclose(lo, hi)
     np.testing.assert_allclose(lo, w - base.wheel_acceleration_max * DT)
+
+
+def _drive_to_limit_with_stale_state(latency: float, age_ticks: int, dt: float = 0.002) -> float:
+    """Drive joint 2 at its bound (13) towards the limit, seeing a state ``age_ticks`` old; max overshoot."""
+    q, v = np.zeros(7), np.zeros(7)
+    q[1] = ARM.position_upper[1] - 0.3
+    history = [q.copy()] * (age_ticks + 1)
+    worst = -np.inf
+    for _ in range(3000):
+        seen = history[-1 - age_ticks]  # the controller's (stale) view of the position
+        lo, hi = joint_motion_bounds(
+            seen, v, ARM.position_lower, ARM.position_upper, ARM.velocity_max, ARM.acceleration_max, dt, latency
+        )
+        v = hi.copy()
+        q = q + v * dt
+        history.append(q.copy())
+        worst = max(worst, q[1] - ARM.position_upper[1])
+    return worst
+
+
+def test_latency_margin_keeps_a_stale_state_from_overshooting() -> None:
+    assert _drive_to_limit_with_stale_state(latency=0.0, age_ticks=1) > 1e-5  # the failure it fixes
+    assert _drive_to_limit_with_stale_state(latency=0.002, age_ticks=1) <= 1e-12
+    assert _drive_to_limit_with_stale_state(latency=0.006, age_ticks=2) <= 1e-12

@@ -134,6 +134,8 @@ class ControllerConfig:
         W: diagonal of the torque scaling W of eq. (8).
         direction: default DM direction u, in the base (yaw-compensated) frame.
         ee_box_lower, ee_box_upper: [m] the EE box of eq. (17) (world frame), ±inf = free.
+        state_latency: [s] age of the state when the command starts to act; the bounds (13)
+            brake from where the joints will be by then (0 = the state is current).
         sigma_threshold: σ_min(J_m) below which damped least squares replaces J#.
         damping_max: [-] the DLS damping λ reached at σ_min = 0.
         qp: the QP controller's settings.
@@ -149,6 +151,7 @@ class ControllerConfig:
     direction: FloatArray = field(default_factory=lambda: _ro([1.0, 0.0, 0.0]))
     ee_box_lower: FloatArray = field(default_factory=lambda: _ro([-np.inf, -np.inf, 0.36]))
     ee_box_upper: FloatArray = field(default_factory=lambda: _ro([np.inf, np.inf, 0.56]))
+    state_latency: float = 0.0
     sigma_threshold: float = 0.08
     damping_max: float = 0.05
     qp: QpConfig = field(default_factory=QpConfig)
@@ -346,7 +349,7 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
 
     path = Path(path) if path is not None else default_config_dir() / "controller.toml"
     r = _Reader(path, read_toml(path))
-    r.unknown({"rate_hz", "controller", "gains", "dm", "singularity", "qp"})
+    r.unknown({"rate_hz", "controller", "state_latency", "gains", "dm", "singularity", "qp"})
     d = ControllerConfig()
     g = r.table("gains", required=False)
     g.unknown({"K_x", "alpha", "k_C", "k_N"})
@@ -378,6 +381,7 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
         raise ConfigError(path, "dm.ee_box_lower", "must be < ee_box_upper on every axis")
     return ControllerConfig(
         rate_hz=r.number("rate_hz", d.rate_hz, lo=1.0, hi=10_000.0),
+        state_latency=r.number("state_latency", d.state_latency, lo=0.0, hi=1.0),
         kind=r.string("controller", d.kind, CONTROLLER_KINDS),
         K_x=g.number("K_x", d.K_x, lo=0.0),
         alpha=g.number("alpha", d.alpha, lo=0.0, hi=1.0),

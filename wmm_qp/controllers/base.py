@@ -111,6 +111,7 @@ class Controller(ABC):
             arm.velocity_max,
             arm.acceleration_max,
             self.dt,
+            self.config.state_latency,
         )  # eq. (13)
         wlo, whi = wheel_bounds(state.wheel_speeds, self.robot.base, self.dt)
         return TickContext(

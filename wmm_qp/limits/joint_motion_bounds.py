@@ -63,6 +63,7 @@ def joint_motion_bounds(
     v_max: FloatArray,
     a_max: FloatArray,
     dt: float,
+    latency: float = 0.0,
 ) -> tuple[FloatArray, FloatArray]:
     """Q_min(q), Q_max(q) of eq. (13).
 
@@ -73,6 +74,10 @@ def joint_motion_bounds(
         v_max: [rad/s] velocity limits.
         a_max: [rad/s²] acceleration limits.
         dt: [s] control period.
+        latency: [s] how old the state is when the command starts to act (transport, compute).
+            The joint moves meanwhile (at a rate within A·latency of v_prev), so the braking
+            distance to each limit is shortened by the most it can travel towards it,
+            max(0, ±v_prev·latency + ½A·latency²). 0 for an in-process robot.
 
     Returns:
         (lo, hi), lo ≤ hi element-wise, both finite.
@@ -81,5 +86,9 @@ def joint_motion_bounds(
     lo, hi = v_prev - step, v_prev + step  # acceleration
     lo, hi = intersect_by_priority(lo, hi, -v_max, v_max)  # velocity
     n = q.shape[0]
-    brake = braking_velocity(np.concatenate([q_max - q, q - q_min]), np.concatenate([a_max, a_max]), dt)
+    # Travel towards each limit before the command acts: the rate was within A·τ of v_prev over
+    # those τ seconds (it may have been braking), so at most v_prev·τ + ½A·τ² towards q_max.
+    ahead, slack = v_prev * latency, 0.5 * a_max * latency * latency
+    distance = np.concatenate([q_max - q - np.maximum(ahead + slack, 0.0), q - q_min - np.maximum(slack - ahead, 0.0)])
+    brake = braking_velocity(distance, np.concatenate([a_max, a_max]), dt)
     return intersect_by_priority(lo, hi, -brake[n:], brake[:n])  # eq. (13), position + braking distance
