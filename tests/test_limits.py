@@ -103,7 +103,7 @@ def _drive_to_limit_with_stale_state(latency: float, age_ticks: int, dt: float =
     worst = -np.inf
     for _ in range(3000):
         seen = history[-1 - age_ticks]  # the controller's (stale) view of the position
-        lo, hi = joint_motion_bounds(
+        _, hi = joint_motion_bounds(
             seen, v, ARM.position_lower, ARM.position_upper, ARM.velocity_max, ARM.acceleration_max, dt, latency
         )
         v = hi.copy()
