@@ -137,3 +137,12 @@ def test_rogue_session_cannot_command(tmp_path: Path) -> None:
             assert anon.wait_for_daemon(3.0) is None
             assert anon.wait_state(1.0) is None
         assert stack.procs["sim"].poll() is None and stack.procs["daemon"].poll() is None
+
+
+def test_an_invalid_zenoh_config_is_a_config_error(tmp_path: Path) -> None:
+    from wmm_qp import ConfigError
+
+    bad = tmp_path / "bad.json5"
+    bad.write_text("{ mode: 'peer', no_such_section: 1 }")
+    with pytest.raises(ConfigError, match="not a valid Zenoh config"):
+        session_config(load_service_config().with_(zenoh={"config": bad}), ROLE_DAEMON)

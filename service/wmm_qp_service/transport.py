@@ -13,6 +13,8 @@ from pathlib import Path
 
 import zenoh
 
+from wmm_qp import ConfigError
+
 from .config import ServiceConfig
 
 ROLE_DAEMON = "daemon"
@@ -30,9 +32,15 @@ def session_config(cfg: ServiceConfig, role: str) -> zenoh.Config:
     Args:
         cfg: service config (base JSON5 file and endpoints).
         role: ``daemon``, ``sim`` or ``client``.
+
+    Raises:
+        ConfigError: the base file is not a valid Zenoh config.
     """
     z = cfg.zenoh
-    zc = zenoh.Config.from_file(str(z.config)) if z.config is not None else zenoh.Config()
+    try:
+        zc = zenoh.Config.from_file(str(z.config)) if z.config is not None else zenoh.Config()
+    except Exception as e:  # zenoh.ZError: unreadable or not a Zenoh config
+        raise ConfigError(z.config or "", "", f"not a valid Zenoh config: {str(e).splitlines()[0][:200]}") from None
     if z.config is not None:  # a relative password dictionary is relative to its config file
         d = json.loads(zc.get_json("transport/auth/usrpwd/dictionary_file"))
         if isinstance(d, str) and not Path(d).is_absolute():
