@@ -234,3 +234,20 @@ def test_jumpy_reference_stream_never_needs_a_safe_stop() -> None:
         va, wh = cmd.arm_rates, cmd.wheel_speeds
         qa = qa + va * 1e-3
         qb = qb + model().base.P(qb[2]) @ wh * 1e-3
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+@pytest.mark.parametrize("mode", ["track", "dm_nullspace"])
+def test_a_joint_past_its_limit_is_brought_back_without_breaking_the_task(solver: str, mode: str) -> None:
+    q = Q0.copy()
+    q[3] = ARM.position_upper[3] + 1e-3  # 1 mrad past joint 4's limit, at rest
+    ctl = qp(solver)
+    x = model().ee_position(np.zeros(3), q)
+    qa, va, wh, qb = q.copy(), np.zeros(7), np.zeros(4), np.zeros(3)
+    for _ in range(100):
+        cmd = ctl.step(w.RobotState(qb, qa, va, wh), w.Reference(mode, x_d=x))
+        assert cmd.task_error < 1e-6
+        va, wh = cmd.arm_rates, cmd.wheel_speeds
+        qa = qa + va * ctl.dt
+        qb = qb + model().base.P(qb[2]) @ wh * ctl.dt
+    assert qa[3] <= ARM.position_upper[3]  # back inside within 0.2 s

@@ -61,6 +61,8 @@ from .base import Controller, TickContext
 N_V = N_WHEELS + N_ARM
 N_S = 6  # s⁺, s⁻ ∈ R³
 SLACK_ACCEPT = 1e-7  # [m/s] slack below this counts as "the task is met"
+RETURN_TIME = 0.05  # [s] a joint past a position limit is pulled back in over about this long
+RETURN_WEIGHT = 100.0  # the pull outweighs the minimal-motion cost of the joints that compensate
 
 
 class QpController(Controller):
@@ -131,6 +133,19 @@ class QpController(Controller):
         u = np.maximum(np.maximum(hi[rows], x[rows]) - x[rows], reach)
         return C, np.maximum(l, -INF), np.minimum(u, INF)
 
+    def return_term(self, q: FloatArray) -> FloatArray:
+        """Linear cost −dᵢ·v_ret,i that pulls a joint beyond a position limit back in (7,).
+
+        Bounds (13) only forbid moving further out (and always admit braking); a joint pushed
+        past a limit (latency, a stalled controller) would otherwise stay there while the task
+        pulls outwards. v_ret = −excess/τ_ret, τ_ret = 0.05 s, weighted 100× the joint's own
+        cost so that it outweighs the motion of the joints that compensate; it acts in the
+        task's null space.
+        """
+        arm = self.robot.arm
+        excess = np.maximum(q - arm.position_upper, 0.0) - np.maximum(arm.position_lower - q, 0.0)
+        return RETURN_WEIGHT * self._w_inv[N_WHEELS:] * excess / RETURN_TIME  # = −κ·d·v_ret
+
     def linear_term(self, ctx: TickContext, mode: Mode) -> FloatArray:
         """−W_x⁻¹ v_n with v_n of eq. (19) in DM_NULLSPACE, else 0."""
         if mode != Mode.DM_NULLSPACE:
@@ -200,6 +215,7 @@ class QpController(Controller):
         p = self._template(N_ARM, 0)
         idx = np.arange(N_ARM)
         p.H[idx, idx] = self._w_inv[N_WHEELS:]
+        p.g[:N_ARM] = self.return_term(ctx.kin.q_arm)
         p.A[:, :N_ARM] = ctx.kin.J_m
         np.subtract(xdot, ctx.kin.J[:, :N_WHEELS] @ w_hold, out=p.b)
         p.lb[:N_ARM] = ctx.arm_lo
@@ -214,6 +230,7 @@ class QpController(Controller):
         idx = np.arange(N_V)
         p.H[idx, idx] = self.cost_diagonal(ctx, mode)
         p.g[:N_V] = self.linear_term(ctx, mode)
+        p.g[N_WHEELS:N_V] += self.return_term(ctx.kin.q_arm)
         p.A[:, :N_V] = ctx.kin.J
         p.b[:] = xdot
         if C.shape[0]:
