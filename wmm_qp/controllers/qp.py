@@ -62,7 +62,7 @@ N_V = N_WHEELS + N_ARM
 N_S = 6  # s⁺, s⁻ ∈ R³
 SLACK_ACCEPT = 1e-7  # [m/s] slack below this counts as "the task is met"
 RETURN_TIME = 0.05  # [s] a joint past a position limit is pulled back in over about this long
-RETURN_WEIGHT = 100.0  # the pull outweighs the minimal-motion cost of the joints that compensate
+RETURN_WEIGHT = 1e3  # outweighs minimal-motion costs (the base's too), stays below the task's ρ₁
 
 
 class QpController(Controller):
@@ -138,8 +138,9 @@ class QpController(Controller):
 
         Bounds (13) only forbid moving further out (and always admit braking); a joint pushed
         past a limit (latency, a stalled controller) would otherwise stay there while the task
-        pulls outwards. v_ret = −excess/τ_ret, τ_ret = 0.05 s, weighted 100× the joint's own
-        cost so that it outweighs the motion of the joints that compensate; it acts in the
+        pulls outwards. v_ret = −excess/τ_ret, τ_ret = 0.05 s, weighted 1000× the joint's own
+        cost so that it outweighs the motion of the joints (and wheels) that compensate, and below
+        the task's exact penalty ρ₁ so the task still comes first; it acts in the
         task's null space.
         """
         arm = self.robot.arm
