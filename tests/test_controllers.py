@@ -101,3 +101,29 @@ def test_closed_form_sigma_min_matches_the_svd() -> None:
         if i % 3 == 0:
             J[2] = 0.3 * J[0] - 0.7 * J[1] + rng.normal(scale=1e-4, size=7)  # near rank 2
         assert abs(sigma_min(J) - np.linalg.svd(J, compute_uv=False)[-1]) < 1e-7
+
+
+def test_paper_controller_switches_to_damped_least_squares_below_the_threshold() -> None:
+    """σ_min(J_m) just above 0.08: the plain J#; just below: the damped one (paper's controller)."""
+    from wmm_qp.pseudoinverse import sigma_min
+
+    c = config()
+    ctl = w.PaperController(model(), c)
+    q = Q0.copy()
+    found = {}
+    for q4 in np.linspace(1.0, 0.0, 400):  # unfold the elbow towards the stretched singularity
+        q[3] = q4
+        s = sigma_min(model().kinematics(np.zeros(3), q).J_m)
+        key = "above" if 0.08 < s < 0.085 else "below" if 0.07 < s < 0.08 else None
+        if key and key not in found:
+            found[key] = q.copy()
+    assert set(found) == {"above", "below"}
+    for key, qk in found.items():
+        kin = model().kinematics(np.zeros(3), qk)
+        xdot = np.array([0.0, 0.0, 1e-3])
+        cmd = ctl.step(w.RobotState(np.zeros(3), qk), w.Reference("track", x_d=kin.x, xd_d=xdot))
+        lam = damping_factor(sigma_min(kin.J_m), c.sigma_threshold, c.damping_max)
+        expected = weighted_pinv(kin.J, weight_matrix_diag(cmd.alpha), lam) @ xdot
+        np.testing.assert_allclose(cmd.v, expected, atol=1e-12)
+        assert (lam > 0) == (key == "below")
+        assert (cmd.status == w.Status.DAMPED) == (key == "below")

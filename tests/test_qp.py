@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from core_fixtures import Q0, config, model, random_arm_q
+from core_fixtures import Q0, config, model
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
@@ -177,7 +177,6 @@ def test_the_problem_is_inspectable() -> None:
     p = ctl.last_problem
     assert p is not None and p.n == 17 and p.n_eq == 3
     assert p.violation(np.zeros(p.n)) > 0  # zero does not meet the task: the equality is real
-    assert random_arm_q is not None
 
 
 def _dm_after(ctl: w.QpController, seconds: float) -> tuple[float, float]:
@@ -251,3 +250,121 @@ def test_a_joint_past_its_limit_is_brought_back_without_breaking_the_task(solver
         qa = qa + va * ctl.dt
         qb = qb + model().base.P(qb[2]) @ wh * ctl.dt
     assert qa[3] <= ARM.position_upper[3]  # back inside within 0.2 s
+
+
+def _task_feasible(ctl: w.QpController, state: w.RobotState, ref: w.Reference) -> tuple[bool, np.ndarray]:
+    """Independent check: is J v = ẋ_ref reachable inside the box bounds? (DAQP, task as equality.)"""
+    from wmm_qp.solvers import QPProblem, make_backend
+
+    ctx = ctl.context(state, ref, need_gradient=ctl.needs_gradient(ref.mode))
+    xdot = ctl.reference_velocity(ctx, ref)
+    lb, ub = ctl.box(ctx)
+    C, l, u = ctl.ee_box_rows(ctx, ref.mode, lb, ub)
+    p = QPProblem(H=np.eye(11), g=np.zeros(11), A=ctx.kin.J, b=xdot, C=C, l=l, u=u, lb=lb, ub=ub)
+    return make_backend("daqp").solve(p).ok, ctx.kin.J @ np.zeros(11) + 0 * xdot + xdot
+
+
+@st.composite
+def nullspace_cases(draw: st.DrawFn) -> tuple[w.RobotState, w.Reference]:
+    q = Q0 + draw(arrays(np.float64, 7, elements=st.floats(-1.0, 1.0)))
+    if draw(st.booleans()):
+        q[[1, 3, 5]] = draw(arrays(np.float64, 3, elements=st.floats(-0.05, 0.05)))  # near singular
+    v = (
+        draw(arrays(np.float64, 7, elements=st.floats(-1.0, 1.0)))
+        * ARM.velocity_max
+        * draw(st.sampled_from([0.0, 0.3, 1.0]))
+    )
+    wh = draw(arrays(np.float64, 4, elements=st.floats(-1.0, 1.0))) * draw(st.sampled_from([0.0, 1.0, 5.0]))
+    x = model().ee_position(np.zeros(3), q)
+    xd = draw(arrays(np.float64, 3, elements=st.floats(-1.0, 1.0))) * draw(st.sampled_from([0.0, 0.01, 0.1]))
+    u = draw(st.sampled_from([[1.0, 0, 0], [0, 0, 1.0], [0.6, 0.0, 0.8]]))
+    return w.RobotState(np.zeros(3), q, v, wh), w.Reference("dm_nullspace", x_d=x, xd_d=xd, direction=u)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(case=nullspace_cases())
+def test_strict_priority_whenever_the_task_is_feasible(solver: str, case: tuple[w.RobotState, w.Reference]) -> None:
+    """Property 3 over random states (near singularities, active bounds): the DM term (k_N = 0.2,
+    vs. 0 with the same weights) never changes the achieved task velocity while it is feasible."""
+    state, ref = case
+    with_dm = qp(solver)
+    without = w.QpController(model(), config().with_(k_N=0.0, qp={"solver": solver}))
+    feasible, xdot = _task_feasible(with_dm, state, ref)
+    a, b = with_dm.step(state, ref), without.step(state, ref)
+    if feasible:
+        J = model().kinematics(state.q_base, state.q_arm).J
+        ref_v = with_dm.reference_velocity(with_dm.context(state, ref, True), ref)
+        tol = 2e-6 if solver == "osqp" else 1e-7  # OSQP (ADMM) works to 1e-6
+        np.testing.assert_allclose(J @ a.v, ref_v, atol=tol)
+        np.testing.assert_allclose(J @ b.v, ref_v, atol=tol)
+    assert xdot is not None
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_wheels_exactly_still_on_every_tick_the_arm_alone_can_do_it(solver: str) -> None:
+    """Property 4 per tick: whenever an arm-only, hard-equality QP is feasible (wheels at rest), |w| < 1e-9."""
+    from wmm_qp.solvers import QPProblem, make_backend
+
+    ctl = qp(solver)
+    checker = make_backend("daqp")
+    dt = ctl.dt
+    rng = np.random.default_rng(3)
+    qb, qa, va, wh = np.zeros(3), Q0.copy(), np.zeros(7), np.zeros(4)
+    x = model().ee_position(qb, qa)
+    checked = 0
+    for k in range(1500):
+        if k % 150 == 0:
+            target = x + rng.normal(scale=0.05, size=3)
+        x = x + np.clip(target - x, -1e-4, 1e-4)
+        ref = w.Reference("track", x_d=x, xd_d=np.clip(target - x, -1e-4, 1e-4) / dt)
+        state = w.RobotState(qb, qa, va, wh)
+        ctx = ctl.context(state, ref, False)
+        xdot = ctl.reference_velocity(ctx, ref)
+        if np.abs(wh).max() == 0.0:
+            p = QPProblem(
+                H=np.eye(7),
+                g=np.zeros(7),
+                A=ctx.kin.J_m,
+                b=xdot,
+                C=np.zeros((0, 7)),
+                l=np.zeros(0),
+                u=np.zeros(0),
+                lb=ctx.arm_lo,
+                ub=ctx.arm_hi,
+            )
+            arm_alone = checker.solve(p).ok
+        else:
+            arm_alone = False
+        cmd = ctl.step(state, ref)
+        if arm_alone:
+            checked += 1
+            assert np.abs(cmd.wheel_speeds).max() < 1e-9
+        va, wh = cmd.arm_rates, cmd.wheel_speeds
+        qa = qa + va * dt
+        qb = qb + model().base.P(qb[2]) @ wh * dt
+    assert checked > 1000
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_driving_into_a_joint_limit_never_passes_it(solver: str) -> None:
+    """Closed loop: pull the EE towards the base so the elbow (joint 4) folds into its limit."""
+    ctl = qp(solver)
+    dt = ctl.dt
+    qb, qa, va, wh = np.zeros(3), Q0.copy(), np.zeros(7), np.zeros(4)
+    x0 = model().ee_position(qb, qa)
+    for k in range(2500):
+        t = k * dt
+        ref = w.Reference("track", x_d=x0 + [-0.12 * t, 0, 0], xd_d=[-0.12, 0, 0])
+        cmd = ctl.step(w.RobotState(qb, qa, va, wh), ref)
+        va, wh = cmd.arm_rates, cmd.wheel_speeds
+        qa = qa + va * dt
+        qb = qb + model().base.P(qb[2]) @ wh * dt
+        assert (qa <= ARM.position_upper + 1e-12).all() and (qa >= ARM.position_lower - 1e-12).all()
+    assert qa[3] > ARM.position_upper[3] - 0.05  # it did reach the limit's neighbourhood
+
+
+def test_hold_without_a_target_holds_still() -> None:
+    ctl = qp("daqp")
+    cmd = ctl.step(w.RobotState(np.zeros(3), Q0), w.Reference("hold"))
+    np.testing.assert_allclose(cmd.v, 0.0, atol=1e-12)

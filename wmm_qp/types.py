@@ -69,19 +69,21 @@ class Reference:
 
     Attributes:
         mode: see :class:`Mode`.
-        x_d: [m] desired EE position (world), used by TRACK, DM_NULLSPACE and HOLD.
+        x_d: [m] desired EE position (world), used by TRACK, DM_NULLSPACE and HOLD; None = where
+            the EE is now (so ``Reference("hold")`` holds still, never drives to the origin).
         xd_d: [m/s] its feed-forward velocity.
         direction: DM direction u in the base (yaw-compensated) frame; None = the config's.
     """
 
     mode: Mode
-    x_d: FloatArray = field(default_factory=lambda: np.zeros(3))
+    x_d: FloatArray | None = None
     xd_d: FloatArray = field(default_factory=lambda: np.zeros(3))
     direction: FloatArray | None = None
 
     def __post_init__(self) -> None:
         self.mode = Mode(self.mode)
-        self.x_d = _vec(self.x_d, 3, "x_d")
+        if self.x_d is not None:
+            self.x_d = _vec(self.x_d, 3, "x_d")
         self.xd_d = _vec(self.xd_d, 3, "xd_d")
         if self.direction is not None:
             self.direction = _vec(self.direction, 3, "direction")
@@ -89,7 +91,7 @@ class Reference:
     def is_finite(self) -> bool:
         d = self.direction
         return bool(
-            np.isfinite(self.x_d).all()
+            (self.x_d is None or np.isfinite(self.x_d).all())
             and np.isfinite(self.xd_d).all()
             and (d is None or (np.isfinite(d).all() and np.linalg.norm(d) > 1e-9))
         )

@@ -8,7 +8,9 @@ It asks of a command only what is physically possible from the state:
 * velocity: |v| ≤ V, or — if the joint is already faster than V — it slows down at A;
 * position: the next position q + v·dt stays inside the limits (or, beyond a limit, does not
   go further out), unless even full braking at A cannot achieve it, in which case the
-  command must be that full braking;
+  command must be that full braking; and the robot must still be able to stop: holding the
+  command for dt and then braking at A tick by tick must end inside the limits, or no further
+  out than braking right now would;
 * wheel: wheel speed and acceleration, the same way.
 
 Tolerance: 1e-9 (absolute, in rad/s).
@@ -43,7 +45,12 @@ def check_command(robot: RobotConfig, dt: float, state: RobotState, cmd: Command
         lo = np.minimum(arm.position_lower - q, 0.0) / dt
         too_high = v > np.maximum(up, v0 - a) + tol
         too_low = v < np.minimum(lo, v0 + a) - tol
-    out["position"] = int(np.sum(~finite | too_high | too_low))
+        # braking distance: where the joint stops if it brakes at A after this command
+        stop_cmd = _stop_position(q, v, a, dt)
+        stop_now = _stop_position(q, v0 - np.clip(v0, -a, a), a, dt)
+        overrun_hi = stop_cmd > np.maximum(arm.position_upper, stop_now) + tol * dt
+        overrun_lo = stop_cmd < np.minimum(arm.position_lower, stop_now) - tol * dt
+    out["position"] = int(np.sum(~finite | too_high | too_low | overrun_hi | overrun_lo))
     w, w0 = np.asarray(cmd.wheel_speeds), state.wheel_speeds
     aw = base.wheel_acceleration_max * dt
     bad_w = (
@@ -53,6 +60,14 @@ def check_command(robot: RobotConfig, dt: float, state: RobotState, cmd: Command
     )
     out["wheel"] = int(np.sum(bad_w))
     return out
+
+
+def _stop_position(q: np.ndarray, v: np.ndarray, a_dt: np.ndarray, dt: float) -> np.ndarray:
+    """Where a joint ends if it holds v for dt, then brakes by a_dt per tick (held dt each) to 0."""
+    speed = np.abs(v)
+    n = np.floor(speed / a_dt)
+    braking = n * speed - a_dt * n * (n + 1.0) / 2.0  # Σ_{j=1..n} (|v| − j·a_dt)
+    return q + np.sign(v) * dt * (speed + braking)
 
 
 @dataclass

@@ -44,6 +44,11 @@ from .validation import Validator
 _NAN3 = [math.nan] * 3
 
 
+def _xd(ref: w.Reference) -> list[float]:
+    """The reference's target for messages (NaN when it means "where the EE is")."""
+    return list(_NAN3) if ref.x_d is None else ref.x_d.tolist()
+
+
 class ControlCore:
     """The daemon's logic without transport: modes, watchdogs, smoothing, the controller.
 
@@ -221,7 +226,7 @@ class ControlCore:
             last_fault=self.last_fault, loop=loop.stats(), rejected=dict(rejected),
             accepted=accepted,
             sim_violations=dict(self.state_msg.violations) if self.state_msg else {},
-            x=cmd.x.tolist() if cmd is not None else [], x_d=self.ref.x_d.tolist(),
+            x=cmd.x.tolist() if cmd is not None else [], x_d=_xd(self.ref),
             dm=float(cmd.dm) if cmd is not None else math.nan, sim_alive=self.sim_alive)
 
     def config_dict(self) -> dict[str, Any]:
@@ -329,7 +334,7 @@ class Daemon:
                         ee = core.state_msg.ee_true if core.state_msg is not None else _NAN3
                         pub_tel.put(encode(TelemetryMsg(
                             robot=svc.robot, seq=seq, stamp=time.time(), t=now - t0,
-                            mode=core.mode.value, x=cmd.x.tolist(), x_d=core.ref.x_d.tolist(),
+                            mode=core.mode.value, x=cmd.x.tolist(), x_d=_xd(core.ref),
                             xd_d=core.ref.xd_d.tolist(), ee_true=list(ee), ee_error=core.ee_error,
                             wheel_speeds=cmd.wheel_speeds.tolist(), arm_rates=cmd.arm_rates.tolist(),
                             status=cmd.status.value, dm=float(cmd.dm), task_error=float(cmd.task_error),

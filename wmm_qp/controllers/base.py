@@ -132,6 +132,8 @@ class Controller(ABC):
         if reference.mode == Mode.DM_CARTESIAN:
             assert ctx.grad_q is not None
             return self.cartesian_dm_velocity(ctx)
+        if reference.x_d is None:  # hold where the EE is
+            return reference.xd_d.copy()
         return reference.xd_d + self.config.K_x * (reference.x_d - ctx.kin.x)  # eq. (18)
 
     def cartesian_dm_velocity(self, ctx: TickContext) -> FloatArray:
@@ -172,7 +174,3 @@ class Controller(ABC):
             dm=ctx.dm,
             sigma_min=ctx.sigma,
         )
-
-
-def is_finite_number(x: float) -> bool:
-    return math.isfinite(x)

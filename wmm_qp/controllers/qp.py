@@ -30,11 +30,17 @@ base's share). The QP instead damps the *arm*: below the threshold the arm's cos
 multiplied by 1 + κ·(λ/λ_max)² (κ = ``qp.singular_arm_weight``, λ from the same variable-
 damping law), so arm motion grows expensive as the arm approaches its singularity and the
 base takes over, with the task still exact. The joint velocity bounds (13) already rule out
-the unbounded joint rates DLS exists to prevent. Arm-first is skipped below the threshold.
+the unbounded joint rates DLS exists to prevent. (The arm-first stage is unaffected: scaling
+every arm joint's cost alike does not change its optimum.)
+
+The penalty alone is exact only while ρ₁ exceeds the task's multiplier, which near a
+singularity or with a large DM gradient (∝ H2³) it may not. So whenever a stage leaves slack,
+it is solved again with s ≡ 0 by DAQP (exact infeasibility detection): if the task is feasible
+that optimum is used (strict priority: task, then cost); if not, the penalised best effort.
 
 Stages:
 
-1. arm first (TRACK/HOLD, ``qp.arm_first``, not near a singularity): the wheels are held at
+1. arm first (TRACK/HOLD, ``qp.arm_first``): the wheels are held at
    the admissible speed nearest 0 and the arm alone tries to meet the task inside (13). If its
    slack is 0, that is the command: the base does not move while the arm can do the task.
    This replaces the α switch (14).
@@ -65,6 +71,13 @@ RETURN_TIME = 0.05  # [s] a joint past a position limit is pulled back in over a
 RETURN_WEIGHT = 1e3  # outweighs minimal-motion costs (the base's too), stays below the task's ρ₁
 
 
+def task_residual(problem: QPProblem, z: FloatArray) -> float:
+    """max |J v − ẋ_ref| of a solution [m/s]: judged on v itself, never on the slack entries (a
+    solver may leave a slack a hair below its bound 0, which clipping would then hide)."""
+    n = problem.n - N_S
+    return float(np.max(np.abs(problem.A[:, :n] @ z[:n] - problem.b)))
+
+
 class QpController(Controller):
     """QP controller (DESIGN.md §2).
 
@@ -89,8 +102,12 @@ class QpController(Controller):
         self._fallback: QPBackend | None = None
         if qp.solver != "daqp" and "daqp" in available_solvers():
             self._fallback = make_backend("daqp", qp.eps_abs)
+        # DAQP also decides, exactly, whether a task the penalised solve left unmet is feasible.
+        self._checker = make_backend("daqp", qp.eps_abs) if "daqp" in available_solvers() else None
         self.fallbacks = 0  # stages the fallback solved
         self.closed_form_hits = 0  # stages solved in closed form (no bound active)
+        self.task_checks = 0  # stages that left slack and were re-solved with the task as an equality
+        self.task_recovered = 0  # ... and turned out feasible (the penalty alone was too weak)
         self._templates: dict[tuple[int, int], QPProblem] = {}
         self._w_inv = 1.0 / weight_matrix_diag(qp.alpha)  # W_x⁻¹, eq. (12)
         self._w_inv_dm = 1.0 / weight_matrix_diag(qp.dm_alpha)  # W_x⁻¹ in DM_NULLSPACE
@@ -148,11 +165,14 @@ class QpController(Controller):
         return RETURN_WEIGHT * self._w_inv[N_WHEELS:] * excess / RETURN_TIME  # = −κ·d·v_ret
 
     def linear_term(self, ctx: TickContext, mode: Mode) -> FloatArray:
-        """−W_x⁻¹ v_n with v_n of eq. (19) in DM_NULLSPACE, else 0."""
+        """−W_x⁻¹ v_n with v_n of eq. (19) (clipped to ±V) in DM_NULLSPACE, else 0."""
         if mode != Mode.DM_NULLSPACE:
             return np.zeros(N_V)
         assert ctx.grad_q is not None
-        v_n = self.config.k_N * np.concatenate([np.zeros(N_WHEELS), ctx.grad_q])  # eq. (19)
+        # eq. (19), each joint's preference clipped to 10× its velocity limit: ∇H2 grows like H2³
+        # and is astronomically large next to a singular direction (H2 is capped at 1e6 there).
+        vmax = self.robot.arm.velocity_max
+        v_n = np.concatenate([np.zeros(N_WHEELS), np.clip(self.config.k_N * ctx.grad_q, -10 * vmax, 10 * vmax)])
         return -self.cost_diagonal(ctx, mode) * v_n
 
     def slack_weights(self) -> tuple[float, float]:
@@ -258,10 +278,15 @@ class QpController(Controller):
         g = problem.g[:n]
         JD = J * d_inv
         try:
-            lam = np.linalg.solve(JD @ J.T, problem.b + JD @ g)
+            with np.errstate(all="ignore"):
+                lam = np.linalg.solve(JD @ J.T, problem.b + JD @ g)
+                v = d_inv * (J.T @ lam - g)
         except np.linalg.LinAlgError:
             return None
-        v = d_inv * (J.T @ lam - g)
+        if not (np.isfinite(lam).all() and np.isfinite(v).all()):
+            return None
+        if np.max(np.abs(J @ v - problem.b)) > 1e-10:  # a near-singular J D⁻¹ Jᵀ: not exact, let the solver work
+            return None
         rho1 = problem.g[n]
         if not (np.all(np.abs(lam) <= rho1) and np.all(problem.lb[:n] <= v) and np.all(v <= problem.ub[:n])):
             return None
@@ -286,26 +311,55 @@ class QpController(Controller):
             self.fallbacks += int(sol.ok)
         if not sol.ok or sol.z is None:
             return None
-        return np.clip(sol.z, problem.lb, problem.ub)  # hard bounds exactly, whatever the tolerance
+        z = np.clip(sol.z, problem.lb, problem.ub)  # hard bounds exactly, whatever the tolerance
+        if task_residual(problem, z) > SLACK_ACCEPT:
+            z = self._task_first(problem, z)
+        return z
+
+    def _task_first(self, problem: QPProblem, z: FloatArray) -> FloatArray:
+        """Strict task priority when the penalised solve left slack.
+
+        The exact penalty keeps s = 0 only while ρ₁ exceeds the task's multiplier; near a
+        singularity, with the null-space DM term (∝ H2³) or the return term, the multiplier can
+        exceed it although the bounds admit the task. So: solve again with s ≡ 0 (the task a hard
+        equality) by DAQP, whose infeasibility detection is exact. Feasible → that optimum is the
+        lexicographic answer (task first, then the cost with its DM/return terms); infeasible →
+        the task truly cannot be met and the penalised solution stands.
+        """
+        checker = self._checker if self._checker is not None else self._full
+        self.task_checks += 1
+        n = problem.n - N_S
+        saved = problem.ub[n:].copy()
+        problem.ub[n:] = 0.0  # s⁺ = s⁻ = 0
+        try:
+            sol = checker.solve(problem)
+        finally:
+            problem.ub[n:] = saved
+        if sol.ok and sol.z is not None:
+            self.task_recovered += 1
+            exact = np.clip(sol.z, problem.lb, problem.ub)
+            exact[n:] = 0.0
+            return exact
+        return z
 
     def _step(self, state: RobotState, reference: Reference) -> Command:
         mode = reference.mode
         ctx = self.context(state, reference, need_gradient=self.needs_gradient(mode))
         xdot = self.reference_velocity(ctx, reference)
-        if ctx.damping == 0.0 and self.config.qp.arm_first and mode in (Mode.TRACK, Mode.HOLD):
+        if self.config.qp.arm_first and mode in (Mode.TRACK, Mode.HOLD):
             p, w_hold = self.build_arm_first(ctx, xdot)
             z = self._solve(self._arm, p)
-            if z is not None and float(np.max(z[N_ARM:])) <= SLACK_ACCEPT:
+            if z is not None and task_residual(p, z) <= SLACK_ACCEPT:
                 self.last_stage = "arm"
                 return self.finish(ctx, np.concatenate([w_hold, z[:N_ARM]]), xdot, alpha=0.0)
-        z = self._solve(self._full, self.build(ctx, xdot, mode))
+        problem = self.build(ctx, xdot, mode)
+        z = self._solve(self._full, problem)
         if z is None:
             self.last_stage = "failed"
             return self.safe_stop(state, f"qp ({self.solver}): the solver failed")
         self.last_stage = "full"
-        slack = float(np.max(z[N_V:]))
         status, reason = Status.OK, ""
-        if slack > 1e-6:
+        if task_residual(problem, z) > 1e-6:
             status, reason = Status.SATURATED, "the bounds cut the task (best effort)"
         alpha = self.config.qp.dm_alpha if mode == Mode.DM_NULLSPACE else self.config.qp.alpha
         return self.finish(ctx, z[:N_V], xdot, status=status, reason=reason, alpha=alpha)

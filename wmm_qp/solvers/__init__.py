@@ -7,7 +7,6 @@ Every backend whose package imports is registered; an unknown or missing one is 
 from __future__ import annotations
 
 import importlib
-from collections.abc import Callable
 
 from ..exceptions import SolverNotFound
 from .base import QPBackend
@@ -50,7 +49,5 @@ def make_backend(name: str, eps_abs: float = 1e-9) -> QPBackend:
         raise SolverNotFound(name, available_solvers(), f"install it with: pip install {_BACKENDS[name][2]}")
     return cls(eps_abs=eps_abs)
 
-
-BackendFactory = Callable[[], QPBackend]
 
 __all__ = ["INF", "SOLVER_NAMES", "QPBackend", "QPProblem", "QPSolution", "available_solvers", "make_backend"]

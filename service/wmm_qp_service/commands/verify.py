@@ -26,11 +26,21 @@ def _positive(text: str) -> int:
     return n
 
 
+def _seed(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if n < 0:
+        raise argparse.ArgumentTypeError("must be >= 0")
+    return n
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--controller", choices=w.config.CONTROLLER_KINDS, default="qp")
     parser.add_argument("--solver", choices=SOLVER_NAMES, default=None, help="QP backend (default: config's)")
     parser.add_argument("--samples", type=_positive, default=1000, help="random states (each run in every mode)")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=_seed, default=0, help="RNG seed (>= 0)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     add_config_arguments(parser)
 
