@@ -18,9 +18,9 @@ eqs. (11) and (18) exactly.
 The slack carries an exact penalty ρ₁‖s‖₁: when ρ₁ exceeds the task constraint's Lagrange
 multiplier, the optimum has s = 0 exactly whenever the bounds admit the task — then the task
 is a hard equality, the DM term lives in the task's null space only and cannot change the
-achieved task velocity (strict priority without a second solve). When the bounds cannot meet
-the task, the task degrades gracefully instead of the solve failing: every stage is always
-feasible, so no solver ever has to detect infeasibility.
+achieved task velocity (strict priority, in one solve while ρ₁ suffices; see below for when it
+does not). When the bounds cannot meet the task, the task degrades gracefully instead of the
+solve failing: every stage is always feasible, so no solver has to detect infeasibility.
 
 Damping near singularities. The paper's controller replaces J# by damped least squares on the
 whole J when σ_min(J_m) < threshold. On a WMM that is the wrong thing to damp: the whole J is
@@ -29,14 +29,15 @@ could have moved it (a wheel speed moves the EE by only ~R/4 per rad/s, so λ² 
 base's share). The QP instead damps the *arm*: below the threshold the arm's cost is
 multiplied by 1 + κ·(λ/λ_max)² (κ = ``qp.singular_arm_weight``, λ from the same variable-
 damping law), so arm motion grows expensive as the arm approaches its singularity and the
-base takes over, with the task still exact. The joint velocity bounds (13) already rule out
+base takes over, the task still met. The joint velocity bounds (13) already rule out
 the unbounded joint rates DLS exists to prevent. (The arm-first stage is unaffected: scaling
 every arm joint's cost alike does not change its optimum.)
 
 The penalty alone is exact only while ρ₁ exceeds the task's multiplier, which near a
 singularity or with a large DM gradient (∝ H2³) it may not. So whenever a stage leaves slack,
-it is solved again with s ≡ 0 by DAQP (exact infeasibility detection): if the task is feasible
-that optimum is used (strict priority: task, then cost); if not, the penalised best effort.
+(judged on |J v − ẋ_ref| itself), it is solved again with s ≡ 0 by DAQP (exact infeasibility
+detection): if the task is feasible that optimum is used (strict priority: task, then cost);
+if not, the penalised best effort.
 
 Stages:
 
