@@ -119,7 +119,8 @@ def test_circle_realtime(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> 
     assert rt["ticks"] > 300 and set(rt["state_age_us"]) == {"p50", "p99", "max"}
     rows = read_log(log)
     assert {row["mode"] for row in rows} == {"track"}
-    assert 200 < len(rows) <= 1500  # one row per daemon tick of 3 s at 500 Hz (misses skip ticks)
+    assert 200 < len(rows) <= 1550  # ~one row per daemon tick of 3 s at 500 Hz (misses skip ticks; the
+    # run ends on a wall-clock deadline, so a tick or two more than 1500 is possible)
     t = [float(row["t"]) for row in rows]
     assert t[0] == 0.0 and all(b > a for a, b in itertools.pairwise(t)) and t[-1] < 3.0
     # the EE follows the circle from where it stood: it moved along y, the error stayed small

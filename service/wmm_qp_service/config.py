@@ -56,10 +56,15 @@ class WatchdogConfig:
     Attributes:
         state_timeout: [s] no valid state for this long → safe stop.
         setpoint_timeout: [s] no setpoint for this long → the smoothed target comes to rest.
+        command_hold: [s] the longest a command can act: the robot's own command timeout
+            (sim.toml ``stale_timeout``) plus the state's age. The controller's bounds (13)
+            brake from where the joints can be by then (its ``state_latency``), so a stalled
+            daemon cannot push a joint past a position limit.
     """
 
     state_timeout: float = 0.05
     setpoint_timeout: float = 0.25
+    command_hold: float = 0.03
 
 
 @dataclass(frozen=True)

@@ -65,7 +65,10 @@ class ControlCore:
     def __init__(self, svc: ServiceConfig, ctl_cfg: w.ControllerConfig, robot: w.RobotConfig,
                  kind: str | None = None) -> None:
         self.svc = svc
-        self.cfg = ctl_cfg.with_(rate_hz=svc.loop.rate_hz)
+        # Bounds (13) brake from where the joints can be when the next command (or the robot's
+        # own command timeout) takes over: over a transport that is longer than in-process.
+        hold = max(ctl_cfg.state_latency, svc.watchdog.command_hold)
+        self.cfg = ctl_cfg.with_(rate_hz=svc.loop.rate_hz, state_latency=hold)
         self.robot = robot
         self.model = w.WmmModel(robot)
         self.kind = kind or self.cfg.kind

@@ -93,7 +93,7 @@ class SimConfig:
 
     rate_hz: float = 1000.0
     seed: int = 0
-    stale_timeout: float = 0.1
+    stale_timeout: float = 0.025
     slip: SlipConfig = field(default_factory=SlipConfig)
     referee: RefereeConfig = field(default_factory=RefereeConfig)
     box: BoxConfig | None = None
