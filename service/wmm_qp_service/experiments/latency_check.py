@@ -1,8 +1,12 @@
-"""The circle in-process with the controller seeing the state ``delay`` ticks late.
+"""The circle in-process with the controller seeing the whole state ``delay`` ticks late.
 
-Reproduces, deterministically, what the realtime circle shows (docs/results.md §4): with a
-state one control tick old (2 ms, about the service path's state age), joint 4 overshoots its
-upper limit by 0.53 mrad near t = 15.7 s and stays there; with no delay it never does.
+A diagnostic for the service path's latency (docs/results.md §4). With a state one control
+tick old, joint 4 used to overshoot its upper limit by 0.53 mrad near t = 15.7 s and stay there
+(~4000 referee counts). The controller now brakes from where the joint can be after
+``state_latency`` (bounds (13)) and pulls a joint past a limit back in: about 0.3 mrad and
+~55 counts remain here, because this diagnostic delays the joint *rates* too (the controller's
+acceleration bounds are then centred on a rate two commands old, hence also a few acceleration
+counts), which the daemon never does. With no delay there are none.
 
     python -m wmm_qp_service.experiments.latency_check [DELAY_TICKS] [DURATION_S]
 """
