@@ -196,8 +196,11 @@ def default_config_dir() -> Path:
     raise ConfigError(candidates[0], "", "no robot.toml found in any of: " + ", ".join(map(str, candidates)))
 
 
-class _Reader:
-    """Typed access to a TOML table, with errors that name the file and key."""
+class TomlTable:
+    """Typed access to a TOML table, with errors that name the file and the dotted key.
+
+    Shared by every config loader of the project (robot, controller, sim).
+    """
 
     def __init__(self, path: Path, data: dict[str, Any], prefix: str = "") -> None:
         self.path, self.data, self.prefix = path, data, prefix
@@ -208,11 +211,11 @@ class _Reader:
     def has(self, k: str) -> bool:
         return k in self.data
 
-    def table(self, k: str, required: bool = True) -> _Reader:
+    def table(self, k: str, required: bool = True) -> TomlTable:
         v = self.data.get(k, None if required else {})
         if not isinstance(v, dict):
             raise ConfigError(self.path, self._key(k), "missing table" if v is None else "must be a table")
-        return _Reader(self.path, v, f"{self._key(k)}.")
+        return TomlTable(self.path, v, f"{self._key(k)}.")
 
     def get(self, k: str, default: Any = ...) -> Any:
         if k not in self.data:
@@ -294,7 +297,7 @@ def load_robot_config(path: Path | str | None = None) -> RobotConfig:
         ConfigError: naming the file and key of the first problem found.
     """
     path = Path(path) if path is not None else default_config_dir() / "robot.toml"
-    r = _Reader(path, read_toml(path))
+    r = TomlTable(path, read_toml(path))
     r.unknown({"name", "arm", "base"})
     a = r.table("arm")
     a.unknown(
@@ -348,7 +351,7 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
     from .solvers import SOLVER_NAMES
 
     path = Path(path) if path is not None else default_config_dir() / "controller.toml"
-    r = _Reader(path, read_toml(path))
+    r = TomlTable(path, read_toml(path))
     r.unknown({"rate_hz", "controller", "state_latency", "gains", "dm", "singularity", "qp"})
     d = ControllerConfig()
     g = r.table("gains", required=False)

@@ -6,13 +6,12 @@ Absent keys keep the defaults below (the same values ``configs/sim.toml`` docume
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from wmm_qp import default_config_dir
-from wmm_qp.config import read_toml
+from wmm_qp.config import TomlTable, read_toml
 from wmm_qp.exceptions import ConfigError
 
 
@@ -111,49 +110,6 @@ class SimConfig:
         return replace(self, **changes)
 
 
-def _number(
-    path: Path,
-    table: dict[str, Any],
-    prefix: str,
-    key: str,
-    default: float,
-    *,
-    lo: float | None = None,
-    positive: bool = False,
-) -> float:
-    v = table.get(key, default)
-    name = f"{prefix}{key}"
-    if isinstance(v, bool) or not isinstance(v, int | float):
-        raise ConfigError(path, name, f"must be a number, got {v!r}")
-    v = float(v)
-    if not math.isfinite(v):
-        raise ConfigError(path, name, f"must be finite, got {v}")
-    if positive and v <= 0:
-        raise ConfigError(path, name, f"must be > 0, got {v}")
-    if lo is not None and v < lo:
-        raise ConfigError(path, name, f"must be >= {lo}, got {v}")
-    return v
-
-
-def _table(path: Path, data: dict[str, Any], key: str, allowed: set[str]) -> dict[str, Any]:
-    t = data.get(key, {})
-    if not isinstance(t, dict):
-        raise ConfigError(path, key, "must be a table")
-    extra = sorted(set(t) - allowed)
-    if extra:
-        raise ConfigError(
-            path, f"{key}.{extra[0]}", f"unknown key (allowed: {', '.join(sorted(allowed))})"
-        )
-    return t
-
-
-def _bool(path: Path, table: dict[str, Any], name: str, key: str, default: bool) -> bool:
-    v = table.get(key, default)
-    if not isinstance(v, bool):
-        raise ConfigError(path, name, f"must be true or false, got {v!r}")
-    return v
-
-
 def load_sim_config(path: Path | str | None = None) -> SimConfig:
     """Load and validate ``sim.toml``.
 
@@ -169,56 +125,43 @@ def load_sim_config(path: Path | str | None = None) -> SimConfig:
         if not path.is_file():
             return SimConfig()
     path = Path(path)
-    data = read_toml(path)
-    extra = sorted(set(data) - {"rate_hz", "seed", "stale_timeout", "slip", "referee", "box"})
-    if extra:
-        raise ConfigError(path, extra[0], "unknown key")
+    r = TomlTable(path, read_toml(path))
+    r.unknown({"rate_hz", "seed", "stale_timeout", "slip", "referee", "box"})
     d = SimConfig()
-    seed = data.get("seed", d.seed)
+    seed = r.get("seed", d.seed)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ConfigError(path, "seed", f"must be a non-negative integer, got {seed!r}")
-    s = _table(
-        path,
-        data,
-        "slip",
-        {"enabled", "wheel_scale_std", "wheel_noise_std", "wheel_noise_tau", "yaw_drift_per_meter"},
-    )
+    s = r.table("slip", required=False)
+    s.unknown({"enabled", "wheel_scale_std", "wheel_noise_std", "wheel_noise_tau", "yaw_drift_per_meter"})
     ds = SlipConfig()
     slip = SlipConfig(
-        enabled=_bool(path, s, "slip.enabled", "enabled", ds.enabled),
-        wheel_scale_std=_number(path, s, "slip.", "wheel_scale_std", ds.wheel_scale_std, lo=0.0),
-        wheel_noise_std=_number(path, s, "slip.", "wheel_noise_std", ds.wheel_noise_std, lo=0.0),
-        wheel_noise_tau=_number(
-            path, s, "slip.", "wheel_noise_tau", ds.wheel_noise_tau, positive=True
-        ),
-        yaw_drift_per_meter=_number(
-            path, s, "slip.", "yaw_drift_per_meter", ds.yaw_drift_per_meter
-        ),
+        enabled=s.boolean("enabled", ds.enabled),
+        wheel_scale_std=s.number("wheel_scale_std", ds.wheel_scale_std, lo=0.0),
+        wheel_noise_std=s.number("wheel_noise_std", ds.wheel_noise_std, lo=0.0),
+        wheel_noise_tau=s.number("wheel_noise_tau", ds.wheel_noise_tau, positive=True),
+        yaw_drift_per_meter=s.number("yaw_drift_per_meter", ds.yaw_drift_per_meter),
     )
-    r = _table(path, data, "referee", {"rtol", "atol"})
-    referee = RefereeConfig(
-        rtol=_number(path, r, "referee.", "rtol", 1e-9, lo=0.0),
-        atol=_number(path, r, "referee.", "atol", 1e-9, lo=0.0),
-    )
-    b = _table(
-        path, data, "box", {"enabled", "mass", "mu", "face_x", "center_y", "width", "height", "g"}
-    )
+    t = r.table("referee", required=False)
+    t.unknown({"rtol", "atol"})
+    referee = RefereeConfig(rtol=t.number("rtol", 1e-9, lo=0.0), atol=t.number("atol", 1e-9, lo=0.0))
+    b = r.table("box", required=False)
+    b.unknown({"enabled", "mass", "mu", "face_x", "center_y", "width", "height", "g"})
     db = BoxConfig()
     box = None
-    if _bool(path, b, "box.enabled", "enabled", False):
+    if b.boolean("enabled", False):
         box = BoxConfig(
-            mass=_number(path, b, "box.", "mass", db.mass, positive=True),
-            mu=_number(path, b, "box.", "mu", db.mu, lo=0.0),
-            face_x=_number(path, b, "box.", "face_x", db.face_x),
-            center_y=_number(path, b, "box.", "center_y", db.center_y),
-            width=_number(path, b, "box.", "width", db.width, positive=True),
-            height=_number(path, b, "box.", "height", db.height, positive=True),
-            g=_number(path, b, "box.", "g", db.g, positive=True),
+            mass=b.number("mass", db.mass, positive=True),
+            mu=b.number("mu", db.mu, lo=0.0),
+            face_x=b.number("face_x", db.face_x),
+            center_y=b.number("center_y", db.center_y),
+            width=b.number("width", db.width, positive=True),
+            height=b.number("height", db.height, positive=True),
+            g=b.number("g", db.g, positive=True),
         )
     return SimConfig(
-        rate_hz=_number(path, data, "", "rate_hz", d.rate_hz, positive=True),
+        rate_hz=r.number("rate_hz", d.rate_hz, positive=True),
         seed=seed,
-        stale_timeout=_number(path, data, "", "stale_timeout", d.stale_timeout, positive=True),
+        stale_timeout=r.number("stale_timeout", d.stale_timeout, positive=True),
         slip=slip,
         referee=referee,
         box=box,
