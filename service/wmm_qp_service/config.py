@@ -41,12 +41,15 @@ class LoopConfig:
         spin_us: [µs] the loop sleeps until this long before the deadline, then spins.
         status_hz: [Hz] status publication rate.
         telemetry_every: publish telemetry every N ticks (0 = never).
+        rt_priority: SCHED_FIFO priority of the control thread (1–99; 0 = normal scheduling).
+            Needs CAP_SYS_NICE (root); without it the daemon says so and runs normally.
     """
 
     rate_hz: float = 500.0
     spin_us: float = 200.0
     status_hz: float = 10.0
     telemetry_every: int = 1
+    rt_priority: int = 0
 
 
 @dataclass(frozen=True)
