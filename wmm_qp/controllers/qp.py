@@ -278,22 +278,31 @@ class QpController(Controller):
         J = problem.A[:, :n]
         g = problem.g[:n]
         JD = J * d_inv
-        try:
-            with np.errstate(all="ignore"):
-                lam = np.linalg.solve(JD @ J.T, problem.b + JD @ g)
-                v = d_inv * (J.T @ lam - g)
-        except np.linalg.LinAlgError:
+        # 3×3 symmetric system J D⁻¹ Jᵀ λ = r solved by its adjugate, in Python floats
+        # (np.linalg.solve costs several µs of overhead for a 3×3).
+        (a, b_, c), (_, d, e), (_, _, f) = (JD @ J.T).tolist()
+        r0, r1, r2 = (problem.b + JD @ g).tolist()
+        A0, A1, A2 = d * f - e * e, c * e - b_ * f, b_ * e - c * d
+        det = a * A0 + b_ * A1 + c * A2
+        if not abs(det) > 1e-300:
             return None
-        if not (np.isfinite(lam).all() and np.isfinite(v).all()):
-            return None
-        if np.max(np.abs(J @ v - problem.b)) > 1e-10:  # a near-singular J D⁻¹ Jᵀ: not exact, let the solver work
-            return None
+        B1, B2, C2 = a * f - c * c, b_ * c - a * e, a * d - b_ * b_
+        lam = np.array([A0 * r0 + A1 * r1 + A2 * r2, A1 * r0 + B1 * r1 + B2 * r2, A2 * r0 + B2 * r1 + C2 * r2]) / det
+        with np.errstate(all="ignore"):
+            v = d_inv * (J.T @ lam - g)
+            resid = J @ v - problem.b
         rho1 = problem.g[n]
-        if not (np.all(np.abs(lam) <= rho1) and np.all(problem.lb[:n] <= v) and np.all(v <= problem.ub[:n])):
+        # every KKT condition at once; NaN/inf fail every comparison
+        ok = (
+            (np.abs(resid) <= 1e-10).all()  # a near-singular J D⁻¹ Jᵀ is not exact: let the solver work
+            and (np.abs(lam) <= rho1).all()
+            and ((problem.lb[:n] <= v) & (v <= problem.ub[:n])).all()
+        )
+        if not ok:
             return None
         if problem.n_in:
             Cv = problem.C[:, :n] @ v
-            if not (np.all(problem.l <= Cv) and np.all(Cv <= problem.u)):
+            if not ((problem.l <= Cv) & (Cv <= problem.u)).all():
                 return None
         z = np.zeros(problem.n)
         z[:n] = v
