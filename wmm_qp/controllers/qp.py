@@ -69,6 +69,8 @@ N_V = N_WHEELS + N_ARM
 N_S = 6  # s⁺, s⁻ ∈ R³
 SLACK_ACCEPT = 1e-7  # [m/s] slack below this counts as "the task is met"
 RETURN_TIME = 0.05  # [s] a joint past a position limit is pulled back in over about this long
+_ARM_DIAG = np.arange(N_ARM)  # diagonal indices of the cost's v block, stage 1 and stage 2
+_V_DIAG = np.arange(N_V)
 RETURN_WEIGHT = 1e3  # outweighs minimal-motion costs (the base's too), stays below the task's ρ₁
 
 
@@ -107,6 +109,7 @@ class QpController(Controller):
         self._checker = make_backend("daqp", qp.eps_abs) if "daqp" in available_solvers() else None
         self.fallbacks = 0  # stages the fallback solved
         self.closed_form_hits = 0  # stages solved in closed form (no bound active)
+        self._closed_form_hit = False  # the last _solve was answered in closed form
         self.task_checks = 0  # stages that left slack and were re-solved with the task as an equality
         self.task_recovered = 0  # ... and turned out feasible (the penalty alone was too weak)
         self._templates: dict[tuple[int, int], QPProblem] = {}
@@ -235,8 +238,7 @@ class QpController(Controller):
         """Stage 1: the arm alone, wheels held at the admissible speed nearest 0."""
         w_hold = np.clip(0.0, ctx.wheel_lo, ctx.wheel_hi)
         p = self._template(N_ARM, 0)
-        idx = np.arange(N_ARM)
-        p.H[idx, idx] = self._w_inv[N_WHEELS:]
+        p.H[_ARM_DIAG, _ARM_DIAG] = self._w_inv[N_WHEELS:]
         p.g[:N_ARM] = self.return_term(ctx.kin.q_arm)
         p.A[:, :N_ARM] = ctx.kin.J_m
         np.subtract(xdot, ctx.kin.J[:, :N_WHEELS] @ w_hold, out=p.b)
@@ -249,8 +251,7 @@ class QpController(Controller):
         lb, ub = self.box(ctx)
         C, l, u = self.ee_box_rows(ctx, mode, lb, ub)
         p = self._template(N_V, C.shape[0])
-        idx = np.arange(N_V)
-        p.H[idx, idx] = self.cost_diagonal(ctx, mode)
+        p.H[_V_DIAG, _V_DIAG] = self.cost_diagonal(ctx, mode)
         p.g[:N_V] = self.linear_term(ctx, mode)
         p.g[N_WHEELS:N_V] += self.return_term(ctx.kin.q_arm)
         p.A[:, :N_V] = ctx.kin.J
@@ -310,10 +311,12 @@ class QpController(Controller):
 
     def _solve(self, backend: QPBackend, problem: QPProblem) -> FloatArray | None:
         self._last_problem = problem
+        self._closed_form_hit = False
         if self.config.qp.closed_form_first:
             z = self.closed_form(problem)
-            if z is not None:
+            if z is not None:  # its residual is already checked to 1e-10
                 self.closed_form_hits += 1
+                self._closed_form_hit = True
                 return z
         sol = backend.solve(problem)
         if (not sol.ok or sol.z is None) and self._fallback is not None:
@@ -359,7 +362,7 @@ class QpController(Controller):
         if self.config.qp.arm_first and mode in (Mode.TRACK, Mode.HOLD):
             p, w_hold = self.build_arm_first(ctx, xdot)
             z = self._solve(self._arm, p)
-            if z is not None and task_residual(p, z) <= SLACK_ACCEPT:
+            if z is not None and (self._closed_form_hit or task_residual(p, z) <= SLACK_ACCEPT):
                 self.last_stage = "arm"
                 return self.finish(ctx, np.concatenate([w_hold, z[:N_ARM]]), xdot, alpha=0.0)
         problem = self.build(ctx, xdot, mode)
