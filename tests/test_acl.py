@@ -2,13 +2,14 @@
 
 The integration test starts the real sim and daemon with ``configs/zenoh/acl_{sim,daemon}.json5``
 and shows that an authenticated client without rights (``viewer``) can read but its mode
-changes, setpoints and robot commands are not delivered, and that a session without
+changes, setpoints, robot commands and boxes are not delivered, and that a session without
 credentials (or with a wrong password) cannot connect at all.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -114,6 +115,7 @@ def test_rogue_session_cannot_command(tmp_path: Path) -> None:
             rogue.put_raw("state", b"\xc1garbage")
             if k % 10 == 0:
                 time.sleep(0.02)
+        rogue.place_box(26.0, 0.65, x0[0] + 0.5, x0[1])  # far ahead: harmless if it got through
         time.sleep(1.0)
         after = op.info()
         assert after is not None and after.status.mode == "track"
@@ -125,12 +127,16 @@ def test_rogue_session_cannot_command(tmp_path: Path) -> None:
             seen.append(msgspec.msgpack.decode(smp.payload.to_bytes(), type=StateMsg))
         assert len(seen) > 100
         assert max(m.cmd_seq for m in seen) < 10**9 and not any(m.stale_stop for m in seen)
+        assert all(math.isnan(m.box_position) for m in seen)  # nor the forged box
         # the operator's own setpoints still get through
         n0 = after.status.accepted["setpoint"]
         for _ in range(20):
             op.send_setpoint(x0)
             time.sleep(0.01)
         _until(lambda: op.info().status.accepted["setpoint"] > n0)
+        # ... and so does its box (sim/box)
+        op.place_box(26.0, 0.65, x0[0] + 0.5, x0[1])
+        _until(lambda: (st := op.wait_state(0.5)) is not None and math.isfinite(st.box_position))
         # no credentials, or a wrong password: no session at all
         anonymous = svc  # configs/zenoh/peer.json5: no credentials
         with Client(anonymous, name="anonymous") as anon:

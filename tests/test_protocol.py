@@ -113,3 +113,19 @@ def test_keys_live_under_prefix_and_robot() -> None:
     k = Keys.of("lab/", "r1")
     assert k.state == "lab/r1/state" and k.cmd == "lab/r1/cmd" and k.setpoint == "lab/r1/setpoint"
     assert k.mode == "lab/r1/mode" and k.info == "lab/r1/info" and k.alive("sim") == "lab/r1/alive/sim"
+
+
+def test_box_message_round_trips_and_is_checked() -> None:
+    """The sim's ``sim/box`` request: a valid box passes, robot id and ranges are checked."""
+    from wmm_qp_service.protocol import BoxMsg
+
+    ok = BoxMsg(robot="r1", mass=26.0, mu=0.65, face_x=0.66, center_y=-0.02)
+    assert Validator(BoxMsg, "r1", LIM).check(encode(ok)) == ok
+    assert Keys.of("wmm", "r1").sim_box == "wmm/r1/sim/box"
+    assert check(BoxMsg, encode(BoxMsg(robot="r2", mass=26.0, mu=0.65, face_x=0.66, center_y=0.0))) == Reject.ROBOT
+    for bad, reason in (({"mass": math.nan}, Reject.NON_FINITE), ({"mass": 0.0}, Reject.RANGE),
+                        ({"mass": 1e6}, Reject.RANGE), ({"mu": -0.1}, Reject.RANGE),
+                        ({"width": 0.0}, Reject.RANGE), ({"face_x": 1e9}, Reject.RANGE)):
+        msg = msgspec.structs.replace(ok, **bad)
+        assert check(BoxMsg, encode(msg)) == reason, bad
+    assert check(BoxMsg, encode(state())) == Reject.SCHEMA

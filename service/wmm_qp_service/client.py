@@ -26,7 +26,7 @@ import zenoh
 
 from .config import ServiceConfig
 from .keys import Keys
-from .protocol import InfoMsg, ModeMsg, SetpointMsg, StateMsg, StatusMsg, TelemetryMsg, encode
+from .protocol import BoxMsg, InfoMsg, ModeMsg, SetpointMsg, StateMsg, StatusMsg, TelemetryMsg, encode
 from .transport import ROLE_CLIENT, open_session
 
 
@@ -62,6 +62,8 @@ class Client:
                                            congestion_control=zenoh.CongestionControl.DROP)
         self._pub_mode = s.declare_publisher(k.mode, congestion_control=zenoh.CongestionControl.BLOCK,
                                              reliability=zenoh.Reliability.RELIABLE)
+        self._pub_box = s.declare_publisher(k.sim_box, congestion_control=zenoh.CongestionControl.BLOCK,
+                                            reliability=zenoh.Reliability.RELIABLE)
         self._sub_state = s.declare_subscriber(k.state, zenoh.handlers.RingChannel(1))
         self._sub_status = s.declare_subscriber(k.status, zenoh.handlers.RingChannel(1))
         self._sub_tel = (s.declare_subscriber(k.telemetry, zenoh.handlers.FifoChannel(100_000))
@@ -98,6 +100,14 @@ class Client:
         msg = ModeMsg(robot=self.svc.robot, seq=self._next(), stamp=time.time(), mode=mode,
                       direction=None if direction is None else [float(v) for v in direction])
         self._pub_mode.put(encode(msg))
+
+    def place_box(self, mass: float, mu: float, face_x: float, center_y: float,
+                  width: float = 0.4, height: float = 0.6) -> None:
+        """Place a box in the sim's scene now: mass [kg], friction μ, face x and centre y [m] (world)."""
+        msg = BoxMsg(robot=self.svc.robot, seq=self._next(), stamp=time.time(), mass=float(mass),
+                     mu=float(mu), face_x=float(face_x), center_y=float(center_y),
+                     width=float(width), height=float(height))
+        self._pub_box.put(encode(msg))
 
     def put_raw(self, key: str, payload: bytes) -> None:
         """Publish raw bytes on ``<prefix>/<robot>/<key>`` (tests of the validation)."""

@@ -41,6 +41,11 @@ class Keys:
         return f"{self.root}/mode"
 
     @property
+    def sim_box(self) -> str:
+        """client → sim: place a box now (:class:`~.protocol.BoxMsg`), never dropped."""
+        return f"{self.root}/sim/box"
+
+    @property
     def status(self) -> str:
         """daemon → all: status (:class:`~.protocol.StatusMsg`), ~10 Hz."""
         return f"{self.root}/status"

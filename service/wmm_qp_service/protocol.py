@@ -46,6 +46,7 @@ class StateMsg(_Msg, tag="state"):
         tau: [N·m] 7 joint torques from the contact model.
         contact_force: [N] 3 EE contact force.
         box_position: [m] box position along the push axis (nan: no box).
+        stalled_joint: the joint (0-based) that stalled the push this step (-1: none).
         violations: limit-referee counts by kind.
         stale_stop: the sim is braking because commands went stale.
         cmd_seq: seq of the last command the sim applied (-1: none).
@@ -61,6 +62,7 @@ class StateMsg(_Msg, tag="state"):
     tau: list[float]
     contact_force: list[float]
     box_position: float = float("nan")
+    stalled_joint: int = -1
     violations: dict[str, int] = msgspec.field(default_factory=dict)
     stale_stop: bool = False
     cmd_seq: int = -1
@@ -78,6 +80,26 @@ class CommandMsg(_Msg, tag="cmd"):
     wheel_speeds: list[float]
     arm_rates: list[float]
     status: str = "ok"
+
+
+class BoxMsg(_Msg, tag="box"):
+    """client → sim: place a box in the scene now (between two sim steps), pushed along +x.
+
+    Attributes:
+        mass: [kg] box mass.
+        mu: [-] Coulomb friction coefficient box/floor.
+        face_x: [m] world x of the face the EE pushes on.
+        center_y: [m] world y of the face's centre.
+        width: [m] face extent along y.
+        height: [m] face extent along z (from the floor).
+    """
+
+    mass: float
+    mu: float
+    face_x: float
+    center_y: float
+    width: float = 0.4
+    height: float = 0.6
 
 
 class SetpointMsg(_Msg, tag="setpoint"):

@@ -5,6 +5,8 @@ Nothing malformed reaches the controller. Checks, in order: the payload's length
 the expected schema (``schema``; ``version`` when the header shows another protocol
 version), the robot id (``robot``), NaN/inf in the time stamp (``non_finite``), vector
 sizes (``size``), NaN/inf (``non_finite``), ranges (``range``), the mode name (``mode``).
+A box (:class:`~.protocol.BoxMsg`): finite, mass in (0, 1000] kg, μ in [0, 5], face x and
+centre y within ``position_abs_max``, width and height in (0, 10] m.
 """
 
 from __future__ import annotations
@@ -20,7 +22,11 @@ import msgspec
 from wmm_qp import Mode
 
 from .config import ValidationConfig
-from .protocol import PROTOCOL_VERSION, CommandMsg, Header, ModeMsg, SetpointMsg, StateMsg
+from .protocol import PROTOCOL_VERSION, BoxMsg, CommandMsg, Header, ModeMsg, SetpointMsg, StateMsg
+
+BOX_MASS_MAX = 1000.0  # [kg]
+BOX_MU_MAX = 5.0  # [-]
+BOX_SIZE_MAX = 10.0  # [m] face width, height
 
 
 class Reject(enum.StrEnum):
@@ -161,6 +167,16 @@ class Validator(Generic[M]):
                 vals = getattr(msg, name)
                 if len(vals) != n:
                     raise Rejected(Reject.SIZE, f"{name} has {len(vals)} entries, expected {n}")
+        elif isinstance(msg, BoxMsg):
+            _finite("box", [msg.mass, msg.mu, msg.face_x, msg.center_y, msg.width, msg.height])
+            for name, v, ok in (("mass", msg.mass, 0.0 < msg.mass <= BOX_MASS_MAX),
+                                ("mu", msg.mu, 0.0 <= msg.mu <= BOX_MU_MAX),
+                                ("width", msg.width, 0.0 < msg.width <= BOX_SIZE_MAX),
+                                ("height", msg.height, 0.0 < msg.height <= BOX_SIZE_MAX)):
+                if not ok:
+                    raise Rejected(Reject.RANGE, f"box {name} = {v:g} outside its range")
+            if max(abs(msg.face_x), abs(msg.center_y)) > lim.position_abs_max:
+                raise Rejected(Reject.RANGE, f"box face x, y beyond ±{lim.position_abs_max:g} m")
         elif isinstance(msg, CommandMsg):
             _vector("wheel_speeds", msg.wheel_speeds, 4, lim.command_abs_max)
             _vector("arm_rates", msg.arm_rates, 7, lim.command_abs_max)

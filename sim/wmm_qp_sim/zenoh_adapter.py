@@ -3,7 +3,9 @@
 Runs the sim at its own rate (1 kHz) with absolute deadlines, takes the latest command
 (ring channel, depth 1, validated on receipt), publishes the state every tick (odometry
 and ground truth, torques, the referee's violation counts) and holds a liveliness token.
-When commands go stale the pure model brakes the robot to rest by itself.
+When commands go stale the pure model brakes the robot to rest by itself. A client may place
+a box in the scene at run time (``sim/box``, :class:`~wmm_qp_service.protocol.BoxMsg`, FIFO,
+validated on receipt); it is applied between two steps with :meth:`SimRobot.place_box`.
 
 Drive model: like a real joint or wheel drive, the adapter ramps the executed rate towards
 the commanded one at the acceleration limit (A·dt per sim step). The controller's command
@@ -27,14 +29,14 @@ import numpy as np
 import zenoh
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.keys import Keys
-from wmm_qp_service.protocol import CommandMsg, StateMsg, encode
+from wmm_qp_service.protocol import BoxMsg, CommandMsg, StateMsg, encode
 from wmm_qp_service.rate_loop import RateLoop
 from wmm_qp_service.transport import ROLE_SIM, open_session
 from wmm_qp_service.validation import Validator
 
 import wmm_qp as w
 
-from .config import SimConfig
+from .config import BoxConfig, SimConfig
 from .robot import SimCommand, SimRobot, SimState
 
 
@@ -64,6 +66,7 @@ class SimNode:
         self.sim = SimRobot(self.model, sim_cfg, seed=seed)
         self.keys = Keys.of(svc.prefix, svc.robot)
         self.validate = Validator(CommandMsg, svc.robot, svc.validation)
+        self.validate_box = Validator(BoxMsg, svc.robot, svc.validation)
         self.ramp = ramp
         self.loop = RateLoop(sim_cfg.rate_hz, spin_s)
         self.a_max = np.asarray(robot.arm.acceleration_max, dtype=float)
@@ -98,6 +101,15 @@ class SimNode:
             wheel_speeds=s.wheels + np.clip(dw, -self.wa_max * dt, self.wa_max * dt),
             arm_rates=s.v_arm + np.clip(dv, -self.a_max * dt, self.a_max * dt))
 
+    def place_box(self, data: bytes) -> bool:
+        """Validate a box request and put the box in the scene (False: rejected, counted)."""
+        msg = self.validate_box(data)
+        if msg is None:
+            return False
+        self.sim.place_box(BoxConfig(mass=msg.mass, mu=msg.mu, face_x=msg.face_x,
+                                     center_y=msg.center_y, width=msg.width, height=msg.height))
+        return True
+
     def state_msg(self, st: SimState, seq: int) -> StateMsg:
         """The wire message of a sim state."""
         return StateMsg(
@@ -106,6 +118,7 @@ class SimNode:
             wheel_speeds=st.wheel_speeds.tolist(), base_true=st.base_true.tolist(),
             ee_true=st.ee_true.tolist(), tau=st.tau.tolist(),
             contact_force=st.contact_force.tolist(), box_position=st.box_position,
+            stalled_joint=-1 if st.stalled_joint is None else st.stalled_joint,
             violations=dict(st.violations), stale_stop=st.stale_stop, cmd_seq=self.cmd_seq)
 
     def outgoing(self, payload: bytes, now: float) -> list[bytes]:
@@ -132,6 +145,7 @@ class SimNode:
         with open_session(self.svc, ROLE_SIM) as session:
             k = self.keys
             sub = session.declare_subscriber(k.cmd, zenoh.handlers.RingChannel(1))
+            sub_box = session.declare_subscriber(k.sim_box, zenoh.handlers.FifoChannel(16))
             pub = session.declare_publisher(k.state, express=True,
                                             congestion_control=zenoh.CongestionControl.DROP,
                                             priority=zenoh.Priority.REAL_TIME)
@@ -141,6 +155,8 @@ class SimNode:
             self.loop.start()
             try:
                 while not stop.is_set() and (max_ticks is None or self.loop.ticks < max_ticks):
+                    while (b := sub_box.try_recv()) is not None:
+                        self.place_box(b.payload.to_bytes())
                     s = sub.try_recv()
                     new = self.validate(s.payload.to_bytes()) if s is not None else None
                     st = self.sim.step(self.next_command(new, dt), dt)
@@ -149,7 +165,7 @@ class SimNode:
                         pub.put(payload)
                     self.loop.wait()
             finally:
-                for ent in (token, sub, pub):
+                for ent in (token, sub, sub_box, pub):
                     with contextlib.suppress(Exception):
                         ent.undeclare()
             return st
