@@ -1,8 +1,8 @@
 """``wmm-qp experiment circle|dm|push``: reproduce one of the paper's experiments.
 
 In-process by default: deterministic (seeded slip), faster than real time, a progress bar on
-stderr when it is a terminal. ``--realtime``: circle and dm through the daemon and the sim
-processes over Zenoh on loopback, in real time (push: not available, exit 2). Prints a
+stderr when it is a terminal. ``--realtime``: through the daemon and the sim
+processes over Zenoh on loopback, in real time (push: no ``--log``/``--plots``). Prints a
 summary, or one JSON object with ``--json``; ``--log`` writes the per-tick CSV, ``--plots``
 PNG figures.
 """
@@ -44,7 +44,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--realtime",
         action="store_true",
-        help="circle, dm: run through the daemon and sim processes over Zenoh in real time",
+        help="run through the daemon and sim processes over Zenoh in real time",
     )
     parser.add_argument("--rate", type=float, default=None, help="[Hz] control rate with --realtime (default 500)")
     parser.add_argument("--process-logs", type=Path, default=None, help="--realtime: keep the processes' logs here")
@@ -63,10 +63,8 @@ def run(args: argparse.Namespace) -> int:
     from ..experiments import circle, dm, log, push
     from ..experiments.runner import make_setup
 
-    if args.realtime and args.name == "push":
-        from ..experiments.realtime import PUSH_UNAVAILABLE
-
-        return _fail(PUSH_UNAVAILABLE)
+    if args.realtime and args.name == "push" and (args.log is not None or args.plots is not None):
+        return _fail("push --realtime writes no --log or --plots (the JSON has the metrics)")
     if args.rate is not None and not args.realtime:
         return _fail("--rate only applies with --realtime")
     if args.rate is not None and not (np.isfinite(args.rate) and 10.0 <= args.rate <= 2000.0):
@@ -89,7 +87,22 @@ def run(args: argparse.Namespace) -> int:
     result: dict[str, Any] = {"experiment": args.name, "controller": args.controller}
     if args.controller == "qp":
         result["solver"] = args.solver
-    if args.realtime:
+    if args.realtime and args.name == "push":
+        from ..experiments.realtime import run_push_realtime
+
+        rt_runs = run_push_realtime(setup, args.controller, args.solver, args.duration or push.DEFAULT_DM_DURATION,
+                                 slip=not args.no_slip, seed=args.seed, rate_hz=args.rate, progress=tty,
+                                 log_dir=args.process_logs)  # fmt: skip
+        result["realtime"] = {name: r.pop("realtime") for name, r in rt_runs.items()}
+        reasons = [r.pop("controller_reasons") for r in rt_runs.values()]
+        result |= rt_runs
+        result["box"] = {"mass": push.MASS, "mu": push.MU, "target": push.TARGET}
+        result["violations"] = {
+            k: sum(r["violations"].get(k, 0) for r in rt_runs.values()) for k in rt_runs["with_dm"]["violations"]
+        }
+        result["controller_reasons"] = {k: v for r in reasons for k, v in r.items()}
+        traces: dict[str, Any] = {}
+    elif args.realtime:
         s = setup()
         rt = _realtime(args, s, tty)
         tr = rt.trace
@@ -156,7 +169,8 @@ def run(args: argparse.Namespace) -> int:
     if args.log is not None:
         for name, tr in traces.items():
             log.write_csv(tr, _suffixed(args.log, name) if name else args.log)
-    result["controller_reasons"] = {k: v for r in traces.values() for k, v in r.reasons.items()}
+    if traces:
+        result["controller_reasons"] = {k: v for r in traces.values() for k, v in r.reasons.items()}
     if args.json:
         print(json.dumps(result))
     else:

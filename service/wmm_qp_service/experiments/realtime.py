@@ -12,9 +12,11 @@ among the recorded states (fallback: the newest state stamped before the tick). 
 trace has the in-process :class:`~.runner.Trace` layout, so the same metrics and the same CSV
 columns apply. Time ``t`` is the daemon's tick time since the scenario's first tick.
 
-The push is not available in real time: the sim process can only be given a box in its
-config at start-up, not placed in front of the EE after the DM enhancement (see
-:data:`PUSH_UNAVAILABLE`).
+The push (:func:`run_push_realtime`) runs each of its two runs on a fresh pair of processes:
+optionally the DM enhancement along x, then the client places the box 1 cm in front of the
+true EE (``sim/box``, :meth:`~..client.Client.place_box`) and streams the quasi-static TRACK
+reference of :mod:`.push`. Its metrics come from the states the sim published after the box
+was placed (torques, box position, stalled joint).
 """
 
 from __future__ import annotations
@@ -39,14 +41,11 @@ from wmm_qp.manipulability import directional_manipulability
 from ..client import Client
 from ..processes import Stack, isolated_config
 from ..protocol import StateMsg, TelemetryMsg
+from . import push
 from .circle import circle
 from .dm import DIRECTIONS, cartesian_end
 from .runner import Progress, Setup, Trace
 
-PUSH_UNAVAILABLE = (
-    "push --realtime is not available: the sim process cannot place the box in front of the EE "
-    "after the DM phase (a box exists only from its config at start-up); run push in-process"
-)
 SETPOINT_HZ = 100.0  # [Hz] rate of the scripted setpoint stream (feed-forward velocity included)
 HOLD_HZ = 50.0  # [Hz] rate of the standing target in the null-space phase
 STARTUP_TIMEOUT = 60.0  # [s] for the daemon to answer with a valid state
@@ -135,11 +134,13 @@ def _pace(
     t_bar0: float,
     total: float,
     send: Callable[[float], None],
+    stop: Callable[[], bool] | None = None,
 ) -> None:
-    """Call ``send(t)`` at ``rate_hz`` for ``duration`` [s] (t from 0), draining the recorder."""
+    """Call ``send(t)`` at ``rate_hz`` for ``duration`` [s] (t from 0) or until ``stop()``,
+    draining the recorder."""
     t0 = time.monotonic()
     k = 0
-    while (t := time.monotonic() - t0) < duration:
+    while (t := time.monotonic() - t0) < duration and not (stop is not None and stop()):
         send(t)
         rec.drain()
         if bar is not None:
@@ -186,6 +187,87 @@ def drive_dm(c: Client, rec: Recorder, duration: float, direction: str, bar: Pro
     return ["dm_cartesian", "dm_nullspace"]
 
 
+@dataclass
+class StackOptions:
+    """How to start the sim and the daemon for one run.
+
+    Attributes:
+        controller: the daemon's controller kind.
+        solver: the daemon's QP backend (None: the config's).
+        rate_hz: [Hz] control rate.
+        slip: the sim's base slip on or off.
+        seed: the sim's slip seed (None: the sim config's).
+        log_dir: the processes' logs go here.
+    """
+
+    controller: str
+    solver: str | None
+    rate_hz: float
+    slip: bool
+    seed: int | None
+    log_dir: Path
+
+
+def _on_stack(opts: StackOptions, drive: Callable[[Client, Recorder], Any]) -> tuple[Any, Recorder, dict[str, Any]]:
+    """Start sim and daemon, run ``drive(client, recorder)``, stop them.
+
+    Returns:
+        (what ``drive`` returned, the closed recorder, the service-side figures).
+    """
+    svc = isolated_config()
+    daemon_args = ["--controller", opts.controller, *(["--solver", opts.solver] if opts.solver else [])]
+    sim_args = _sim_config_file(opts.slip, opts.log_dir) + ([] if opts.seed is None else ["--seed", str(opts.seed)])
+    stack = Stack(svc, rate_hz=opts.rate_hz, log_dir=opts.log_dir, extra_daemon_args=daemon_args,
+                  extra_sim_args=sim_args)  # fmt: skip
+    try:
+        stack.start()
+        with Client(svc, name="experiment", telemetry=True) as c:
+            if not _wait_ready(c, STARTUP_TIMEOUT):
+                raise RealtimeError(f"the daemon or the sim did not come up (logs: {opts.log_dir})")
+            rec = Recorder(c).open()
+            c.telemetry()  # start from here
+            info0 = c.info()
+            wall0 = time.perf_counter()
+            out = drive(c, rec)
+            time.sleep(0.05)
+            rec.drain()
+            c.set_mode("hold")
+            info1 = c.info()
+            rec.drain()
+            rec.close()
+            wall = time.perf_counter() - wall0
+    finally:
+        codes = stack.stop()
+    service: dict[str, Any] = {
+        "rate_hz": opts.rate_hz,
+        "transport": "zenoh, loopback",
+        "exit_codes": codes,
+        "logs": str(opts.log_dir),
+        "wall_time": wall,
+    }
+    if info0 is not None and info1 is not None:
+        l0, l1 = info0.status.loop, info1.status.loop
+        ticks = l1.ticks - l0.ticks
+        misses = l1.deadline_misses - l0.deadline_misses
+        service |= {
+            "ticks": ticks,
+            "deadline_misses": misses,
+            "misses_per_10k": round(1e4 * misses / ticks, 2) if ticks else None,
+            "tick_p50_us": round(l1.tick_p50_us, 1),
+            "tick_p99_us": round(l1.tick_p99_us, 1),
+            "rejected": dict(info1.status.rejected),
+            "last_fault": info1.status.last_fault,
+        }
+    return out, rec, service
+
+
+def _options(name: str, setup: Setup, controller: str, solver: str | None, slip: bool, seed: int | None,
+             rate_hz: float | None, log_dir: Path | None) -> StackOptions:
+    log_dir = log_dir or Path(tempfile.mkdtemp(prefix=f"wmm-qp-rt-{name}-"))
+    log_dir.mkdir(parents=True, exist_ok=True)
+    return StackOptions(controller, solver, float(rate_hz or setup.ctl_cfg.rate_hz), slip, seed, log_dir)
+
+
 def run_realtime(
     name: str,
     setup: Setup,
@@ -203,7 +285,7 @@ def run_realtime(
     """Run ``circle`` or ``dm`` through the daemon and the sim over Zenoh, in real time.
 
     Args:
-        name: "circle" or "dm" (push: :class:`RealtimeError`, see :data:`PUSH_UNAVAILABLE`).
+        name: "circle" or "dm" (the push: :func:`run_push_realtime`).
         setup: the model and configs (for the DM along u and the log layout).
         controller: the daemon's controller kind.
         solver: the daemon's QP backend (None: the config's).
@@ -218,64 +300,150 @@ def run_realtime(
     Returns:
         The trace and the service-side figures.
     """
-    if name == "push":
-        raise RealtimeError(PUSH_UNAVAILABLE)
-    rate = float(rate_hz or setup.ctl_cfg.rate_hz)
-    log_dir = log_dir or Path(tempfile.mkdtemp(prefix=f"wmm-qp-rt-{name}-"))
-    log_dir.mkdir(parents=True, exist_ok=True)
-    svc = isolated_config()
-    daemon_args = ["--controller", controller, *(["--solver", solver] if solver else [])]
-    sim_args = _sim_config_file(slip, log_dir) + ([] if seed is None else ["--seed", str(seed)])
-    stack = Stack(svc, rate_hz=rate, log_dir=log_dir, extra_daemon_args=daemon_args, extra_sim_args=sim_args)
+    if name not in ("circle", "dm"):
+        raise RealtimeError(f"no realtime scenario {name!r} here (push: run_push_realtime)")
+    opts = _options(name, setup, controller, solver, slip, seed, rate_hz, log_dir)
     u = DIRECTIONS[direction] if name == "dm" else np.asarray(setup.ctl_cfg.direction, dtype=float)
     bar = Progress(f"{name} (realtime)", progress) if progress else None
+
+    def drive(c: Client, rec: Recorder) -> list[str]:
+        if name == "circle":
+            return drive_circle(c, rec, duration, bar)
+        return drive_dm(c, rec, duration, direction, bar)
+
     try:
-        stack.start()
-        with Client(svc, name="experiment", telemetry=True) as c:
-            if not _wait_ready(c, STARTUP_TIMEOUT):
-                raise RealtimeError(f"the daemon or the sim did not come up (logs: {log_dir})")
-            rec = Recorder(c).open()
-            c.telemetry()  # start from here
-            info0 = c.info()
-            wall0 = time.perf_counter()
-            if name == "circle":
-                modes = drive_circle(c, rec, duration, bar)
-            else:
-                modes = drive_dm(c, rec, duration, direction, bar)
-            time.sleep(0.05)
-            rec.drain()
-            c.set_mode("hold")
-            info1 = c.info()
-            rec.drain()
-            rec.close()
-            wall = time.perf_counter() - wall0
+        modes, rec, service = _on_stack(opts, drive)
     finally:
-        codes = stack.stop()
         if bar is not None:
             bar.close()
     trace, t_switch, age = build_trace(setup, rec, modes, duration, u)
-    trace.wall_time = wall
-    service: dict[str, Any] = {
-        "rate_hz": rate,
-        "transport": "zenoh, loopback",
-        "exit_codes": codes,
-        "logs": str(log_dir),
-        "state_age_us": age,
-    }
-    if info0 is not None and info1 is not None:
-        l0, l1 = info0.status.loop, info1.status.loop
-        ticks = l1.ticks - l0.ticks
-        misses = l1.deadline_misses - l0.deadline_misses
-        service |= {
-            "ticks": ticks,
-            "deadline_misses": misses,
-            "misses_per_10k": round(1e4 * misses / ticks, 2) if ticks else None,
-            "tick_p50_us": round(l1.tick_p50_us, 1),
-            "tick_p99_us": round(l1.tick_p99_us, 1),
-            "rejected": dict(info1.status.rejected),
-            "last_fault": info1.status.last_fault,
-        }
+    trace.wall_time = service.pop("wall_time")
+    service["state_age_us"] = age
     return RealtimeResult(trace=trace, t_switch=t_switch, service=service)
+
+
+@dataclass
+class PushStart:
+    """Where one realtime push phase started.
+
+    Attributes:
+        face_x: [m] the box face's initial world x.
+        q_arm: [rad] joint angles when the box was placed.
+    """
+
+    face_x: float
+    q_arm: list[float]
+
+
+def drive_push(c: Client, rec: Recorder, model: Any, scale: float, bar: Progress | None) -> PushStart:
+    """Place the box 1 cm ahead of the true EE, then push it with a slow TRACK reference.
+
+    Same phase as :func:`.push._push_phase`: x_d moves from the model EE position along +x at
+    ``PUSH_SPEED / scale`` by gap + target + overshoot, then stays; ends when the box has moved
+    ``TARGET`` or after ``SETTLE * scale`` more seconds.
+    """
+    st = c.wait_state(5.0)
+    if st is None:
+        raise RealtimeError("no state from the sim")
+    x_start = model.ee_position(np.array(st.q_base), np.array(st.q_arm))
+    face_x = float(st.ee_true[0]) + push.GAP
+    c.place_box(push.MASS, push.MU, face_x, float(st.ee_true[1]))
+    end = time.monotonic() + 5.0
+    while not ((s := c.wait_state(0.5)) is not None and math.isfinite(s.box_position)):
+        if time.monotonic() > end:
+            raise RealtimeError("the sim did not place the box")
+    speed = push.PUSH_SPEED / scale
+    t_move = (push.GAP + push.TARGET + push.OVERSHOOT) / speed
+    duration = t_move + push.SETTLE * scale
+    c.set_mode("track", DIRECTIONS["x"].tolist())
+
+    def send(t: float) -> None:
+        s = min(t, t_move)
+        c.send_setpoint(x_start + np.array([speed * s, 0.0, 0.0]), [speed if t < t_move else 0.0, 0.0, 0.0])
+
+    def moved() -> bool:
+        s = c.latest_state()
+        return s is not None and s.box_position - face_x >= push.TARGET
+
+    _pace(rec, duration, SETPOINT_HZ, bar, 0.0, duration, send, moved)
+    return PushStart(face_x=face_x, q_arm=list(st.q_arm))
+
+
+def push_metrics_realtime(setup: Setup, rec: Recorder, start: PushStart) -> dict[str, Any]:
+    """The in-process push metrics (:func:`.push.push_metrics` keys) from the sim's states."""
+    dec = msgspec.msgpack.Decoder(StateMsg)
+    states = [s for s in (dec.decode(b) for b in rec.states) if math.isfinite(s.box_position)]
+    if not states:
+        raise RealtimeError("no state with the box arrived")
+    tau = np.array([s.tau for s in states])
+    W = np.asarray(setup.ctl_cfg.W, dtype=float)
+    stalled = np.array([s.stalled_joint for s in states])
+    first = np.flatnonzero(stalled >= 0)
+    distance = float(states[-1].box_position - start.face_x)
+    J = setup.model.arm.position_jacobian(np.array(start.q_arm))[1]
+    return {
+        "completed": bool(distance >= push.TARGET - 1e-9),
+        "distance": distance,
+        "max_abs_torque": [float(v) for v in np.abs(tau).max(axis=0)],
+        "max_weighted_torque_norm": float(np.linalg.norm(tau * W, axis=1).max()),
+        "saturated_joint": int(stalled[first[0]]) if first.size else None,
+        "stall_ticks": int(first.size),
+        "dm_at_push_start": float(directional_manipulability(J, DIRECTIONS["x"], W)),
+        "push_force": push.MU * push.MASS * 9.81,
+        "violations": dict(states[-1].violations),
+    }
+
+
+def run_push_realtime(
+    setup_factory: Callable[[], Setup],
+    controller: str,
+    solver: str | None,
+    dm_duration: float,
+    *,
+    slip: bool = True,
+    seed: int | None = None,
+    rate_hz: float | None = None,
+    progress: bool = True,
+    log_dir: Path | None = None,
+) -> dict[str, dict[str, Any]]:
+    """The box push through the daemon and the sim over Zenoh: with and without DM first.
+
+    Args:
+        setup_factory: () → a fresh :class:`Setup` (model, configs).
+        controller, solver, slip, seed, rate_hz, progress, log_dir: as :func:`run_realtime`.
+        dm_duration: [s] DM enhancement before the push (with_dm); below 20 s it also speeds
+            the push up in proportion, as in-process.
+
+    Returns:
+        {"with_dm": metrics, "without_dm": metrics}; each metrics dict also has "realtime"
+        (the service-side figures of its run).
+    """
+    scale = min(1.0, dm_duration / push.DEFAULT_DM_DURATION)
+    out: dict[str, dict[str, Any]] = {}
+    for name in ("with_dm", "without_dm"):
+        setup = setup_factory()
+        opts = _options(f"push-{name}", setup, controller, solver, slip, seed, rate_hz,
+                        None if log_dir is None else log_dir / name)  # fmt: skip
+        bar = Progress(f"push {name} (realtime)", progress) if progress else None
+
+        def drive(c: Client, rec: Recorder, with_dm: bool = name == "with_dm",
+                  bar: Progress | None = bar, setup: Setup = setup) -> PushStart:  # fmt: skip
+            if with_dm:
+                drive_dm(c, rec, dm_duration, "x", bar)
+            return drive_push(c, rec, setup.model, scale, bar)
+
+        try:
+            start, rec, service = _on_stack(opts, drive)
+        finally:
+            if bar is not None:
+                bar.close()
+        out[name] = push_metrics_realtime(setup, rec, start) | {"realtime": service}
+        reasons: dict[str, int] = {}
+        for t in rec.telemetry:
+            if t.status != "ok":
+                reasons[f"status {t.status}"] = reasons.get(f"status {t.status}", 0) + 1
+        out[name]["controller_reasons"] = reasons
+    return out
 
 
 def match_states(states: list[StateMsg], tel: list[TelemetryMsg]) -> list[int]:
