@@ -83,9 +83,11 @@ def test_stream_tracked_mode_change_smooth_and_malformed_rejected(service_stack:
             da = np.abs(np.subtract(q.arm_rates, p.arm_rates)) / (a_max * dt)
             dw = np.abs(np.subtract(q.wheel_speeds, p.wheel_speeds)) / (wa_max * dt)
             worst = max(worst, float(da.max()), float(dw.max()))
-        # each command is inside the acceleration bounds around the *executed* rates, which
-        # may lag the previous command by a tick of transport jitter: < 2 A·dt, never a jump
-        assert worst <= 2.0 + 1e-6, worst
+        # Each command is inside the acceleration bounds around the *executed* rates the sim
+        # reported, which lag the previous command by the state's age: ~1 tick normally, several
+        # on a loaded machine (7 A·dt seen once under load 3). A discontinuity at a mode change
+        # would be far larger: an unbounded switch jumps by up to V/(A·dt) ≈ 130.
+        assert worst <= 8.0, worst
         # ---- malformed messages: rejected, counted, the loop keeps running
         before = c.info()
         assert before is not None
