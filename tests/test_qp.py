@@ -17,6 +17,12 @@ from wmm_qp.verify import check_command
 SOLVERS = available_solvers()
 
 
+def advance(qb: np.ndarray, qa: np.ndarray, cmd: w.Command, dt: float) -> tuple[np.ndarray, ...]:
+    """A kinematic robot executing ``cmd`` for ``dt``: (q_base, q_arm, v_arm, wheel_speeds)."""
+    va, wh = cmd.arm_rates, cmd.wheel_speeds
+    return qb + model().base.P(qb[2]) @ wh * dt, qa + va * dt, va, wh
+
+
 def qp(solver: str, **qp_changes: object) -> w.QpController:
     return w.QpController(model(), config().with_(qp={"solver": solver, **qp_changes}))
 
@@ -125,9 +131,7 @@ def test_wheels_still_while_the_arm_suffices_then_base_supplies_the_rest(solver:
         assert cmd.status != w.Status.SAFE_STOP, cmd.reason
         if wheels_zero_until is None and np.abs(cmd.wheel_speeds).max() >= 1e-9:
             wheels_zero_until = t
-        va, wh = cmd.arm_rates, cmd.wheel_speeds
-        qa = qa + va * dt
-        qb = qb + model().base.P(qb[2]) @ wh * dt
+        qb, qa, va, wh = advance(qb, qa, cmd, dt)
         errs.append(np.linalg.norm(model().ee_position(qb, qa) - ref.x_d))
     assert wheels_zero_until is not None and wheels_zero_until > 1.0  # arm alone at first: |w| < 1e-9
     assert np.abs(wh).max() > 0.1  # base supplies the remainder at the end
@@ -188,10 +192,8 @@ def _dm_after(ctl: w.QpController, seconds: float) -> tuple[float, float]:
     wmax, cmd = 0.0, None
     for _ in range(int(seconds / dt)):
         cmd = ctl.step(w.RobotState(qb, qa, va, wh), ref)
-        va, wh = cmd.arm_rates, cmd.wheel_speeds
+        qb, qa, va, wh = advance(qb, qa, cmd, dt)
         wmax = max(wmax, float(np.abs(wh).max()))
-        qa = qa + va * dt
-        qb = qb + model().base.P(qb[2]) @ wh * dt
     assert cmd is not None
     return cmd.dm, wmax
 
@@ -230,9 +232,7 @@ def test_jumpy_reference_stream_never_needs_a_safe_stop() -> None:
         xd = xd + step
         cmd = ctl.step(w.RobotState(qb, qa, va, wh), w.Reference("track", x_d=xd, xd_d=step / 1e-3))
         assert cmd.status != w.Status.SAFE_STOP, cmd.reason
-        va, wh = cmd.arm_rates, cmd.wheel_speeds
-        qa = qa + va * 1e-3
-        qb = qb + model().base.P(qb[2]) @ wh * 1e-3
+        qb, qa, va, wh = advance(qb, qa, cmd, 1e-3)
 
 
 @pytest.mark.parametrize("solver", SOLVERS)
@@ -246,9 +246,7 @@ def test_a_joint_past_its_limit_is_brought_back_without_breaking_the_task(solver
     for _ in range(100):
         cmd = ctl.step(w.RobotState(qb, qa, va, wh), w.Reference(mode, x_d=x))
         assert cmd.task_error < 1e-6
-        va, wh = cmd.arm_rates, cmd.wheel_speeds
-        qa = qa + va * ctl.dt
-        qb = qb + model().base.P(qb[2]) @ wh * ctl.dt
+        qb, qa, va, wh = advance(qb, qa, cmd, ctl.dt)
     assert qa[3] <= ARM.position_upper[3]  # back inside within 0.2 s
 
 
@@ -340,9 +338,7 @@ def test_wheels_exactly_still_on_every_tick_the_arm_alone_can_do_it(solver: str)
         if arm_alone:
             checked += 1
             assert np.abs(cmd.wheel_speeds).max() < 1e-9
-        va, wh = cmd.arm_rates, cmd.wheel_speeds
-        qa = qa + va * dt
-        qb = qb + model().base.P(qb[2]) @ wh * dt
+        qb, qa, va, wh = advance(qb, qa, cmd, dt)
     assert checked > 1000
 
 
@@ -357,9 +353,7 @@ def test_driving_into_a_joint_limit_never_passes_it(solver: str) -> None:
         t = k * dt
         ref = w.Reference("track", x_d=x0 + [-0.12 * t, 0, 0], xd_d=[-0.12, 0, 0])
         cmd = ctl.step(w.RobotState(qb, qa, va, wh), ref)
-        va, wh = cmd.arm_rates, cmd.wheel_speeds
-        qa = qa + va * dt
-        qb = qb + model().base.P(qb[2]) @ wh * dt
+        qb, qa, va, wh = advance(qb, qa, cmd, dt)
         assert (qa <= ARM.position_upper + 1e-12).all() and (qa >= ARM.position_lower - 1e-12).all()
     assert qa[3] > ARM.position_upper[3] - 0.05  # it did reach the limit's neighbourhood
 

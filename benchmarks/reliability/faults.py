@@ -11,7 +11,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -26,11 +25,11 @@ def main() -> int:
     p.add_argument("--out", metavar="FILE", help="also write the JSON here")
     args = p.parse_args()
     from wmm_qp_service import faults
-    from wmm_qp_service.processes import Stack, isolated_config
+    from wmm_qp_service.processes import Stack, isolated_config, log_folder
 
     out: dict[str, Any] = {"rate_hz": args.rate}
     todo = args.only or SCENARIOS
-    log_dir = Path(tempfile.mkdtemp(prefix="wmm-qp-faults-"))
+    log_dir = log_folder(None, "faults")
     stack = Stack(isolated_config(), rate_hz=args.rate, log_dir=log_dir)
     probe = None
     try:

@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -30,9 +29,9 @@ def main() -> int:
     args = p.parse_args()
     from wmm_qp_service.client import Client
     from wmm_qp_service.fuzz import fuzz_wire
-    from wmm_qp_service.processes import Stack, isolated_config
+    from wmm_qp_service.processes import Stack, isolated_config, log_folder
 
-    log_dir = Path(tempfile.mkdtemp(prefix="wmm-qp-fuzz-"))
+    log_dir = log_folder(None, "fuzz")
     stack = Stack(isolated_config(), rate_hz=args.loop_rate, log_dir=log_dir)
     try:
         stack.start()

@@ -33,6 +33,15 @@ def isolated_config(base: ServiceConfig | None = None, prefix: str | None = None
                              "sim_endpoint": f"tcp/127.0.0.1:{free_port()}"})
 
 
+def log_folder(path: str | Path | None, tag: str) -> Path:
+    """Where the processes' logs go: ``path`` (created if missing) or a fresh temporary folder."""
+    import tempfile
+
+    folder = Path(path) if path else Path(tempfile.mkdtemp(prefix=f"wmm-qp-{tag}-"))
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder
+
+
 def _service_args(svc: ServiceConfig) -> list[str]:
     return ["--prefix", svc.prefix, "--robot", svc.robot,
             "--daemon-endpoint", svc.zenoh.daemon_endpoint, "--sim-endpoint", svc.zenoh.sim_endpoint]

@@ -12,9 +12,7 @@ import argparse
 import json
 import math
 import sys
-import tempfile
 import time
-from pathlib import Path
 from typing import Any
 
 HELP = "start sim and daemon on loopback, drive every mode, print a summary"
@@ -37,11 +35,10 @@ def run(args: argparse.Namespace) -> int:
     if not 10.0 <= args.rate <= 2000.0:
         print("wmm-qp demo: error: --rate must be in [10, 2000] Hz", file=sys.stderr)
         return 2
-    from ..processes import Stack, isolated_config
+    from ..processes import Stack, isolated_config, log_folder
 
     svc = isolated_config()
-    log_dir = Path(args.logs) if args.logs else Path(tempfile.mkdtemp(prefix="wmm-qp-demo-"))
-    log_dir.mkdir(parents=True, exist_ok=True)
+    log_dir = log_folder(args.logs, "demo")
     stack = Stack(svc, rate_hz=args.rate, log_dir=log_dir)
     try:
         stack.start()

@@ -37,17 +37,14 @@ def run(args: argparse.Namespace) -> int:
     if not 10.0 <= args.rate <= 2000.0:
         print("wmm-qp soak: error: --rate must be in [10, 2000] Hz", file=sys.stderr)
         return 2
-    import tempfile
-
     import numpy as np
 
     from ..client import Client
-    from ..processes import Stack, isolated_config
+    from ..processes import Stack, isolated_config, log_folder
     from ..teleop import stream_circle, stream_haptic
 
     svc = isolated_config()
-    log_dir = Path(args.logs) if args.logs else Path(tempfile.mkdtemp(prefix="wmm-qp-soak-"))
-    log_dir.mkdir(parents=True, exist_ok=True)
+    log_dir = log_folder(args.logs, "soak")
     stack = Stack(svc, rate_hz=args.rate, log_dir=log_dir)
     out: dict[str, Any] = {}
     try:
