@@ -23,6 +23,16 @@ def _plt() -> Any:
     return plt
 
 
+def _save(plt: Any, fig: Any, out: Path, name: str, tag: str) -> Path:
+    """Title, lay out, write ``<out>/<name>_<tag>.png`` and close the figure."""
+    fig.suptitle(f"{name} — {tag}")
+    fig.tight_layout()
+    path = out / f"{name}_{tag}.png"
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    return path
+
+
 def plot_circle(trace: Trace, out: Path, tag: str) -> list[Path]:
     """Fig. 5 (EE trajectory, tracking error) and Fig. 6 (base trajectory)."""
     plt = _plt()
@@ -40,12 +50,7 @@ def plot_circle(trace: Trace, out: Path, tag: str) -> list[Path]:
     ax[2].plot(trace.base_true[:, 0], trace.base_true[:, 1], label="true")
     ax[2].set(xlabel="x [m]", ylabel="y [m]", title="base trajectory")
     ax[2].legend()
-    fig.suptitle(f"circle — {tag}")
-    fig.tight_layout()
-    p = out / f"circle_{tag}.png"
-    fig.savefig(p, dpi=80)
-    plt.close(fig)
-    return [p]
+    return [_save(plt, fig, out, "circle", tag)]
 
 
 def plot_dm(trace: Trace, out: Path, tag: str) -> list[Path]:
@@ -56,12 +61,7 @@ def plot_dm(trace: Trace, out: Path, tag: str) -> list[Path]:
     ax[0].set(xlabel="t [s]", ylabel="H2", title="directional manipulability")
     ax[1].plot(trace.t, trace.ee_true[:, 2])
     ax[1].set(xlabel="t [s]", ylabel="z [m]", title="EE height (true)")
-    fig.suptitle(f"dm — {tag}")
-    fig.tight_layout()
-    p = out / f"dm_{tag}.png"
-    fig.savefig(p, dpi=80)
-    plt.close(fig)
-    return [p]
+    return [_save(plt, fig, out, "dm", tag)]
 
 
 def plot_push(
@@ -82,9 +82,4 @@ def plot_push(
     ax[0].legend(fontsize=7, ncol=2)
     ax[2].set(xlabel="push time [s]", title="‖W τ‖ [N·m], box displacement [cm]")
     ax[2].legend(fontsize=7)
-    fig.suptitle(f"push — {tag}")
-    fig.tight_layout()
-    p = out / f"push_{tag}.png"
-    fig.savefig(p, dpi=80)
-    plt.close(fig)
-    return [p]
+    return [_save(plt, fig, out, "push", tag)]
