@@ -100,13 +100,10 @@ class QpController(Controller):
         # One backend (workspace) per stage: shapes differ, warm starts stay meaningful.
         self._arm = make_backend(qp.solver, qp.eps_abs)
         self._full = make_backend(qp.solver, qp.eps_abs)
-        # A stage the configured solver fails on is re-solved by DAQP (dual active set, exact)
-        # before it becomes a safe stop: iterative solvers stall on rare, hard instances.
-        self._fallback: QPBackend | None = None
-        if qp.solver != "daqp" and "daqp" in available_solvers():
-            self._fallback = make_backend("daqp", qp.eps_abs)
-        # DAQP also decides, exactly, whether a task the penalised solve left unmet is feasible.
-        self._checker = make_backend("daqp", qp.eps_abs) if "daqp" in available_solvers() else None
+        # DAQP (dual active set, exact) re-solves a stage another solver failed on (iterative
+        # solvers stall on rare, hard instances) and decides, exactly, whether a task the
+        # penalised solve left unmet is feasible (_task_first).
+        self._fallback = make_backend("daqp", qp.eps_abs) if "daqp" in available_solvers() else None
         self.fallbacks = 0  # stages the fallback solved
         self.closed_form_hits = 0  # stages solved in closed form (no bound active)
         self._closed_form_hit = False  # the last _solve was answered in closed form
@@ -319,7 +316,7 @@ class QpController(Controller):
                 self._closed_form_hit = True
                 return z
         sol = backend.solve(problem)
-        if (not sol.ok or sol.z is None) and self._fallback is not None:
+        if (not sol.ok or sol.z is None) and self._fallback is not None and self.solver != "daqp":
             sol = self._fallback.solve(problem)
             self.fallbacks += int(sol.ok)
         if not sol.ok or sol.z is None:
@@ -339,7 +336,7 @@ class QpController(Controller):
         lexicographic answer (task first, then the cost with its DM/return terms); infeasible →
         the task truly cannot be met and the penalised solution stands.
         """
-        checker = self._checker if self._checker is not None else self._full
+        checker = self._fallback if self._fallback is not None else self._full
         self.task_checks += 1
         n = problem.n - N_S
         saved = problem.ub[n:].copy()
