@@ -241,6 +241,14 @@ class TomlTable:
             raise ConfigError(self.path, self._key(k), f"must be <= {hi}, got {v}")
         return v
 
+    def integer(self, k: str, default: Any = ..., *, lo: int | None = None) -> int:
+        v = self.get(k, default)
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise ConfigError(self.path, self._key(k), f"must be an integer, got {v!r}")
+        if lo is not None and v < lo:
+            raise ConfigError(self.path, self._key(k), f"must be >= {lo}, got {v}")
+        return v
+
     def vector(self, k: str, n: int, default: Any = ..., *, positive: bool = False, finite: bool = True) -> FloatArray:
         v = self.get(k, default)
         if not isinstance(v, list | tuple | np.ndarray) or len(v) != n:

@@ -5,14 +5,13 @@ Every check names the file and the dotted key (:class:`wmm_qp.ConfigError`).
 
 from __future__ import annotations
 
-import math
 import re
-import tomllib
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
 from wmm_qp import ConfigError, default_config_dir
+from wmm_qp.config import TomlTable, read_toml
 
 _NAME = re.compile(r"^[A-Za-z0-9_\-]+(/[A-Za-z0-9_\-]+)*$")
 
@@ -133,33 +132,24 @@ class ServiceConfig:
         return replace(self, **changes)
 
 
-def _section(path: Path, data: dict[str, Any], name: str, cls: type, base: Any) -> Any:
-    raw = data.get(name, {})
-    if not isinstance(raw, dict):
-        raise ConfigError(path, name, "must be a table")
-    out = {}
-    for k, v in raw.items():
-        key = f"{name}.{k}"
-        if k not in cls.__dataclass_fields__:  # type: ignore[attr-defined]
-            raise ConfigError(path, key, "unknown key")
+def _section(root: TomlTable, name: str, cls: Any, base: Any) -> Any:
+    """One table of service.toml, typed by the dataclass's defaults (numbers > 0 but z_min)."""
+    t = root.table(name, required=False)
+    t.unknown({f.name for f in fields(cls)})
+    out: dict[str, Any] = {}
+    for k in t.data:
         default = getattr(base, k)
         if k == "config":
-            p = Path(v)
-            out[k] = p if p.is_absolute() else path.parent / p
-            continue
-        if isinstance(default, str):
-            if not isinstance(v, str) or not v:
-                raise ConfigError(path, key, "must be a non-empty string")
-        elif isinstance(default, bool | int) and not isinstance(default, float):
-            if not isinstance(v, int) or isinstance(v, bool) or v < 0:
-                raise ConfigError(path, key, "must be an integer >= 0")
+            p = Path(t.string(k))
+            out[k] = p if p.is_absolute() else root.path.parent / p
+        elif isinstance(default, str):
+            out[k] = t.string(k)
+            if not out[k]:
+                raise ConfigError(root.path, f"{name}.{k}", "must be a non-empty string")
+        elif isinstance(default, int):
+            out[k] = t.integer(k, lo=0)
         else:
-            if not isinstance(v, int | float) or isinstance(v, bool) or not math.isfinite(v):
-                raise ConfigError(path, key, "must be a finite number")
-            v = float(v)
-            if k not in ("z_min",) and v <= 0:
-                raise ConfigError(path, key, "must be > 0")
-        out[k] = v
+            out[k] = t.number(k, positive=k != "z_min")
     return replace(base, **out)
 
 
@@ -175,16 +165,9 @@ def load_service_config(path: Path | str | None = None) -> ServiceConfig:
             return ServiceConfig()
     else:
         p = Path(path)
-    try:
-        data = tomllib.loads(p.read_text())
-    except OSError as e:
-        raise ConfigError(p, "", f"cannot read: {e.strerror}") from None
-    except tomllib.TOMLDecodeError as e:
-        raise ConfigError(p, "", f"invalid TOML: {e}") from None
-    sections = ("zenoh", "loop", "watchdog", "smoothing", "validation")
-    for k in data:
-        if k not in (*sections, "robot", "prefix"):
-            raise ConfigError(p, k, "unknown key")
+    root = TomlTable(p, read_toml(p))
+    root.unknown({"zenoh", "loop", "watchdog", "smoothing", "validation", "robot", "prefix"})
+    data = root.data
     base = ServiceConfig()
     for k in ("robot", "prefix"):
         v = data.get(k, getattr(base, k))
@@ -193,11 +176,11 @@ def load_service_config(path: Path | str | None = None) -> ServiceConfig:
     cfg = ServiceConfig(
         robot=data.get("robot", base.robot),
         prefix=data.get("prefix", base.prefix),
-        zenoh=_section(p, data, "zenoh", ZenohConfig, base.zenoh),
-        loop=_section(p, data, "loop", LoopConfig, base.loop),
-        watchdog=_section(p, data, "watchdog", WatchdogConfig, base.watchdog),
-        smoothing=_section(p, data, "smoothing", SmoothingConfig, base.smoothing),
-        validation=_section(p, data, "validation", ValidationConfig, base.validation),
+        zenoh=_section(root, "zenoh", ZenohConfig, base.zenoh),
+        loop=_section(root, "loop", LoopConfig, base.loop),
+        watchdog=_section(root, "watchdog", WatchdogConfig, base.watchdog),
+        smoothing=_section(root, "smoothing", SmoothingConfig, base.smoothing),
+        validation=_section(root, "validation", ValidationConfig, base.validation),
     )
     if cfg.validation.z_min >= cfg.validation.z_max:
         raise ConfigError(p, "validation.z_min", "must be < validation.z_max")

@@ -1,0 +1,37 @@
+"""service.toml loads into a frozen ServiceConfig; errors name the file and the dotted key."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from wmm_qp.exceptions import ConfigError
+from wmm_qp_service.config import load_service_config
+
+
+def test_shipped_service_config_loads() -> None:
+    c = load_service_config()
+    assert c.loop.rate_hz == 500.0 and c.watchdog.command_hold == 0.03 and c.zenoh.config.is_file()
+
+
+@pytest.mark.parametrize("text, key", [
+    ("[loop]\nrate_hz = -1\n", "loop.rate_hz"),
+    ("[loop]\nrt_priority = 1.5\n", "loop.rt_priority"),
+    ("[zenoh]\nbogus = 1\n", "zenoh.bogus"),
+    ("[zenoh]\ndaemon_endpoint = ''\n", "zenoh.daemon_endpoint"),
+    ("mystery = 1\n", "mystery"),
+    ("[validation]\nz_min = 3.0\n", "validation.z_min"),
+])
+def test_service_config_errors_name_file_and_key(tmp_path: Path, text: str, key: str) -> None:
+    p = tmp_path / "service.toml"
+    p.write_text(text)
+    with pytest.raises(ConfigError) as e:
+        load_service_config(p)
+    assert e.value.key == key and str(p) in str(e.value)
+
+
+def test_negative_z_min_is_allowed(tmp_path: Path) -> None:
+    p = tmp_path / "service.toml"
+    p.write_text("[validation]\nz_min = -0.3\n")
+    assert load_service_config(p).validation.z_min == -0.3
