@@ -5,9 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from wmm_qp_service.config import load_service_config
 
 from wmm_qp.exceptions import ConfigError
-from wmm_qp_service.config import load_service_config
 
 
 def test_shipped_service_config_loads() -> None:
