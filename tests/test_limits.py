@@ -7,6 +7,7 @@ from core_fixtures import robot
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import wmm_qp as w
 from wmm_qp.limits import braking_command, braking_velocity, joint_motion_bounds, wheel_bounds
 
 DT = 0.002
@@ -93,6 +94,33 @@ def test_wheel_bounds_acceleration_wins_beyond_speed_limit() -> None:
     lo, hi = wheel_bounds(w, base, DT)
     np.testing.assert_allclose(lo, hi)
     np.testing.assert_allclose(lo, w - base.wheel_acceleration_max * DT)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.floats(min_value=0.0, max_value=2.0), min_size=7, max_size=7), st.sampled_from([0.001, 0.002]))
+def test_the_upper_bound_is_the_braking_velocity_when_that_is_reachable(dist: list[float], dt: float) -> None:
+    """bounds (13) fuse the braking formula; from v_prev = braking_velocity(d) the bound is exactly it."""
+    d = np.array(dist)
+    q = ARM.position_upper - d
+    q = np.where(np.isfinite(q), q, 0.0)
+    v = np.where(np.isfinite(ARM.position_upper), braking_velocity(d, ARM.acceleration_max, dt), 0.0)
+    _, hi = joint_motion_bounds(q, v, ARM.position_lower, ARM.position_upper, np.full(7, 1e9), ARM.acceleration_max, dt)
+    limited = np.isfinite(ARM.position_upper)
+    np.testing.assert_allclose(hi[limited], v[limited], rtol=1e-12, atol=1e-12)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.floats(min_value=-2.0, max_value=2.0), min_size=4, max_size=4))
+def test_the_controllers_bounds_on_the_wheels_are_the_wheel_bounds(speeds: list[float]) -> None:
+    from core_fixtures import config, model
+
+    base = robot().base
+    wh = np.array(speeds) * base.wheel_speed_max
+    ctl = w.QpController(model(), config())
+    lo, hi = ctl.bounds(np.zeros(11), np.concatenate([wh, np.zeros(7)]))
+    wlo, whi = wheel_bounds(wh, base, ctl.dt)
+    np.testing.assert_array_equal(lo[:4], wlo)
+    np.testing.assert_array_equal(hi[:4], whi)
 
 
 def _drive_to_limit_with_stale_state(latency: float, age_ticks: int, dt: float = 0.002) -> float:

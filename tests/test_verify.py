@@ -31,13 +31,20 @@ def test_a_command_that_cannot_brake_before_the_limit_is_a_position_violation() 
 
 def test_verify_catches_a_controller_without_the_braking_bound(monkeypatch: pytest.MonkeyPatch) -> None:
     """Drop the braking-distance part of bounds (13): the referee must notice."""
-    import wmm_qp.controllers.base as base
+    from wmm_qp.config import N_WHEELS
     from wmm_qp.limits import intersect_by_priority
 
-    def one_step_only(q, v_prev, q_min, q_max, v_max, a_max, dt, latency=0.0):  # type: ignore[no-untyped-def]
-        lo, hi = intersect_by_priority(v_prev - a_max * dt, v_prev + a_max * dt, -v_max, v_max)
-        return intersect_by_priority(lo, hi, np.minimum((q_min - q) / dt, 0), np.maximum((q_max - q) / dt, 0))
-
-    monkeypatch.setattr(base, "joint_motion_bounds", one_step_only)
     ctl = w.QpController(model(), config().with_(qp={"solver": "daqp"}))
+    arm, wheels = model().config.arm, ctl.bounds
+
+    def one_step_only(q, v_prev):  # type: ignore[no-untyped-def]
+        lo, hi = wheels(q, v_prev)  # the wheels' bounds as they are; the arm's without braking
+        a, qa, va = arm.acceleration_max * DT, q[N_WHEELS:], v_prev[N_WHEELS:]
+        alo, ahi = intersect_by_priority(va - a, va + a, -arm.velocity_max, arm.velocity_max)
+        lo[N_WHEELS:], hi[N_WHEELS:] = intersect_by_priority(
+            alo, ahi, np.minimum((arm.position_lower - qa) / DT, 0), np.maximum((arm.position_upper - qa) / DT, 0)
+        )
+        return lo, hi
+
+    monkeypatch.setattr(ctl, "bounds", one_step_only)
     assert verify_controller(ctl, model(), 150, 0).by_kind["position"] > 0

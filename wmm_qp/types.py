@@ -55,12 +55,7 @@ class RobotState:
         self.wheel_speeds = _vec(self.wheel_speeds, N_WHEELS, "wheel_speeds")
 
     def is_finite(self) -> bool:
-        return bool(
-            np.isfinite(self.q_base).all()
-            and np.isfinite(self.q_arm).all()
-            and np.isfinite(self.v_arm).all()
-            and np.isfinite(self.wheel_speeds).all()
-        )
+        return bool(np.isfinite(np.concatenate((self.q_base, self.q_arm, self.v_arm, self.wheel_speeds))).all())
 
 
 @dataclass(slots=True)

@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import ControllerConfig, FloatArray, RobotConfig
-from ..limits import braking_command, joint_motion_bounds, wheel_bounds, wheel_braking_command
+from ..config import N_WHEELS, ControllerConfig, FloatArray, RobotConfig
+from ..limits import MotionBounds, braking_command, wheel_braking_command
 from ..manipulability import directional_manipulability, dm_cartesian_gradient, dm_gradient
 from ..model.wmm import Kinematics, WmmModel
 from ..pseudoinverse import damping_factor, sigma_min
@@ -31,10 +31,24 @@ class TickContext:
     grad_q: FloatArray | None  # ∇_{q_m} H2, eq. (9), when the mode needs it
     sigma: float
     damping: float
-    arm_lo: FloatArray
-    arm_hi: FloatArray
-    wheel_lo: FloatArray
-    wheel_hi: FloatArray
+    lo: FloatArray  # bounds on v = [v_b; v_m]: wheel bounds, then eq. (13)
+    hi: FloatArray
+
+    @property
+    def wheel_lo(self) -> FloatArray:
+        return self.lo[:N_WHEELS]
+
+    @property
+    def wheel_hi(self) -> FloatArray:
+        return self.hi[:N_WHEELS]
+
+    @property
+    def arm_lo(self) -> FloatArray:
+        return self.lo[N_WHEELS:]
+
+    @property
+    def arm_hi(self) -> FloatArray:
+        return self.hi[N_WHEELS:]
 
 
 class Controller(ABC):
@@ -52,6 +66,17 @@ class Controller(ABC):
         self.robot: RobotConfig = model.config
         self.config = config
         self.dt = config.dt
+        arm, base = self.robot.arm, self.robot.base
+        free = np.full(N_WHEELS, np.inf)  # wheels: speed and acceleration bounds only
+        self.bounds = MotionBounds(
+            np.concatenate([-free, arm.position_lower]),
+            np.concatenate([free, arm.position_upper]),
+            np.concatenate([np.full(N_WHEELS, base.wheel_speed_max), arm.velocity_max]),
+            np.concatenate([np.full(N_WHEELS, base.wheel_acceleration_max), arm.acceleration_max]),
+            config.dt,
+            config.state_latency,
+        )  # eq. (13) for the arm; for the wheels (no position limit) it reduces to the wheel bounds
+        self._no_wheel_q = np.zeros(N_WHEELS)
 
     def reset(self) -> None:  # noqa: B027 (optional hook, no-op by default)
         """Forget any state carried between ticks (warm starts, mode latches)."""
@@ -102,18 +127,10 @@ class Controller(ABC):
         else:
             dm, grad_q = directional_manipulability(kin.J_arm, u, W), None  # eq. (8)
         sig = sigma_min(kin.J_m)
-        arm = self.robot.arm
-        lo, hi = joint_motion_bounds(
-            state.q_arm,
-            state.v_arm,
-            arm.position_lower,
-            arm.position_upper,
-            arm.velocity_max,
-            arm.acceleration_max,
-            self.dt,
-            self.config.state_latency,
-        )  # eq. (13)
-        wlo, whi = wheel_bounds(state.wheel_speeds, self.robot.base, self.dt)
+        lo, hi = self.bounds(
+            np.concatenate((self._no_wheel_q, state.q_arm)),
+            np.concatenate((state.wheel_speeds, state.v_arm)),
+        )  # eq. (13) and the wheel bounds
         return TickContext(
             kin=kin,
             u=u,
@@ -121,10 +138,8 @@ class Controller(ABC):
             grad_q=grad_q,
             sigma=sig,
             damping=damping_factor(sig, self.config.sigma_threshold, self.config.damping_max),
-            arm_lo=lo,
-            arm_hi=hi,
-            wheel_lo=wlo,
-            wheel_hi=whi,
+            lo=lo,
+            hi=hi,
         )
 
     def task_velocity(self, ctx: TickContext, reference: Reference) -> FloatArray:

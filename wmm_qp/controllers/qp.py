@@ -56,6 +56,8 @@ exact solvers; the guarantee for iterative solvers' tolerances).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..config import N_ARM, N_WHEELS, ControllerConfig, FloatArray
@@ -112,6 +114,7 @@ class QpController(Controller):
         self._templates: dict[tuple[int, int], QPProblem] = {}
         self._w_inv = 1.0 / weight_matrix_diag(qp.alpha)  # W_x⁻¹, eq. (12)
         self._w_inv_dm = 1.0 / weight_matrix_diag(qp.dm_alpha)  # W_x⁻¹ in DM_NULLSPACE
+        self._return_gain = RETURN_WEIGHT * self._w_inv[N_WHEELS:] / RETURN_TIME  # see return_term
         self._last_problem: QPProblem | None = None
         self.last_stage = ""
 
@@ -131,7 +134,7 @@ class QpController(Controller):
     # ------------------------------------------------------------------ building
     def box(self, ctx: TickContext) -> tuple[FloatArray, FloatArray]:
         """Hard bounds on v = [v_b; v_m]: wheel bounds and eq. (13)."""
-        return np.concatenate([ctx.wheel_lo, ctx.arm_lo]), np.concatenate([ctx.wheel_hi, ctx.arm_hi])
+        return ctx.lo, ctx.hi
 
     def ee_box_rows(
         self, ctx: TickContext, mode: Mode, lb: FloatArray, ub: FloatArray
@@ -162,8 +165,8 @@ class QpController(Controller):
         task's null space.
         """
         arm = self.robot.arm
-        excess = np.maximum(q - arm.position_upper, 0.0) - np.maximum(arm.position_lower - q, 0.0)
-        return RETURN_WEIGHT * self._w_inv[N_WHEELS:] * excess / RETURN_TIME  # = −κ·d·v_ret
+        excess = q - np.minimum(np.maximum(q, arm.position_lower), arm.position_upper)  # 0 inside
+        return self._return_gain * excess  # = −κ·d·v_ret
 
     def linear_term(self, ctx: TickContext, mode: Mode) -> FloatArray:
         """−W_x⁻¹ v_n with v_n of eq. (19) (clipped to ±V) in DM_NULLSPACE, else 0."""
@@ -194,7 +197,7 @@ class QpController(Controller):
     def reference_velocity(self, ctx: TickContext, reference: Reference) -> FloatArray:
         """ẋ_ref of the mode, scaled down to ``qp.task_speed_max``."""
         xdot = self.task_velocity(ctx, reference)
-        n = float(np.linalg.norm(xdot))
+        n = math.sqrt(float(xdot @ xdot))
         cap = self.config.qp.task_speed_max
         return xdot * (cap / n) if n > cap else xdot
 
@@ -233,7 +236,7 @@ class QpController(Controller):
 
     def build_arm_first(self, ctx: TickContext, xdot: FloatArray) -> tuple[QPProblem, FloatArray]:
         """Stage 1: the arm alone, wheels held at the admissible speed nearest 0."""
-        w_hold = np.clip(0.0, ctx.wheel_lo, ctx.wheel_hi)
+        w_hold = np.minimum(np.maximum(ctx.wheel_lo, 0.0), ctx.wheel_hi)
         p = self._template(N_ARM, 0)
         p.H[_ARM_DIAG, _ARM_DIAG] = self._w_inv[N_WHEELS:]
         p.g[:N_ARM] = self.return_term(ctx.kin.q_arm)
@@ -285,16 +288,25 @@ class QpController(Controller):
         if not abs(det) > 1e-300:
             return None
         B1, B2, C2 = a * f - c * c, b_ * c - a * e, a * d - b_ * b_
-        lam = np.array([A0 * r0 + A1 * r1 + A2 * r2, A1 * r0 + B1 * r1 + B2 * r2, A2 * r0 + B2 * r1 + C2 * r2]) / det
-        with np.errstate(all="ignore"):
-            v = d_inv * (J.T @ lam - g)
-            resid = J @ v - problem.b
-        rho1 = problem.g[n]
-        # every KKT condition at once; NaN/inf fail every comparison
+        l0, l1, l2 = (
+            (A0 * r0 + A1 * r1 + A2 * r2) / det,
+            (A1 * r0 + B1 * r1 + B2 * r2) / det,
+            (A2 * r0 + B2 * r1 + C2 * r2) / det,
+        )
+        rho1 = float(problem.g[n])
+        # |λᵢ| ≤ ρ₁ first, in Python floats (NaN fails it): then λ is finite and bounded, and v
+        # below cannot overflow.
+        if not (abs(l0) <= rho1 and abs(l1) <= rho1 and abs(l2) <= rho1):
+            return None
+        v = (J.T @ np.array((l0, l1, l2)) - g) * d_inv
+        resid = J @ v - problem.b
+        # the remaining KKT conditions; NaN/inf fail every comparison
+        # (min over tolist(): a numpy .all() on a 7-vector costs twice as much; a NaN in v, which
+        # Python's min would not propagate, already fails the residual test)
         ok = (
-            (np.abs(resid) <= 1e-10).all()  # a near-singular J D⁻¹ Jᵀ is not exact: let the solver work
-            and (np.abs(lam) <= rho1).all()
-            and ((problem.lb[:n] <= v) & (v <= problem.ub[:n])).all()
+            resid.dot(resid) <= 1e-20  # a near-singular J D⁻¹ Jᵀ is not exact: let the solver work
+            and min((v - problem.lb[:n]).tolist()) >= 0.0
+            and min((problem.ub[:n] - v).tolist()) >= 0.0
         )
         if not ok:
             return None

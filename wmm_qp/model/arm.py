@@ -41,20 +41,23 @@ class ArmModel:
         self.data = self.model.createData()
         self.frame_id = self.model.getFrameId(ee_frame)
         joints = [self.model.joints[j] for j in range(1, self.model.njoints)]
-        # Index maps for q (angles) → Pinocchio's q (revolute: angle; continuous: cos, sin).
-        self._rev_q = np.array([j.idx_q for j in joints if j.nq == 1], dtype=int)
-        self._rev_v = np.array([j.idx_v for j in joints if j.nq == 1], dtype=int)
-        self._cont_q = np.array([j.idx_q for j in joints if j.nq == 2], dtype=int)
-        self._cont_v = np.array([j.idx_v for j in joints if j.nq == 2], dtype=int)
+        # Pinocchio's q (revolute: the angle; continuous: cos, sin) gathered from one vector
+        # [q, cos q, sin q] by a fixed index map: three ufuncs per call, no per-joint Python.
+        gather: list[int] = []
+        for j in joints:
+            gather += [j.idx_v] if j.nq == 1 else [N_ARM + j.idx_v, 2 * N_ARM + j.idx_v]
+        self._gather = np.array(gather, dtype=np.intp)
+        self._trig = np.empty(3 * N_ARM)
         self._q = pin.neutral(self.model)
         self.joint_names = [self.model.names[j] for j in range(1, self.model.njoints)]
 
     def pin_q(self, q: FloatArray) -> FloatArray:
         """Pinocchio configuration of the 7 joint angles q [rad] (a reused buffer)."""
-        self._q[self._rev_q] = q[self._rev_v]
-        self._q[self._cont_q] = np.cos(q[self._cont_v])
-        self._q[self._cont_q + 1] = np.sin(q[self._cont_v])
-        return self._q
+        t = self._trig
+        t[:N_ARM] = q
+        np.cos(q, out=t[N_ARM : 2 * N_ARM])
+        np.sin(q, out=t[2 * N_ARM :])
+        return np.take(t, self._gather, out=self._q)
 
     def position(self, q: FloatArray) -> FloatArray:
         """p_m(q_m) [m]: EE position in the arm base frame, eq. (1)."""

@@ -15,6 +15,8 @@ signs and the R/4 factor; this is what it must mean.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..config import BaseConfig, FloatArray
@@ -44,10 +46,8 @@ class MecanumBase:
         Args:
             yaw: [rad] base heading ψ.
         """
-        c, s = np.cos(yaw), np.sin(yaw)
-        P = self.M.copy()
-        P[0], P[1] = c * self.M[0] - s * self.M[1], s * self.M[0] + c * self.M[1]  # blkdiag(Rz2(ψ), 1)·M
-        return P
+        c, s = math.cos(yaw), math.sin(yaw)
+        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ self.M  # blkdiag(Rz2(ψ), 1)·M
 
     def body_twist(self, wheel_speeds: FloatArray) -> FloatArray:
         """[v_x, v_y, ω] in the base frame [m/s, m/s, rad/s] for wheel speeds [rad/s]."""

@@ -13,6 +13,7 @@ Velocities, eq. (5): ẋ = J_b q̇_b + J_m v_m = J v with v = [v_b; v_m] ∈ R¹
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,7 +27,7 @@ N_V = N_WHEELS + N_ARM
 
 def rot_z(yaw: float) -> FloatArray:
     """Rz(ψ), 3×3."""
-    c, s = np.cos(yaw), np.sin(yaw)
+    c, s = math.cos(yaw), math.sin(yaw)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
@@ -81,26 +82,23 @@ class WmmModel:
 
     def kinematics(self, q_base: FloatArray, q_arm: FloatArray, hessian: bool = False) -> Kinematics:
         """FK and Jacobians at (q_b, q_m); with ``hessian`` also ∂J_arm/∂q (for eq. (9))."""
+        q_base, q_arm = np.asarray(q_base, float), np.asarray(q_arm, float)
         p_arm, J_arm = self.arm.position_jacobian(q_arm)
-        R = rot_z(q_base[2])
-        c, s = R[0, 0], R[1, 0]
-        pm = self.mount + p_arm
-        p = np.array([c * pm[0] - s * pm[1], s * pm[0] + c * pm[1], pm[2]])  # Rz(ψ)(p_mount + p_m)
-        x = np.array([q_base[0] + p[0], q_base[1] + p[1], p[2]])  # eq. (2)
-        J_b = np.array([[1.0, 0.0, -p[1]], [0.0, 1.0, p[0]], [0.0, 0.0, 0.0]])  # eq. (5)
-        P = self.base.P(q_base[2])  # eqs. (3), (20)
-        J = np.empty((3, N_V))  # eq. (5): [J_b P, J_m], written row by row
-        J[0, :4] = P[0] - p[1] * P[2]
-        J[1, :4] = P[1] + p[0] * P[2]
-        J[2, :4] = 0.0
-        J[0, 4:] = c * J_arm[0] - s * J_arm[1]  # J_m = Rz(ψ) J_arm
-        J[1, 4:] = s * J_arm[0] + c * J_arm[1]
-        J[2, 4:] = J_arm[2]
-        J_m = J[:, 4:]
+        qb0, qb1, yaw = q_base.tolist()
+        R = rot_z(yaw)
+        p = R @ (self.mount + p_arm)  # Rz(ψ)(p_mount + p_m)
+        x = p + (qb0, qb1, 0.0)  # eq. (2)
+        px, py = float(p[0]), float(p[1])
+        J_b = np.array([[1.0, 0.0, -py], [0.0, 1.0, px], [0.0, 0.0, 0.0]])  # eq. (5)
+        P = R @ self.base.M  # eqs. (3), (20): blkdiag(Rz2(ψ), 1)·M, and R is exactly that
+        J = np.empty((3, N_V))  # eq. (5): [J_b P, J_m]
+        np.matmul(J_b, P, out=J[:, :N_WHEELS])
+        np.matmul(R, J_arm, out=J[:, N_WHEELS:])  # J_m = Rz(ψ) J_arm
+        J_m = J[:, N_WHEELS:]
         dJ = self.arm.jacobian_derivatives(q_arm) if hessian else None
         return Kinematics(
-            q_base=np.asarray(q_base, float),
-            q_arm=np.asarray(q_arm, float),
+            q_base=q_base,
+            q_arm=q_arm,
             R=R,
             p_arm=p_arm,
             x=x,
