@@ -85,11 +85,8 @@ class Reference:
 
     def is_finite(self) -> bool:
         d = self.direction
-        return bool(
-            (self.x_d is None or np.isfinite(self.x_d).all())
-            and np.isfinite(self.xd_d).all()
-            and (d is None or (np.isfinite(d).all() and np.linalg.norm(d) > 1e-9))
-        )
+        x = self.xd_d if self.x_d is None else np.concatenate((self.x_d, self.xd_d))
+        return bool(np.isfinite(x).all() and (d is None or (np.isfinite(d).all() and np.linalg.norm(d) > 1e-9)))
 
 
 class Status(enum.StrEnum):

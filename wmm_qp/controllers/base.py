@@ -77,6 +77,7 @@ class Controller(ABC):
             config.state_latency,
         )  # eq. (13) for the arm; for the wheels (no position limit) it reduces to the wheel bounds
         self._no_wheel_q = np.zeros(N_WHEELS)
+        self._u = config.direction / math.sqrt(float(config.direction @ config.direction))  # unit DM direction
 
     def reset(self) -> None:  # noqa: B027 (optional hook, no-op by default)
         """Forget any state carried between ticks (warm starts, mode latches)."""
@@ -118,8 +119,9 @@ class Controller(ABC):
     def context(self, state: RobotState, reference: Reference, need_gradient: bool) -> TickContext:
         """Kinematics, DM (and its gradient when needed), σ_min, damping and bounds (13)."""
         kin = self.model.kinematics(state.q_base, state.q_arm, hessian=need_gradient)
-        u = self.config.direction if reference.direction is None else reference.direction
-        u = u / math.sqrt(float(u @ u))
+        u = self._u if reference.direction is None else reference.direction
+        if u is not self._u:
+            u = u / math.sqrt(float(u @ u))
         W = self.config.W
         if need_gradient:
             assert kin.dJ_arm is not None

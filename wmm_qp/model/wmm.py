@@ -87,8 +87,8 @@ class WmmModel:
         qb0, qb1, yaw = q_base.tolist()
         R = rot_z(yaw)
         p = R @ (self.mount + p_arm)  # Rz(ψ)(p_mount + p_m)
-        x = p + (qb0, qb1, 0.0)  # eq. (2)
-        px, py = float(p[0]), float(p[1])
+        px, py, pz = p.tolist()
+        x = np.array((qb0 + px, qb1 + py, pz))  # eq. (2)
         J_b = np.array([[1.0, 0.0, -py], [0.0, 1.0, px], [0.0, 0.0, 0.0]])  # eq. (5)
         P = R @ self.base.M  # eqs. (3), (20): blkdiag(Rz2(ψ), 1)·M, and R is exactly that
         J = np.empty((3, N_V))  # eq. (5): [J_b P, J_m]
