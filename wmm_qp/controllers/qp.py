@@ -73,6 +73,9 @@ SLACK_ACCEPT = 1e-7  # [m/s] slack below this counts as "the task is met"
 RETURN_TIME = 0.05  # [s] a joint past a position limit is pulled back in over about this long
 _ARM_DIAG = np.arange(N_ARM)  # diagonal indices of the cost's v block, stage 1 and stage 2
 _V_DIAG = np.arange(N_V)
+_NO_ROWS, _NO_BOUNDS = np.zeros((0, N_V)), np.zeros(0)  # no EE box rows (read only)
+_NO_ROWS.setflags(write=False)
+_NO_BOUNDS.setflags(write=False)
 RETURN_WEIGHT = 1e3  # outweighs minimal-motion costs (the base's too), stays below the task's ρ₁
 
 
@@ -114,6 +117,8 @@ class QpController(Controller):
         self._templates: dict[tuple[int, int], QPProblem] = {}
         self._w_inv = 1.0 / weight_matrix_diag(qp.alpha)  # W_x⁻¹, eq. (12)
         self._w_inv_dm = 1.0 / weight_matrix_diag(qp.dm_alpha)  # W_x⁻¹ in DM_NULLSPACE
+        self._v_n = np.zeros(N_V)  # eq. (19)'s v_n, reused
+        self._v_n_max = 10.0 * self.robot.arm.velocity_max
         self._return_gain = RETURN_WEIGHT * self._w_inv[N_WHEELS:] / RETURN_TIME  # see return_term
         self._last_problem: QPProblem | None = None
         self.last_stage = ""
@@ -145,7 +150,7 @@ class QpController(Controller):
         nearest zero inside the box bounds (so the QP is always feasible).
         """
         if mode != Mode.DM_CARTESIAN:
-            return np.zeros((0, N_V)), np.zeros(0), np.zeros(0)
+            return _NO_ROWS, _NO_BOUNDS, _NO_BOUNDS
         lo, hi, x = self.config.ee_box_lower, self.config.ee_box_upper, ctx.kin.x
         rows = np.flatnonzero(np.isfinite(lo) | np.isfinite(hi))
         C = self.dt * ctx.kin.J[rows]
@@ -175,8 +180,8 @@ class QpController(Controller):
         assert ctx.grad_q is not None
         # eq. (19), each joint's preference clipped to 10× its velocity limit: ∇H2 grows like H2³
         # and is astronomically large next to a singular direction (H2 is capped at 1e6 there).
-        vmax = self.robot.arm.velocity_max
-        v_n = np.concatenate([np.zeros(N_WHEELS), np.clip(self.config.k_N * ctx.grad_q, -10 * vmax, 10 * vmax)])
+        v_n = self._v_n  # wheels: 0
+        np.minimum(np.maximum(self.config.k_N * ctx.grad_q, -self._v_n_max), self._v_n_max, out=v_n[N_WHEELS:])
         return -self.cost_diagonal(ctx, mode) * v_n
 
     def slack_weights(self) -> tuple[float, float]:

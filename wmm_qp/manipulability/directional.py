@@ -11,6 +11,8 @@ frame, so uᵀ J_m = uᵀ Rz(ψ)ᵀ Rz(ψ) J_arm: H2 depends on q_m only.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..config import FloatArray
@@ -27,7 +29,7 @@ def directional_manipulability(J_arm: FloatArray, u: FloatArray, W: FloatArray) 
         W: diagonal of the torque scaling W.
     """
     t = W * (J_arm.T @ u)  # W Jᵀ u
-    return float(1.0 / np.sqrt(max(float(t @ t), S_MIN)))
+    return 1.0 / math.sqrt(max(float(t @ t), S_MIN))
 
 
 def torque_norm_per_newton(J_arm: FloatArray, u: FloatArray, W: FloatArray) -> float:
@@ -46,11 +48,12 @@ def dm_gradient(J_arm: FloatArray, dJ_arm: FloatArray, u: FloatArray, W: FloatAr
         u: unit direction.
         W: diagonal of W.
     """
-    a = (W * W) * (J_arm.T @ u)  # A Jᵀ u
-    s = max(float(u @ J_arm @ a), S_MIN)  # uᵀ J A Jᵀ u
-    h2 = 1.0 / np.sqrt(s)
+    Jtu = J_arm.T @ u
+    a = (W * W) * Jtu  # A Jᵀ u
+    s = max(float(Jtu @ a), S_MIN)  # uᵀ J A Jᵀ u
+    h2 = 1.0 / math.sqrt(s)
     g = (dJ_arm @ a) @ u  # g_k = uᵀ ∂J/∂q_k A Jᵀ u
-    return h2, -(h2**3) * g  # eq. (9)
+    return h2, (-(h2**3)) * g  # eq. (9)
 
 
 def dm_cartesian_gradient(grad_q: FloatArray, J_m: FloatArray) -> FloatArray:

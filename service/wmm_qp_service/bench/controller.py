@@ -4,9 +4,11 @@ Two passes over the same trajectory for each (solver, mode):
 
 1. clean: only ``ctl.step`` is timed (these are the headline figures);
 2. breakdown: the controller's pieces are wrapped with stopwatches from outside —
-   ``model.kinematics``, the DM and its gradient (``dm_gradient``), σ_min, the bounds (13),
-   the ``QpController.build_*`` methods and every ``backend.solve`` — and "other" is the
-   rest of the step (the wrappers add ~1 µs per piece, so this pass is a little slower).
+   ``model.kinematics``, the DM and its gradient (``dm_gradient``), σ_min, the bounds (13)
+   (``ctl.bounds``), the ``QpController.build_*`` methods, and the solve: the closed-form
+   optimum (``closed_form``) and every ``backend.solve`` — and "other" is the rest of the step
+   (the checks of state, reference and command, ẋ_ref, the diagnostics; the wrappers add
+   ~1 µs per piece, so this pass is a little slower).
 """
 
 from __future__ import annotations
@@ -74,17 +76,18 @@ def instrumented(ctl: w.QpController, timer: PieceTimer) -> Iterator[None]:
         "dm_gradient": "dm",
         "directional_manipulability": "dm",
         "sigma_min": "sigma",
-        "joint_motion_bounds": "bounds",
-        "wheel_bounds": "bounds",
     }
     saved = {name: getattr(ctl_base, name) for name in patched if hasattr(ctl_base, name)}
     # Whatever stages the controller has: every backend attribute and every build* method.
     backends = {k: v for k, v in vars(ctl).items() if isinstance(v, QPBackend)}
+    bounds = ctl.bounds
     builders = [k for k in dir(type(ctl)) if k.startswith("build") and callable(getattr(ctl, k))]
     try:
         for name, fn in saved.items():
             setattr(ctl_base, name, _timed(fn, timer, patched[name]))
         setattr(ctl.model, "kinematics", _timed(ctl.model.kinematics, timer, "kinematics"))  # noqa: B010
+        ctl.bounds = _timed(bounds, timer, "bounds")  # type: ignore[assignment]
+        setattr(ctl, "closed_form", _timed(ctl.closed_form, timer, "solve"))  # noqa: B010
         for name in builders:
             setattr(ctl, name, _timed(getattr(ctl, name), timer, "qp_build"))
         for name, b in backends.items():
@@ -98,6 +101,8 @@ def instrumented(ctl: w.QpController, timer: PieceTimer) -> Iterator[None]:
         for name in builders:
             ctl.__dict__.pop(name, None)
         ctl.model.__dict__.pop("kinematics", None)
+        ctl.__dict__.pop("closed_form", None)
+        ctl.bounds = bounds
 
 
 def run_case(
