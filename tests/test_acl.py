@@ -152,3 +152,25 @@ def test_an_invalid_zenoh_config_is_a_config_error(tmp_path: Path) -> None:
     bad.write_text("{ mode: 'peer', no_such_section: 1 }")
     with pytest.raises(ConfigError, match="not a valid Zenoh config"):
         session_config(load_service_config().with_(zenoh={"config": bad}), ROLE_DAEMON)
+
+
+@pytest.mark.integration
+def test_acl_stack_connects_whichever_process_starts_first(tmp_path: Path) -> None:
+    """The daemon up first (its connect to the sim retried): with gossip on, the sim learned the
+    daemon from the client, dialled it, and the daemon's own connect was then refused for good."""
+    from wmm_qp_service.processes import Stack, isolated_config
+
+    svc = isolated_config()
+    stack = Stack(svc, rate_hz=500.0, log_dir=tmp_path,
+                  extra_sim_args=["--zenoh-config", str(ZENOH_DIR / "acl_sim.json5")],
+                  extra_daemon_args=["--zenoh-config", str(ZENOH_DIR / "acl_daemon.json5")])
+    operator = svc.with_(zenoh={"config": ZENOH_DIR / "acl_operator.json5"})
+    try:
+        stack.start_daemon()
+        with Client(operator, name="operator") as op:
+            assert op.wait_for_daemon(TIMEOUT) is not None  # the daemon is up, the sim is not
+            assert not op.info().status.sim_alive
+            stack.start_sim()
+            _until(lambda: (i := op.info()) is not None and i.status.state_ok and i.status.sim_alive)
+    finally:
+        stack.stop()
