@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 
+from ._jit import jit
 from .config import N_ARM, N_WHEELS, FloatArray
 
 
@@ -53,7 +54,20 @@ def sigma_min(J: FloatArray) -> float:
     """
     if J.shape[0] != 3:
         return float(np.linalg.svd(J, compute_uv=False)[-1])
-    (a, b, c), (_, d, e), (_, _, f) = (J @ J.T).tolist()
+    return _sigma_min3(np.asarray(J, dtype=np.float64))
+
+
+@jit
+def _sigma_min3(J: FloatArray) -> float:
+    a = b = c = d = e = f = 0.0  # J Jᵀ = [[a, b, c], [b, d, e], [c, e, f]]
+    for i in range(J.shape[1]):
+        x, y, z = J[0, i], J[1, i], J[2, i]
+        a += x * x
+        b += x * y
+        c += x * z
+        d += y * y
+        e += y * z
+        f += z * z
     p1 = b * b + c * c + e * e
     q = (a + d + f) / 3.0
     aq, dq, fq = a - q, d - q, f - q

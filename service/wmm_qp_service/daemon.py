@@ -89,6 +89,7 @@ class ControlCore:
         self.model = w.WmmModel(robot)
         self.kind = kind or self.cfg.kind
         self.ctl = w.make_controller(self.kind, self.model, self.cfg)
+        self.ctl.warm_up()  # the compiled kernels are loaded before the loop, not in its first tick
         self.dt = self.cfg.dt
         sm = svc.smoothing
         self.smoother = SetpointSmoother(self.dt, sm.v_max, sm.a_max, sm.j_max)

@@ -97,6 +97,24 @@ class Controller(ABC):
         except Exception as e:  # the control loop must never raise (DESIGN.md §2, item 5)
             return self.safe_stop(state, f"{self.name}: {type(e).__name__}: {e}")
 
+    def warm_up(self, q_arm: FloatArray | None = None) -> None:
+        """One tick of every mode, then :meth:`reset`: compiles, or loads from numba's cache,
+        every kernel of the hot path (~0.1–0.5 s once per process, seconds on a machine's first
+        run). Call it before a real-time loop starts, so the first real tick does not pay it.
+
+        Args:
+            q_arm: [rad] arm configuration to tick at (default: mid-range of every joint).
+        """
+        arm = self.robot.arm
+        if q_arm is None:
+            lo = np.where(np.isfinite(arm.position_lower), arm.position_lower, -1.0)
+            hi = np.where(np.isfinite(arm.position_upper), arm.position_upper, 1.0)
+            q_arm = 0.5 * (lo + hi) + 0.3  # off the straight (singular) pose
+        state = RobotState(q_base=np.zeros(3), q_arm=q_arm)
+        for mode in Mode:
+            self.step(state, Reference(mode))
+        self.reset()
+
     @abstractmethod
     def _step(self, state: RobotState, reference: Reference) -> Command:
         """The controller's own computation (may raise; :meth:`step` catches)."""

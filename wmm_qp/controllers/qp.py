@@ -60,6 +60,7 @@ import math
 
 import numpy as np
 
+from .._jit import jit
 from ..config import N_ARM, N_WHEELS, ControllerConfig, FloatArray
 from ..model.wmm import WmmModel
 from ..pseudoinverse import weight_matrix_diag
@@ -71,8 +72,6 @@ N_V = N_WHEELS + N_ARM
 N_S = 6  # s⁺, s⁻ ∈ R³
 SLACK_ACCEPT = 1e-7  # [m/s] slack below this counts as "the task is met"
 RETURN_TIME = 0.05  # [s] a joint past a position limit is pulled back in over about this long
-_ARM_DIAG = np.arange(N_ARM)  # diagonal indices of the cost's v block, stage 1 and stage 2
-_V_DIAG = np.arange(N_V)
 _NO_ROWS, _NO_BOUNDS = np.zeros((0, N_V)), np.zeros(0)  # no EE box rows (read only)
 _NO_ROWS.setflags(write=False)
 _NO_BOUNDS.setflags(write=False)
@@ -84,6 +83,140 @@ def task_residual(problem: QPProblem, z: FloatArray) -> float:
     solver may leave a slack a hair below its bound 0, which clipping would then hide)."""
     n = problem.n - N_S
     return float(np.max(np.abs(problem.A[:, :n] @ z[:n] - problem.b)))
+
+
+@jit
+def _closed_form(
+    H: FloatArray,
+    g: FloatArray,
+    A: FloatArray,
+    b: FloatArray,
+    C: FloatArray,
+    l: FloatArray,
+    u: FloatArray,
+    lb: FloatArray,
+    ub: FloatArray,
+    z: FloatArray,
+) -> bool:
+    """:meth:`QpController.closed_form` compiled: z ← the optimum, True iff every KKT condition holds."""
+    n = z.shape[0] - N_S
+    # G = J D⁻¹ Jᵀ (3×3) and r = b + J D⁻¹ g, J = A[:, :n], D = diag(H)[:n]
+    G = np.zeros((3, 3))
+    r = b.copy()
+    for i in range(n):
+        d_inv = 1.0 / H[i, i]
+        for a in range(3):
+            jd = A[a, i] * d_inv
+            r[a] += jd * g[i]
+            for c in range(3):
+                G[a, c] += jd * A[c, i]
+    # λ = G⁻¹ r by the adjugate (G symmetric)
+    a_, b_, c_, d_, e_, f_ = G[0, 0], G[0, 1], G[0, 2], G[1, 1], G[1, 2], G[2, 2]
+    A0, A1, A2 = d_ * f_ - e_ * e_, c_ * e_ - b_ * f_, b_ * e_ - c_ * d_
+    det = a_ * A0 + b_ * A1 + c_ * A2
+    if not abs(det) > 1e-300:
+        return False
+    B1, B2, C2 = a_ * f_ - c_ * c_, b_ * c_ - a_ * e_, a_ * d_ - b_ * b_
+    lam = np.empty(3)
+    lam[0] = (A0 * r[0] + A1 * r[1] + A2 * r[2]) / det
+    lam[1] = (A1 * r[0] + B1 * r[1] + B2 * r[2]) / det
+    lam[2] = (A2 * r[0] + B2 * r[1] + C2 * r[2]) / det
+    rho1 = g[n]
+    for a in range(3):  # the exact penalty's subgradient condition (NaN fails it)
+        if not abs(lam[a]) <= rho1:
+            return False
+    z[:] = 0.0
+    for i in range(n):  # v = D⁻¹(Jᵀλ − g) inside its bounds
+        vi = (A[0, i] * lam[0] + A[1, i] * lam[1] + A[2, i] * lam[2] - g[i]) / H[i, i]
+        if not (lb[i] <= vi <= ub[i]):
+            return False
+        z[i] = vi
+    res = 0.0  # a near-singular G is not exact: let the solver work
+    for a in range(3):
+        e = -b[a]
+        for i in range(n):
+            e += A[a, i] * z[i]
+        res += e * e
+    if not res <= 1e-20:
+        return False
+    for k in range(C.shape[0]):  # l ≤ C v ≤ u
+        cv = 0.0
+        for i in range(n):
+            cv += C[k, i] * z[i]
+        if not (l[k] <= cv <= u[k]):
+            return False
+    return True
+
+
+@jit
+def _fill_arm_first(
+    J: FloatArray,
+    xdot: FloatArray,
+    lo: FloatArray,
+    hi: FloatArray,
+    cost: FloatArray,
+    H: FloatArray,
+    A: FloatArray,
+    b: FloatArray,
+    lb: FloatArray,
+    ub: FloatArray,
+    w_hold: FloatArray,
+) -> None:
+    """Stage 1's H, A, b, lb, ub over v_m (wheels held at w_hold, the admissible speed nearest 0)."""
+    n_w, n = w_hold.shape[0], cost.shape[0]
+    for j in range(n_w):
+        w_hold[j] = min(max(lo[j], 0.0), hi[j])
+    for a in range(3):
+        r = xdot[a]
+        for j in range(n_w):
+            r -= J[a, j] * w_hold[j]
+        b[a] = r  # the task left to the arm: ẋ_ref − J_b P w_hold
+        for i in range(n):
+            A[a, i] = J[a, n_w + i]
+    for i in range(n):
+        H[i, i] = cost[i]
+        lb[i], ub[i] = lo[n_w + i], hi[n_w + i]
+
+
+@jit
+def _fill_full(
+    J: FloatArray,
+    xdot: FloatArray,
+    lo: FloatArray,
+    hi: FloatArray,
+    cost: FloatArray,
+    H: FloatArray,
+    A: FloatArray,
+    b: FloatArray,
+    lb: FloatArray,
+    ub: FloatArray,
+) -> None:
+    """Stage 2's H, A, b, lb, ub over v = [v_b; v_m]."""
+    for a in range(3):
+        b[a] = xdot[a]
+        for i in range(cost.shape[0]):
+            A[a, i] = J[a, i]
+    for i in range(cost.shape[0]):
+        H[i, i] = cost[i]
+        lb[i], ub[i] = lo[i], hi[i]
+
+
+@jit
+def _add_return_term(q: FloatArray, q_lower: FloatArray, q_upper: FloatArray, gain: FloatArray, g: FloatArray) -> None:
+    """g[:n] += gain·(q − clip(q, q_lower, q_upper)): see :meth:`QpController.return_term`."""
+    for i in range(q.shape[0]):
+        g[i] += gain[i] * (q[i] - min(max(q[i], q_lower[i]), q_upper[i]))
+
+
+@jit
+def _add_nullspace_term(cost: FloatArray, grad_q: FloatArray, k_N: float, v_n_max: FloatArray, g: FloatArray) -> None:
+    """g += −W_x⁻¹ v_n, v_n = [0; k_N ∇H2] of eq. (19), each joint's preference clipped to
+    ±10× its velocity limit: ∇H2 grows like H2³ and is astronomically large next to a singular
+    direction (H2 is capped at 1e6 there)."""
+    n_w = cost.shape[0] - grad_q.shape[0]
+    for i in range(grad_q.shape[0]):
+        v_n = min(max(k_N * grad_q[i], -v_n_max[i]), v_n_max[i])
+        g[n_w + i] -= cost[n_w + i] * v_n
 
 
 class QpController(Controller):
@@ -117,7 +250,6 @@ class QpController(Controller):
         self._templates: dict[tuple[int, int], QPProblem] = {}
         self._w_inv = 1.0 / weight_matrix_diag(qp.alpha)  # W_x⁻¹, eq. (12)
         self._w_inv_dm = 1.0 / weight_matrix_diag(qp.dm_alpha)  # W_x⁻¹ in DM_NULLSPACE
-        self._v_n = np.zeros(N_V)  # eq. (19)'s v_n, reused
         self._v_n_max = 10.0 * self.robot.arm.velocity_max
         self._return_gain = RETURN_WEIGHT * self._w_inv[N_WHEELS:] / RETURN_TIME  # see return_term
         self._last_problem: QPProblem | None = None
@@ -167,22 +299,21 @@ class QpController(Controller):
         pulls outwards. v_ret = −excess/τ_ret, τ_ret = 0.05 s, weighted 1000× the joint's own
         cost so that it outweighs the motion of the joints (and wheels) that compensate, and below
         the task's exact penalty ρ₁ so the task still comes first; it acts in the
-        task's null space.
+        task's null space. (The stages' builders add it in their compiled fill.)
         """
+        out = np.zeros(N_ARM)
         arm = self.robot.arm
-        excess = q - np.minimum(np.maximum(q, arm.position_lower), arm.position_upper)  # 0 inside
-        return self._return_gain * excess  # = −κ·d·v_ret
+        _add_return_term(q, arm.position_lower, arm.position_upper, self._return_gain, out)
+        return out
 
     def linear_term(self, ctx: TickContext, mode: Mode) -> FloatArray:
-        """−W_x⁻¹ v_n with v_n of eq. (19) (clipped to ±V) in DM_NULLSPACE, else 0."""
-        if mode != Mode.DM_NULLSPACE:
-            return np.zeros(N_V)
-        assert ctx.grad_q is not None
-        # eq. (19), each joint's preference clipped to 10× its velocity limit: ∇H2 grows like H2³
-        # and is astronomically large next to a singular direction (H2 is capped at 1e6 there).
-        v_n = self._v_n  # wheels: 0
-        np.minimum(np.maximum(self.config.k_N * ctx.grad_q, -self._v_n_max), self._v_n_max, out=v_n[N_WHEELS:])
-        return -self.cost_diagonal(ctx, mode) * v_n
+        """−W_x⁻¹ v_n with v_n of eq. (19) (clipped to ±10·V) in DM_NULLSPACE, else 0 (for tests
+        and logs: the builder computes it in its compiled fill)."""
+        g = np.zeros(N_V)
+        if mode == Mode.DM_NULLSPACE:
+            assert ctx.grad_q is not None
+            _add_nullspace_term(self.cost_diagonal(ctx, mode), ctx.grad_q, self.config.k_N, self._v_n_max, g)
+        return g
 
     def slack_weights(self) -> tuple[float, float]:
         """(ρ₁, ρ₂): the slack's exact penalty and quadratic weight."""
@@ -241,32 +372,32 @@ class QpController(Controller):
 
     def build_arm_first(self, ctx: TickContext, xdot: FloatArray) -> tuple[QPProblem, FloatArray]:
         """Stage 1: the arm alone, wheels held at the admissible speed nearest 0."""
-        w_hold = np.minimum(np.maximum(ctx.wheel_lo, 0.0), ctx.wheel_hi)
         p = self._template(N_ARM, 0)
-        p.H[_ARM_DIAG, _ARM_DIAG] = self._w_inv[N_WHEELS:]
-        p.g[:N_ARM] = self.return_term(ctx.kin.q_arm)
-        p.A[:, :N_ARM] = ctx.kin.J_m
-        np.subtract(xdot, ctx.kin.J[:, :N_WHEELS] @ w_hold, out=p.b)
-        p.lb[:N_ARM] = ctx.arm_lo
-        p.ub[:N_ARM] = ctx.arm_hi
+        w_hold = np.empty(N_WHEELS)
+        arm = self.robot.arm
+        _fill_arm_first(
+            ctx.kin.J, xdot, ctx.lo, ctx.hi, self._w_inv[N_WHEELS:], p.H, p.A, p.b, p.lb, p.ub, w_hold
+        )
+        p.g[:N_ARM] = 0.0
+        _add_return_term(ctx.kin.q_arm, arm.position_lower, arm.position_upper, self._return_gain, p.g)
         return p, w_hold
 
     def build(self, ctx: TickContext, xdot: FloatArray, mode: Mode) -> QPProblem:
         """Stage 2: the whole robot (see the module docstring)."""
-        lb, ub = self.box(ctx)
-        C, l, u = self.ee_box_rows(ctx, mode, lb, ub)
+        C, l, u = self.ee_box_rows(ctx, mode, ctx.lo, ctx.hi)
         p = self._template(N_V, C.shape[0])
-        p.H[_V_DIAG, _V_DIAG] = self.cost_diagonal(ctx, mode)
-        p.g[:N_V] = self.linear_term(ctx, mode)
-        p.g[N_WHEELS:N_V] += self.return_term(ctx.kin.q_arm)
-        p.A[:, :N_V] = ctx.kin.J
-        p.b[:] = xdot
+        cost = self.cost_diagonal(ctx, mode)
+        _fill_full(ctx.kin.J, xdot, ctx.lo, ctx.hi, cost, p.H, p.A, p.b, p.lb, p.ub)
+        p.g[:N_V] = 0.0
+        if mode == Mode.DM_NULLSPACE:
+            assert ctx.grad_q is not None
+            _add_nullspace_term(cost, ctx.grad_q, self.config.k_N, self._v_n_max, p.g)
+        arm = self.robot.arm
+        _add_return_term(ctx.kin.q_arm, arm.position_lower, arm.position_upper, self._return_gain, p.g[N_WHEELS:])
         if C.shape[0]:
             p.C[:, :N_V] = C
             p.l[:] = l
             p.u[:] = u
-        p.lb[:N_V] = lb
-        p.ub[:N_V] = ub
         return p
 
     # ------------------------------------------------------------------ solving
@@ -279,49 +410,11 @@ class QpController(Controller):
         |λᵢ| ≤ ρ₁ (the exact penalty's subgradient condition). This is an active-set solver's
         first iterate: exact, no tolerance involved.
         """
-        n = problem.n - N_S
-        d_inv = 1.0 / problem.H.diagonal()[:n]
-        J = problem.A[:, :n]
-        g = problem.g[:n]
-        JD = J * d_inv
-        # 3×3 symmetric system J D⁻¹ Jᵀ λ = r solved by its adjugate, in Python floats
-        # (np.linalg.solve costs several µs of overhead for a 3×3).
-        (a, b_, c), (_, d, e), (_, _, f) = (JD @ J.T).tolist()
-        r0, r1, r2 = (problem.b + JD @ g).tolist()
-        A0, A1, A2 = d * f - e * e, c * e - b_ * f, b_ * e - c * d
-        det = a * A0 + b_ * A1 + c * A2
-        if not abs(det) > 1e-300:
-            return None
-        B1, B2, C2 = a * f - c * c, b_ * c - a * e, a * d - b_ * b_
-        l0, l1, l2 = (
-            (A0 * r0 + A1 * r1 + A2 * r2) / det,
-            (A1 * r0 + B1 * r1 + B2 * r2) / det,
-            (A2 * r0 + B2 * r1 + C2 * r2) / det,
+        z = np.empty(problem.n)
+        ok = _closed_form(
+            problem.H, problem.g, problem.A, problem.b, problem.C, problem.l, problem.u, problem.lb, problem.ub, z
         )
-        rho1 = float(problem.g[n])
-        # |λᵢ| ≤ ρ₁ first, in Python floats (NaN fails it): then λ is finite and bounded, and v
-        # below cannot overflow.
-        if not (abs(l0) <= rho1 and abs(l1) <= rho1 and abs(l2) <= rho1):
-            return None
-        v = (J.T @ np.array((l0, l1, l2)) - g) * d_inv
-        resid = J @ v - problem.b
-        # the remaining KKT conditions; NaN/inf fail every comparison
-        # (min over tolist(): a numpy .all() on a 7-vector costs twice as much; a NaN in v, which
-        # Python's min would not propagate, already fails the residual test)
-        ok = (
-            resid.dot(resid) <= 1e-20  # a near-singular J D⁻¹ Jᵀ is not exact: let the solver work
-            and min((v - problem.lb[:n]).tolist()) >= 0.0
-            and min((problem.ub[:n] - v).tolist()) >= 0.0
-        )
-        if not ok:
-            return None
-        if problem.n_in:
-            Cv = problem.C[:, :n] @ v
-            if not ((problem.l <= Cv) & (Cv <= problem.u)).all():
-                return None
-        z = np.zeros(problem.n)
-        z[:n] = v
-        return z
+        return z if ok else None
 
     def _solve(self, backend: QPBackend, problem: QPProblem) -> FloatArray | None:
         self._last_problem = problem
@@ -386,7 +479,7 @@ class QpController(Controller):
             return self.safe_stop(state, f"qp ({self.solver}): the solver failed")
         self.last_stage = "full"
         status, reason = Status.OK, ""
-        if task_residual(problem, z) > 1e-6:
+        if not self._closed_form_hit and task_residual(problem, z) > 1e-6:
             status, reason = Status.SATURATED, "the bounds cut the task (best effort)"
         alpha = self.config.qp.dm_alpha if mode == Mode.DM_NULLSPACE else self.config.qp.alpha
         return self.finish(ctx, z[:N_V], xdot, status=status, reason=reason, alpha=alpha)

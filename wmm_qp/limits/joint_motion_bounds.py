@@ -20,8 +20,11 @@ overshoots a position limit.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from .._jit import jit
 from ..config import FloatArray
 
 
@@ -54,8 +57,44 @@ def braking_command(v_prev: FloatArray, a_max: FloatArray, dt: float) -> FloatAr
     return v_prev - np.clip(v_prev, -step, step)
 
 
+@jit
+def _braking_speed(distance: float, a: float, dt: float) -> float:
+    """:func:`braking_velocity` of one joint (the same formula, compiled)."""
+    d_hat = min(max(distance, 0.0) / (a * dt * dt), _D_HAT_CAP)
+    n = math.floor((math.sqrt(8.0 * d_hat + 1.0) - 1.0) / 2.0)
+    return (d_hat + 0.5 * n * (n + 1.0)) / (n + 1.0) * (a * dt)
+
+
+@jit
+def _motion_bounds(
+    q: FloatArray,
+    v: FloatArray,
+    q_min: FloatArray,
+    q_max: FloatArray,
+    v_max: FloatArray,
+    a_max: FloatArray,
+    dt: float,
+    latency: float,
+    lo: FloatArray,
+    hi: FloatArray,
+) -> None:
+    """Eq. (13) joint by joint into lo, hi (see :class:`MotionBounds`)."""
+    for i in range(q.shape[0]):
+        step = a_max[i] * dt
+        lo_a, hi_a = v[i] - step, v[i] + step  # acceleration
+        lo_v = min(max(-v_max[i], lo_a), hi_a)  # velocity: the acceleration interval's point
+        hi_v = min(max(v_max[i], lo_a), hi_a)  # nearest [−V, V] where they do not meet
+        # distance to each limit once the latency has passed: the joint may travel up to
+        # v·τ + ½Aτ² towards it meanwhile (its rate stays within A·τ of v)
+        ahead, slack = v[i] * latency, 0.5 * a_max[i] * latency * latency
+        up = _braking_speed(q_max[i] - q[i] - max(ahead + slack, 0.0), a_max[i], dt)
+        down = _braking_speed(q[i] - q_min[i] - max(slack - ahead, 0.0), a_max[i], dt)
+        lo[i] = min(max(-down, lo_v), hi_v)  # position and braking distance, lowest priority
+        hi[i] = min(max(up, lo_v), hi_v)
+
+
 class MotionBounds:
-    """Q_min(q), Q_max(q) of eq. (13) for a fixed set of joints: constants computed once.
+    """Q_min(q), Q_max(q) of eq. (13) for a fixed set of joints.
 
     Args:
         q_min, q_max: [rad] position limits (±inf: no position bound, e.g. a continuous joint
@@ -68,8 +107,7 @@ class MotionBounds:
             distance to each limit is shortened by the most it can travel towards it,
             max(0, ±v_prev·latency + ½A·latency²). 0 for an in-process robot.
 
-    Calling it costs ~30 small vector operations: the upper limits and the mirrored lower
-    limits (−q_min against −q) go through the braking formula together as one 2n-vector.
+    A call is one compiled kernel (``_motion_bounds``) over the joints.
     """
 
     def __init__(
@@ -81,39 +119,17 @@ class MotionBounds:
         dt: float,
         latency: float = 0.0,
     ) -> None:
-        a_max = np.asarray(a_max, dtype=float)
-        n = a_max.shape[0]
-        self.n = n
-        self._step = a_max * dt
-        self._v_max = np.asarray(v_max, dtype=float)
-        self._neg_v_max = -self._v_max
-        self._limit = np.concatenate([q_max, np.negative(q_min)])  # upper; lower mirrored
-        sign = np.concatenate([np.ones(n), -np.ones(n)])
-        self._scale = np.concatenate([sign, latency * sign])  # [q; q; v; v] → [q; −q; vτ; −vτ]
-        self._slack = np.concatenate([0.5 * a_max * latency * latency] * 2)  # ½Aτ²
-        a2 = np.concatenate([a_max, a_max])
-        self._c8 = 8.0 / (a2 * dt * dt)  # distance → 8 d̂ (see braking_velocity)
-        self._adt8 = a2 * dt / 8.0
+        self.q_min, self.q_max, self.v_max, self.a_max = (
+            np.array(a, dtype=np.float64) for a in (q_min, q_max, v_max, a_max)
+        )
+        self.n = self.a_max.shape[0]
+        self.dt, self.latency = float(dt), float(latency)
 
     def __call__(self, q: FloatArray, v_prev: FloatArray) -> tuple[FloatArray, FloatArray]:
         """(lo, hi) for positions q [rad] and current rates v_prev [rad/s]; lo ≤ hi, finite."""
-        n = self.n
-        lo, hi = v_prev - self._step, v_prev + self._step  # acceleration
-        lo_v = np.minimum(np.maximum(self._neg_v_max, lo), hi)  # velocity, by priority
-        hi_v = np.minimum(np.maximum(self._v_max, lo), hi)
-        x = np.concatenate((q, q, v_prev, v_prev))
-        x *= self._scale  # [q; −q; v·τ; −v·τ]
-        # distance to each limit once the latency has passed (upper, then mirrored lower)
-        d = self._limit - x[: 2 * n]
-        d -= np.maximum(x[2 * n :] + self._slack, 0.0)
-        # braking_velocity's exact discrete-time bound with e = 8 d̂ and m = n + 1:
-        # v = a·dt·(d̂/m + (m − 1)/2) = (a·dt/8)·(e/m + 4m − 4), m = ⌊(√(e + 1) + 1)/2⌋
-        e = np.minimum(np.maximum(d, 0.0) * self._c8, 8.0 * _D_HAT_CAP)
-        m = np.floor(np.sqrt(e + 1.0) * 0.5 + 0.5)
-        brake = (e / m + 4.0 * m - 4.0) * self._adt8
-        lo_f = np.minimum(np.maximum(np.negative(brake[n:]), lo_v), hi_v)  # eq. (13)
-        hi_f = np.minimum(np.maximum(brake[:n], lo_v), hi_v)
-        return lo_f, hi_f
+        lo, hi = np.empty(self.n), np.empty(self.n)
+        _motion_bounds(q, v_prev, self.q_min, self.q_max, self.v_max, self.a_max, self.dt, self.latency, lo, hi)
+        return lo, hi
 
 
 def joint_motion_bounds(

@@ -15,6 +15,7 @@ import math
 
 import numpy as np
 
+from .._jit import jit
 from ..config import FloatArray
 
 S_MIN = 1e-12  # uᵀ J A Jᵀ u is floored here: H2 ≤ 1e6 where Jᵀu = 0 (a singular direction)
@@ -28,8 +29,16 @@ def directional_manipulability(J_arm: FloatArray, u: FloatArray, W: FloatArray) 
         u: unit direction (arm base frame).
         W: diagonal of the torque scaling W.
     """
-    t = W * (J_arm.T @ u)  # W Jᵀ u
-    return 1.0 / math.sqrt(max(float(t @ t), S_MIN))
+    return _dm(np.asarray(J_arm, dtype=np.float64), np.asarray(u, dtype=np.float64), np.asarray(W, dtype=np.float64))
+
+
+@jit
+def _dm(J_arm: FloatArray, u: FloatArray, W: FloatArray) -> float:
+    s = 0.0
+    for i in range(J_arm.shape[1]):
+        t = W[i] * (J_arm[0, i] * u[0] + J_arm[1, i] * u[1] + J_arm[2, i] * u[2])  # W Jᵀ u
+        s += t * t
+    return 1.0 / math.sqrt(max(s, S_MIN))
 
 
 def torque_norm_per_newton(J_arm: FloatArray, u: FloatArray, W: FloatArray) -> float:
@@ -48,12 +57,30 @@ def dm_gradient(J_arm: FloatArray, dJ_arm: FloatArray, u: FloatArray, W: FloatAr
         u: unit direction.
         W: diagonal of W.
     """
-    Jtu = J_arm.T @ u
-    a = (W * W) * Jtu  # A Jᵀ u
-    s = max(float(Jtu @ a), S_MIN)  # uᵀ J A Jᵀ u
-    h2 = 1.0 / math.sqrt(s)
-    g = (dJ_arm @ a) @ u  # g_k = uᵀ ∂J/∂q_k A Jᵀ u
-    return h2, (-(h2**3)) * g  # eq. (9)
+    grad = np.empty(J_arm.shape[1])
+    h2 = _dm_gradient(J_arm, dJ_arm, np.asarray(u, dtype=np.float64), np.asarray(W, dtype=np.float64), grad)
+    return h2, grad
+
+
+@jit
+def _dm_gradient(J_arm: FloatArray, dJ_arm: FloatArray, u: FloatArray, W: FloatArray, grad: FloatArray) -> float:
+    n = J_arm.shape[1]
+    a = np.empty(n)  # A Jᵀ u
+    s = 0.0  # uᵀ J A Jᵀ u
+    for i in range(n):
+        jtu = J_arm[0, i] * u[0] + J_arm[1, i] * u[1] + J_arm[2, i] * u[2]
+        a[i] = W[i] * W[i] * jtu
+        s += jtu * a[i]
+    h2 = 1.0 / math.sqrt(max(s, S_MIN))
+    for k in range(n):
+        g = 0.0  # g_k = uᵀ ∂J/∂q_k A Jᵀ u
+        for r in range(3):
+            row = 0.0
+            for i in range(n):
+                row += dJ_arm[k, r, i] * a[i]
+            g += u[r] * row
+        grad[k] = -(h2**3) * g  # eq. (9)
+    return h2
 
 
 def dm_cartesian_gradient(grad_q: FloatArray, J_m: FloatArray) -> FloatArray:

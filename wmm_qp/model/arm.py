@@ -7,15 +7,29 @@ angles to Pinocchio's configuration vector once per call.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
+from .._jit import jit
 from ..config import N_ARM, FloatArray
 from ..exceptions import ConfigError
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+IntArray = np.ndarray[Any, np.dtype[np.int64]]
+
+
+@jit
+def _pin_q(q: FloatArray, idx_q: IntArray, nq: IntArray, out: FloatArray) -> None:
+    for i in range(q.shape[0]):
+        if nq[i] == 1:
+            out[idx_q[i]] = q[i]
+        else:  # continuous joint: (cos, sin)
+            out[idx_q[i]] = math.cos(q[i])
+            out[idx_q[i] + 1] = math.sin(q[i])
 
 
 class ArmModel:
@@ -41,23 +55,16 @@ class ArmModel:
         self.data = self.model.createData()
         self.frame_id = self.model.getFrameId(ee_frame)
         joints = [self.model.joints[j] for j in range(1, self.model.njoints)]
-        # Pinocchio's q (revolute: the angle; continuous: cos, sin) gathered from one vector
-        # [q, cos q, sin q] by a fixed index map: three ufuncs per call, no per-joint Python.
-        gather: list[int] = []
-        for j in joints:
-            gather += [j.idx_v] if j.nq == 1 else [N_ARM + j.idx_v, 2 * N_ARM + j.idx_v]
-        self._gather = np.array(gather, dtype=np.intp)
-        self._trig = np.empty(3 * N_ARM)
+        # Where each joint angle goes in Pinocchio's q: idx_q, and nq (1: the angle; 2: cos, sin)
+        self._idx_q = np.array([j.idx_q for j in joints], dtype=np.int64)
+        self._nq = np.array([j.nq for j in joints], dtype=np.int64)
         self._q = pin.neutral(self.model)
         self.joint_names = [self.model.names[j] for j in range(1, self.model.njoints)]
 
     def pin_q(self, q: FloatArray) -> FloatArray:
         """Pinocchio configuration of the 7 joint angles q [rad] (a reused buffer)."""
-        t = self._trig
-        t[:N_ARM] = q
-        np.cos(q, out=t[N_ARM : 2 * N_ARM])
-        np.sin(q, out=t[2 * N_ARM :])
-        return np.take(t, self._gather, out=self._q)
+        _pin_q(np.asarray(q, dtype=np.float64), self._idx_q, self._nq, self._q)
+        return self._q
 
     def position(self, q: FloatArray) -> FloatArray:
         """p_m(q_m) [m]: EE position in the arm base frame, eq. (1)."""

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._jit import jit
 from ..config import N_ARM, N_WHEELS, FloatArray, RobotConfig
 from .arm import ArmModel
 from .mecanum import MecanumBase
@@ -62,6 +63,34 @@ class Kinematics:
     dJ_arm: FloatArray | None = None
 
 
+@jit
+def _assemble(
+    q_base: FloatArray, p_arm: FloatArray, J_arm: FloatArray, mount: FloatArray, M: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """R, x, J_b, P, J of :class:`Kinematics` from the arm's FK and Jacobian (compiled)."""
+    c, s = math.cos(q_base[2]), math.sin(q_base[2])
+    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    mx, my = mount[0] + p_arm[0], mount[1] + p_arm[1]
+    px, py = c * mx - s * my, s * mx + c * my  # Rz(ψ)(p_mount + p_m)
+    x = np.array([q_base[0] + px, q_base[1] + py, mount[2] + p_arm[2]])  # eq. (2)
+    J_b = np.array([[1.0, 0.0, -py], [0.0, 1.0, px], [0.0, 0.0, 0.0]])  # eq. (5)
+    n_w, n_a = M.shape[1], J_arm.shape[1]
+    P = np.empty((3, n_w))  # eqs. (3), (20): blkdiag(Rz2(ψ), 1)·M
+    J = np.empty((3, n_w + n_a))  # eq. (5): [J_b P, J_m]
+    for j in range(n_w):
+        P[0, j] = c * M[0, j] - s * M[1, j]
+        P[1, j] = s * M[0, j] + c * M[1, j]
+        P[2, j] = M[2, j]
+        J[0, j] = P[0, j] - py * P[2, j]
+        J[1, j] = P[1, j] + px * P[2, j]
+        J[2, j] = 0.0
+    for j in range(n_a):  # J_m = Rz(ψ) J_arm
+        J[0, n_w + j] = c * J_arm[0, j] - s * J_arm[1, j]
+        J[1, n_w + j] = s * J_arm[0, j] + c * J_arm[1, j]
+        J[2, n_w + j] = J_arm[2, j]
+    return R, x, J_b, P, J
+
+
 class WmmModel:
     """Kinematic model of the wheeled mobile manipulator.
 
@@ -84,16 +113,7 @@ class WmmModel:
         """FK and Jacobians at (q_b, q_m); with ``hessian`` also ∂J_arm/∂q (for eq. (9))."""
         q_base, q_arm = np.asarray(q_base, float), np.asarray(q_arm, float)
         p_arm, J_arm = self.arm.position_jacobian(q_arm)
-        qb0, qb1, yaw = q_base.tolist()
-        R = rot_z(yaw)
-        p = R @ (self.mount + p_arm)  # Rz(ψ)(p_mount + p_m)
-        px, py, pz = p.tolist()
-        x = np.array((qb0 + px, qb1 + py, pz))  # eq. (2)
-        J_b = np.array([[1.0, 0.0, -py], [0.0, 1.0, px], [0.0, 0.0, 0.0]])  # eq. (5)
-        P = R @ self.base.M  # eqs. (3), (20): blkdiag(Rz2(ψ), 1)·M, and R is exactly that
-        J = np.empty((3, N_V))  # eq. (5): [J_b P, J_m]
-        np.matmul(J_b, P, out=J[:, :N_WHEELS])
-        np.matmul(R, J_arm, out=J[:, N_WHEELS:])  # J_m = Rz(ψ) J_arm
+        R, x, J_b, P, J = _assemble(q_base, p_arm, J_arm, self.mount, self.base.M)  # eqs. (2), (3), (5)
         J_m = J[:, N_WHEELS:]
         dJ = self.arm.jacobian_derivatives(q_arm) if hessian else None
         return Kinematics(
