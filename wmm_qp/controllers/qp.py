@@ -247,6 +247,7 @@ class QpController(Controller):
         self._closed_form_hit = False  # the last _solve was answered in closed form
         self.task_checks = 0  # stages that left slack and were re-solved with the task as an equality
         self.task_recovered = 0  # ... and turned out feasible (the penalty alone was too weak)
+        self.task_without_objective = 0  # ... of which only with the DM/return terms dropped
         self._templates: dict[tuple[int, int], QPProblem] = {}
         self._w_inv = 1.0 / weight_matrix_diag(qp.alpha)  # W_x⁻¹, eq. (12)
         self._w_inv_dm = 1.0 / weight_matrix_diag(qp.dm_alpha)  # W_x⁻¹ in DM_NULLSPACE
@@ -445,6 +446,12 @@ class QpController(Controller):
         equality) by DAQP, whose infeasibility detection is exact. Feasible → that optimum is the
         lexicographic answer (task first, then the cost with its DM/return terms); infeasible →
         the task truly cannot be met and the penalised solution stands.
+
+        Next to a singularity the DM term can be 10⁵× the cost's scale while a row of J is ~1e-6:
+        DAQP (and proxsuite) then report such a feasible task infeasible (found by hypothesis:
+        the arm straight up, DM along z). So a failed exact solve is repeated once without the
+        linear term (DM and return terms: the lower priorities, given up for this tick) before
+        the task is declared infeasible.
         """
         checker = self._fallback if self._fallback is not None else self._full
         self.task_checks += 1
@@ -453,6 +460,14 @@ class QpController(Controller):
         problem.ub[n:] = 0.0  # s⁺ = s⁻ = 0
         try:
             sol = checker.solve(problem)
+            if not (sol.ok and sol.z is not None) and problem.g[:n].any():
+                g = problem.g[:n].copy()
+                problem.g[:n] = 0.0
+                try:
+                    sol = checker.solve(problem)
+                finally:
+                    problem.g[:n] = g
+                self.task_without_objective += int(sol.ok and sol.z is not None)
         finally:
             problem.ub[n:] = saved
         if sol.ok and sol.z is not None:
