@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._jit import all_finite
 from .config import N_ARM, N_WHEELS, FloatArray
 
 
@@ -55,7 +56,7 @@ class RobotState:
         self.wheel_speeds = _vec(self.wheel_speeds, N_WHEELS, "wheel_speeds")
 
     def is_finite(self) -> bool:
-        return bool(np.isfinite(np.concatenate((self.q_base, self.q_arm, self.v_arm, self.wheel_speeds))).all())
+        return all(all_finite(a) for a in (self.q_base, self.q_arm, self.v_arm, self.wheel_speeds))
 
 
 @dataclass(slots=True)
@@ -85,8 +86,11 @@ class Reference:
 
     def is_finite(self) -> bool:
         d = self.direction
-        x = self.xd_d if self.x_d is None else np.concatenate((self.x_d, self.xd_d))
-        return bool(np.isfinite(x).all() and (d is None or (np.isfinite(d).all() and np.linalg.norm(d) > 1e-9)))
+        return (
+            (self.x_d is None or all_finite(self.x_d))
+            and all_finite(self.xd_d)
+            and (d is None or (all_finite(d) and float(np.linalg.norm(d)) > 1e-9))
+        )
 
 
 class Status(enum.StrEnum):

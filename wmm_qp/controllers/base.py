@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._jit import all_finite, jit
 from ..config import N_WHEELS, ControllerConfig, FloatArray, RobotConfig
 from ..limits import MotionBounds, braking_command, wheel_braking_command
 from ..manipulability import directional_manipulability, dm_cartesian_gradient, dm_gradient
@@ -49,6 +50,18 @@ class TickContext:
     @property
     def arm_hi(self) -> FloatArray:
         return self.hi[N_WHEELS:]
+
+
+@jit
+def _task_error(J: FloatArray, v: FloatArray, xdot_ref: FloatArray) -> float:
+    """‖J v − ẋ_ref‖ [m/s]."""
+    s = 0.0
+    for a in range(J.shape[0]):
+        e = -xdot_ref[a]
+        for i in range(J.shape[1]):
+            e += J[a, i] * v[i]
+        s += e * e
+    return math.sqrt(s)
 
 
 class Controller(ABC):
@@ -91,7 +104,7 @@ class Controller(ABC):
             if not reference.is_finite():
                 return self.safe_stop(state, "reference holds NaN, inf or a zero direction")
             cmd = self._step(state, reference)
-            if not (np.isfinite(cmd.wheel_speeds).all() and np.isfinite(cmd.arm_rates).all()):
+            if not (all_finite(cmd.wheel_speeds) and all_finite(cmd.arm_rates)):
                 return self.safe_stop(state, f"{self.name}: non-finite command")
             return cmd
         except Exception as e:  # the control loop must never raise (DESIGN.md §2, item 5)
@@ -194,18 +207,17 @@ class Controller(ABC):
         alpha: float = 0.0,
     ) -> Command:
         """Wrap v = [v_b; v_m] into a Command with diagnostics."""
-        e = ctx.kin.J @ v - xdot_ref
-        err = math.sqrt(float(e @ e))
         if status == Status.OK and ctx.damping > 0.0:
             status, reason = Status.DAMPED, reason or f"sigma_min {ctx.sigma:.3g} below threshold"
+        v = np.array(v, dtype=np.float64)  # the command owns its numbers
         return Command(
-            wheel_speeds=v[:4].copy(),
-            arm_rates=v[4:].copy(),
+            wheel_speeds=v[:N_WHEELS],
+            arm_rates=v[N_WHEELS:],
             status=status,
             reason=reason,
             alpha=alpha,
-            task_error=err,
-            x=ctx.kin.x.copy(),
+            task_error=_task_error(ctx.kin.J, v, xdot_ref),
+            x=ctx.kin.x,  # computed for this tick only
             dm=ctx.dm,
             sigma_min=ctx.sigma,
         )

@@ -135,6 +135,7 @@ def run_case(
         model = w.WmmModel(robot)
         ctl = w.make_controller("qp", model, cfg.with_(qp={"solver": solver}))
         assert isinstance(ctl, w.QpController)
+        ctl.warm_up()  # compiled kernels loaded before timing, as the daemon does
         dt = ctl.dt
         bot = IdealRobot.at_paper_start(model)
         x0 = bot.ee()

@@ -137,6 +137,7 @@ def _run_ours(
 ) -> dict[str, Any]:
     model = w.WmmModel(robot)
     ctl = w.make_controller("qp", model, cfg.with_(qp={"solver": "proxsuite"}))
+    ctl.warm_up()  # compiled kernels loaded before timing, as the daemon does
     bot = IdealRobot.at_paper_start(model)
     x0 = bot.ee()
     samples: list[int] = []
