@@ -105,3 +105,13 @@ def test_cli_user_errors_exit_2(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["bench", "--solver", "nope"]) == 2
     err = capsys.readouterr().err
     assert "Traceback" not in err and "error" in err
+
+
+def test_fastest_backend_breaks_a_p50_tie_by_p99() -> None:
+    from wmm_qp_service.bench.runner import targets
+
+    ticks = {"osqp": {"p50": 27.60, "p99": 309.9}, "daqp": {"p50": 27.77, "p99": 81.1}}
+    assert targets({"tick_us": ticks})["fastest_backend"] == "daqp"  # within 2 %: p99 decides
+    ticks["osqp"]["p50"] = 20.0  # clearly faster: p50 decides
+    t = targets({"tick_us": ticks})
+    assert t["fastest_backend"] == "osqp" and t["fastest_p99_le_250us"] is False

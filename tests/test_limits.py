@@ -109,6 +109,36 @@ def test_the_upper_bound_is_the_braking_velocity_when_that_is_reachable(dist: li
     np.testing.assert_allclose(hi[limited], v[limited], rtol=1e-12, atol=1e-12)
 
 
+def _numpy_bounds(q, v, dt, latency):  # type: ignore[no-untyped-def]
+    """Eq. (13) written as plain numpy (the form before the compiled kernel): the reference."""
+    a, vmax = ARM.acceleration_max, ARM.velocity_max
+    lo, hi = np.minimum(np.maximum(-vmax, v - a * dt), v + a * dt), np.minimum(np.maximum(vmax, v - a * dt), v + a * dt)
+    ahead, slack = v * latency, 0.5 * a * latency * latency
+    up = braking_velocity(ARM.position_upper - q - np.maximum(ahead + slack, 0.0), a, dt)
+    down = braking_velocity(q - ARM.position_lower - np.maximum(slack - ahead, 0.0), a, dt)
+    return np.minimum(np.maximum(-down, lo), hi), np.minimum(np.maximum(up, lo), hi)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.lists(floats, min_size=7, max_size=7),
+    st.lists(st.floats(min_value=-1.6, max_value=1.6), min_size=7, max_size=7),
+    st.sampled_from([0.001, 0.002]),
+    st.sampled_from([0.0, 0.003, 0.03]),
+)
+def test_the_compiled_bounds_equal_the_numpy_formula(qs: list[float], vs: list[float], dt: float, lat: float) -> None:
+    lo_q = np.where(np.isfinite(ARM.position_lower), ARM.position_lower, -np.pi)
+    hi_q = np.where(np.isfinite(ARM.position_upper), ARM.position_upper, np.pi)
+    q = (lo_q + hi_q) / 2 + np.array(qs) * ((hi_q - lo_q) / 2 + 0.2)
+    v = np.array(vs) * ARM.velocity_max
+    lo, hi = joint_motion_bounds(
+        q, v, ARM.position_lower, ARM.position_upper, ARM.velocity_max, ARM.acceleration_max, dt, lat
+    )
+    ref_lo, ref_hi = _numpy_bounds(q, v, dt, lat)
+    np.testing.assert_allclose(lo, ref_lo, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(hi, ref_hi, rtol=0, atol=1e-15)
+
+
 @settings(max_examples=100, deadline=None)
 @given(st.lists(st.floats(min_value=-2.0, max_value=2.0), min_size=4, max_size=4))
 def test_the_controllers_bounds_on_the_wheels_are_the_wheel_bounds(speeds: list[float]) -> None:

@@ -59,6 +59,15 @@ def test_cartesian_gradient_is_joint_gradient_through_pseudoinverse() -> None:
     g = rng.normal(size=7)
     J = rng.normal(size=(3, 7))
     np.testing.assert_allclose(dm_cartesian_gradient(g, J), g @ np.linalg.pinv(J), atol=1e-12)  # eq. (10)
+    # the compiled normal-equation path (taken when σ_min is known to be ≥ 1e-4) agrees
+    s = float(np.linalg.svd(J, compute_uv=False)[-1])
+    np.testing.assert_allclose(dm_cartesian_gradient(g, J, s), g @ np.linalg.pinv(J), atol=1e-12)
+
+
+def test_cartesian_gradient_near_a_singularity_falls_back_to_least_squares() -> None:
+    J = np.array([[1.0, 0, 0, 0, 0, 0, 0], [0, 1.0, 0, 0, 0, 0, 0], [0, 0, 1e-9, 0, 0, 0, 0]])
+    g = np.array([0.3, -0.2, 1.0, 0, 0, 0, 0])
+    np.testing.assert_allclose(dm_cartesian_gradient(g, J, 1e-9), dm_cartesian_gradient(g, J), atol=0)
 
 
 def test_cartesian_gradient_predicts_dm_change_along_minimum_norm_motion() -> None:

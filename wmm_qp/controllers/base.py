@@ -90,6 +90,7 @@ class Controller(ABC):
             config.state_latency,
         )  # eq. (13) for the arm; for the wheels (no position limit) it reduces to the wheel bounds
         self._no_wheel_q = np.zeros(N_WHEELS)
+        self._boxed_axes = np.flatnonzero(np.isfinite(config.ee_box_lower) | np.isfinite(config.ee_box_upper)).tolist()
         self._u = config.direction / math.sqrt(float(config.direction @ config.direction))  # unit DM direction
 
     def reset(self) -> None:  # noqa: B027 (optional hook, no-op by default)
@@ -187,11 +188,13 @@ class Controller(ABC):
     def cartesian_dm_velocity(self, ctx: TickContext) -> FloatArray:
         """v_c of eq. (17): k_C ∇_x H2 on the axes whose box is active and holds x, else 0."""
         assert ctx.grad_q is not None
-        grad_x = dm_cartesian_gradient(ctx.grad_q, ctx.kin.J_m)  # eq. (10)
-        lo, hi = self.config.ee_box_lower, self.config.ee_box_upper
-        boxed = np.isfinite(lo) | np.isfinite(hi)
-        inside = (lo <= ctx.kin.x) & (ctx.kin.x <= hi)
-        return np.where(boxed & inside, self.config.k_C * grad_x, 0.0)  # eq. (17)
+        grad_x = dm_cartesian_gradient(ctx.grad_q, ctx.kin.J_m, ctx.sigma)  # eq. (10)
+        lo, hi, x = self.config.ee_box_lower, self.config.ee_box_upper, ctx.kin.x
+        v_c = np.zeros(3)
+        for i in self._boxed_axes:  # eq. (17)
+            if lo[i] <= x[i] <= hi[i]:
+                v_c[i] = self.config.k_C * grad_x[i]
+        return v_c
 
     @staticmethod
     def needs_gradient(mode: Mode) -> bool:

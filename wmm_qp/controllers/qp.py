@@ -62,6 +62,7 @@ import numpy as np
 
 from .._jit import jit
 from ..config import N_ARM, N_WHEELS, ControllerConfig, FloatArray
+from ..model.arm import IntArray
 from ..model.wmm import WmmModel
 from ..pseudoinverse import weight_matrix_diag
 from ..solvers import INF, QPBackend, QPProblem, available_solvers, make_backend
@@ -219,6 +220,31 @@ def _add_nullspace_term(cost: FloatArray, grad_q: FloatArray, k_N: float, v_n_ma
         g[n_w + i] -= cost[n_w + i] * v_n
 
 
+@jit
+def _ee_box(
+    J: FloatArray,
+    x: FloatArray,
+    lo: FloatArray,
+    hi: FloatArray,
+    rows: IntArray,
+    lb: FloatArray,
+    ub: FloatArray,
+    dt: float,
+    C: FloatArray,
+    l: FloatArray,
+    u: FloatArray,
+) -> None:
+    """C, l, u of :meth:`QpController.ee_box_rows` (compiled)."""
+    for k in range(rows.shape[0]):
+        r = rows[k]
+        reach = 0.0  # where the command nearest zero inside the box bounds takes the EE
+        for i in range(J.shape[1]):
+            C[k, i] = dt * J[r, i]
+            reach += C[k, i] * min(max(0.0, lb[i]), ub[i])
+        l[k] = max(min(min(lo[r], x[r]) - x[r], reach), -INF)  # never further out than x already is
+        u[k] = min(max(max(hi[r], x[r]) - x[r], reach), INF)
+
+
 class QpController(Controller):
     """QP controller (DESIGN.md §2).
 
@@ -252,6 +278,7 @@ class QpController(Controller):
         self._w_inv = 1.0 / weight_matrix_diag(qp.alpha)  # W_x⁻¹, eq. (12)
         self._w_inv_dm = 1.0 / weight_matrix_diag(qp.dm_alpha)  # W_x⁻¹ in DM_NULLSPACE
         self._v_n_max = 10.0 * self.robot.arm.velocity_max
+        self._box_rows = np.array(self._boxed_axes, dtype=np.int64)  # the EE box's axes
         self._return_gain = RETURN_WEIGHT * self._w_inv[N_WHEELS:] / RETURN_TIME  # see return_term
         self._last_problem: QPProblem | None = None
         self.last_stage = ""
@@ -284,13 +311,11 @@ class QpController(Controller):
         """
         if mode != Mode.DM_CARTESIAN:
             return _NO_ROWS, _NO_BOUNDS, _NO_BOUNDS
-        lo, hi, x = self.config.ee_box_lower, self.config.ee_box_upper, ctx.kin.x
-        rows = np.flatnonzero(np.isfinite(lo) | np.isfinite(hi))
-        C = self.dt * ctx.kin.J[rows]
-        reach = C @ np.clip(0.0, lb, ub)
-        l = np.minimum(np.minimum(lo[rows], x[rows]) - x[rows], reach)
-        u = np.maximum(np.maximum(hi[rows], x[rows]) - x[rows], reach)
-        return C, np.maximum(l, -INF), np.minimum(u, INF)
+        k = len(self._boxed_axes)
+        C, l, u = np.empty((k, N_V)), np.empty(k), np.empty(k)
+        box_lo, box_hi = self.config.ee_box_lower, self.config.ee_box_upper
+        _ee_box(ctx.kin.J, ctx.kin.x, box_lo, box_hi, self._box_rows, lb, ub, self.dt, C, l, u)
+        return C, l, u
 
     def return_term(self, q: FloatArray) -> FloatArray:
         """Linear cost −dᵢ·v_ret,i that pulls a joint beyond a position limit back in (7,).

@@ -83,11 +83,40 @@ def _dm_gradient(J_arm: FloatArray, dJ_arm: FloatArray, u: FloatArray, W: FloatA
     return h2
 
 
-def dm_cartesian_gradient(grad_q: FloatArray, J_m: FloatArray) -> FloatArray:
+def dm_cartesian_gradient(grad_q: FloatArray, J_m: FloatArray, sigma_min: float | None = None) -> FloatArray:
     """∇_x H2 = ∇_{q_m} H2 · J_m⁺ (3,), eq. (10), with J_m world-aligned.
 
-    J_m⁺ = J_mᵀ (J_m J_mᵀ)⁻¹ is the plain right pseudoinverse (Moore–Penrose, via lstsq
-    so that it stays finite near singularities).
+    J_m⁺ = J_mᵀ (J_m J_mᵀ)⁻¹ is the plain right pseudoinverse. Given σ_min(J_m) ≥ 1e-4 (the
+    controller knows it), the 3×3 normal equations are solved in a compiled kernel; otherwise,
+    or without σ_min, by lstsq (Moore–Penrose, finite next to singularities).
     """
-    y: FloatArray = np.asarray(np.linalg.lstsq(J_m.T, grad_q, rcond=1e-10)[0], dtype=np.float64)
-    return y  # solves J_mᵀ y = gᵀ: y = (J_m⁺)ᵀ gᵀ
+    if sigma_min is not None and sigma_min >= 1e-4 and J_m.shape[0] == 3:
+        y = np.empty(3)
+        _solve_normal3(np.asarray(J_m, dtype=np.float64), np.asarray(grad_q, dtype=np.float64), y)
+        return y
+    out: FloatArray = np.asarray(np.linalg.lstsq(J_m.T, grad_q, rcond=1e-10)[0], dtype=np.float64)
+    return out  # solves J_mᵀ y = gᵀ: y = (J_m⁺)ᵀ gᵀ
+
+
+@jit
+def _solve_normal3(J: FloatArray, g: FloatArray, y: FloatArray) -> None:
+    """y = (J Jᵀ)⁻¹ J g for a 3×n J of full row rank (adjugate of the symmetric 3×3)."""
+    a = b = c = d = e = f = 0.0  # J Jᵀ = [[a, b, c], [b, d, e], [c, e, f]]
+    r0 = r1 = r2 = 0.0  # J g
+    for i in range(J.shape[1]):
+        x0, x1, x2 = J[0, i], J[1, i], J[2, i]
+        a += x0 * x0
+        b += x0 * x1
+        c += x0 * x2
+        d += x1 * x1
+        e += x1 * x2
+        f += x2 * x2
+        r0 += x0 * g[i]
+        r1 += x1 * g[i]
+        r2 += x2 * g[i]
+    A0, A1, A2 = d * f - e * e, c * e - b * f, b * e - c * d
+    B1, B2, C2 = a * f - c * c, b * c - a * e, a * d - b * b
+    det = a * A0 + b * A1 + c * A2
+    y[0] = (A0 * r0 + A1 * r1 + A2 * r2) / det
+    y[1] = (A1 * r0 + B1 * r1 + B2 * r2) / det
+    y[2] = (A2 * r0 + B2 * r1 + C2 * r2) / det

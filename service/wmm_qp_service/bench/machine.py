@@ -7,7 +7,7 @@ import platform
 from importlib import metadata
 from typing import Any
 
-PACKAGES = ("numpy", "pin", "proxsuite", "osqp", "daqp", "qpsolvers", "pin-pink", "eclipse-zenoh")
+PACKAGES = ("numpy", "numba", "pin", "proxsuite", "osqp", "daqp", "qpsolvers", "pin-pink", "eclipse-zenoh")
 
 
 def cpu_model() -> str:

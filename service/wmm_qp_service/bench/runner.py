@@ -70,7 +70,11 @@ def targets(r: dict[str, Any]) -> dict[str, Any]:
     t: dict[str, Any] = {}
     ticks = r.get("tick_us")
     if ticks:
-        best = min(ticks, key=lambda s: ticks[s]["p50"])
+        # The fastest backend: lowest p50; backends within 2 % of it tie at this machine's noise
+        # (each stage tries the closed form first, so p50 hardly depends on the solver), and
+        # among those the lowest p99 decides.
+        low = min(ticks[s]["p50"] for s in ticks)
+        best = min((s for s in ticks if ticks[s]["p50"] <= 1.02 * low), key=lambda s: ticks[s]["p99"])
         t["fastest_backend"] = best
         t["fastest_p50_le_120us"] = ticks[best]["p50"] <= 120.0
         t["fastest_p99_le_250us"] = ticks[best]["p99"] <= 250.0
