@@ -15,6 +15,7 @@ import numpy as np
 
 from ._jit import jit
 from .config import N_ARM, N_WHEELS, FloatArray
+from .linalg3 import gram3
 
 
 def weight_matrix_diag(alpha: float) -> FloatArray:
@@ -59,15 +60,7 @@ def sigma_min(J: FloatArray) -> float:
 
 @jit
 def _sigma_min3(J: FloatArray) -> float:
-    a = b = c = d = e = f = 0.0  # J Jᵀ = [[a, b, c], [b, d, e], [c, e, f]]
-    for i in range(J.shape[1]):
-        x, y, z = J[0, i], J[1, i], J[2, i]
-        a += x * x
-        b += x * y
-        c += x * z
-        d += y * y
-        e += y * z
-        f += z * z
+    a, b, c, d, e, f = gram3(J)  # J Jᵀ = [[a, b, c], [b, d, e], [c, e, f]]
     p1 = b * b + c * c + e * e
     q = (a + d + f) / 3.0
     aq, dq, fq = a - q, d - q, f - q

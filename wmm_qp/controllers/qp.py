@@ -62,6 +62,7 @@ import numpy as np
 
 from .._jit import jit
 from ..config import N_ARM, N_WHEELS, ControllerConfig, FloatArray
+from ..linalg3 import solve_sym3
 from ..model.arm import IntArray
 from ..model.wmm import WmmModel
 from ..pseudoinverse import weight_matrix_diag
@@ -75,6 +76,7 @@ SLACK_ACCEPT = 1e-7  # [m/s] slack below this counts as "the task is met"
 RETURN_TIME = 0.05  # [s] a joint past a position limit is pulled back in over about this long
 _NO_ROWS, _NO_BOUNDS = np.zeros((0, N_V)), np.zeros(0)  # no EE box rows (read only)
 _NO_ROWS.setflags(write=False)
+_NO_HOLD = np.zeros(0)  # stage 2 holds no column
 _NO_BOUNDS.setflags(write=False)
 RETURN_WEIGHT = 1e3  # outweighs minimal-motion costs (the base's too), stays below the task's ρ₁
 
@@ -111,17 +113,11 @@ def _closed_form(
             r[a] += jd * g[i]
             for c in range(3):
                 G[a, c] += jd * A[c, i]
-    # λ = G⁻¹ r by the adjugate (G symmetric)
-    a_, b_, c_, d_, e_, f_ = G[0, 0], G[0, 1], G[0, 2], G[1, 1], G[1, 2], G[2, 2]
-    A0, A1, A2 = d_ * f_ - e_ * e_, c_ * e_ - b_ * f_, b_ * e_ - c_ * d_
-    det = a_ * A0 + b_ * A1 + c_ * A2
+    # λ = G⁻¹ r (G symmetric)
+    det, l0, l1, l2 = solve_sym3(G[0, 0], G[0, 1], G[0, 2], G[1, 1], G[1, 2], G[2, 2], r[0], r[1], r[2])
     if not abs(det) > 1e-300:
         return False
-    B1, B2, C2 = a_ * f_ - c_ * c_, b_ * c_ - a_ * e_, a_ * d_ - b_ * b_
-    lam = np.empty(3)
-    lam[0] = (A0 * r[0] + A1 * r[1] + A2 * r[2]) / det
-    lam[1] = (A1 * r[0] + B1 * r[1] + B2 * r[2]) / det
-    lam[2] = (A2 * r[0] + B2 * r[1] + C2 * r[2]) / det
+    lam = np.array((l0, l1, l2))
     rho1 = g[n]
     for a in range(3):  # the exact penalty's subgradient condition (NaN fails it)
         if not abs(lam[a]) <= rho1:
@@ -150,7 +146,7 @@ def _closed_form(
 
 
 @jit
-def _fill_arm_first(
+def _fill_stage(
     J: FloatArray,
     xdot: FloatArray,
     lo: FloatArray,
@@ -163,43 +159,22 @@ def _fill_arm_first(
     ub: FloatArray,
     w_hold: FloatArray,
 ) -> None:
-    """Stage 1's H, A, b, lb, ub over v_m (wheels held at w_hold, the admissible speed nearest 0)."""
-    n_w, n = w_hold.shape[0], cost.shape[0]
-    for j in range(n_w):
+    """A stage's H, A, b, lb, ub over the last len(cost) columns of v = [v_b; v_m]. The columns
+    before them (the wheels in stage 1; none in stage 2) are held at w_hold, the admissible
+    speed nearest 0, and their motion leaves the stage's task: b = ẋ_ref − J_held w_hold."""
+    first, n = w_hold.shape[0], cost.shape[0]
+    for j in range(first):
         w_hold[j] = min(max(lo[j], 0.0), hi[j])
     for a in range(3):
         r = xdot[a]
-        for j in range(n_w):
+        for j in range(first):
             r -= J[a, j] * w_hold[j]
-        b[a] = r  # the task left to the arm: ẋ_ref − J_b P w_hold
+        b[a] = r
         for i in range(n):
-            A[a, i] = J[a, n_w + i]
+            A[a, i] = J[a, first + i]
     for i in range(n):
         H[i, i] = cost[i]
-        lb[i], ub[i] = lo[n_w + i], hi[n_w + i]
-
-
-@jit
-def _fill_full(
-    J: FloatArray,
-    xdot: FloatArray,
-    lo: FloatArray,
-    hi: FloatArray,
-    cost: FloatArray,
-    H: FloatArray,
-    A: FloatArray,
-    b: FloatArray,
-    lb: FloatArray,
-    ub: FloatArray,
-) -> None:
-    """Stage 2's H, A, b, lb, ub over v = [v_b; v_m]."""
-    for a in range(3):
-        b[a] = xdot[a]
-        for i in range(cost.shape[0]):
-            A[a, i] = J[a, i]
-    for i in range(cost.shape[0]):
-        H[i, i] = cost[i]
-        lb[i], ub[i] = lo[i], hi[i]
+        lb[i], ub[i] = lo[first + i], hi[first + i]
 
 
 @jit
@@ -401,9 +376,7 @@ class QpController(Controller):
         p = self._template(N_ARM, 0)
         w_hold = np.empty(N_WHEELS)
         arm = self.robot.arm
-        _fill_arm_first(
-            ctx.kin.J, xdot, ctx.lo, ctx.hi, self._w_inv[N_WHEELS:], p.H, p.A, p.b, p.lb, p.ub, w_hold
-        )
+        _fill_stage(ctx.kin.J, xdot, ctx.lo, ctx.hi, self._w_inv[N_WHEELS:], p.H, p.A, p.b, p.lb, p.ub, w_hold)
         p.g[:N_ARM] = 0.0
         _add_return_term(ctx.kin.q_arm, arm.position_lower, arm.position_upper, self._return_gain, p.g)
         return p, w_hold
@@ -413,7 +386,7 @@ class QpController(Controller):
         C, l, u = self.ee_box_rows(ctx, mode, ctx.lo, ctx.hi)
         p = self._template(N_V, C.shape[0])
         cost = self.cost_diagonal(ctx, mode)
-        _fill_full(ctx.kin.J, xdot, ctx.lo, ctx.hi, cost, p.H, p.A, p.b, p.lb, p.ub)
+        _fill_stage(ctx.kin.J, xdot, ctx.lo, ctx.hi, cost, p.H, p.A, p.b, p.lb, p.ub, _NO_HOLD)
         p.g[:N_V] = 0.0
         if mode == Mode.DM_NULLSPACE:
             assert ctx.grad_q is not None

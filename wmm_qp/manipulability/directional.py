@@ -17,6 +17,7 @@ import numpy as np
 
 from .._jit import jit
 from ..config import FloatArray
+from ..linalg3 import gram3, solve_sym3
 
 S_MIN = 1e-12  # uᵀ J A Jᵀ u is floored here: H2 ≤ 1e6 where Jᵀu = 0 (a singular direction)
 
@@ -101,22 +102,10 @@ def dm_cartesian_gradient(grad_q: FloatArray, J_m: FloatArray, sigma_min: float 
 @jit
 def _solve_normal3(J: FloatArray, g: FloatArray, y: FloatArray) -> None:
     """y = (J Jᵀ)⁻¹ J g for a 3×n J of full row rank (adjugate of the symmetric 3×3)."""
-    a = b = c = d = e = f = 0.0  # J Jᵀ = [[a, b, c], [b, d, e], [c, e, f]]
     r0 = r1 = r2 = 0.0  # J g
     for i in range(J.shape[1]):
-        x0, x1, x2 = J[0, i], J[1, i], J[2, i]
-        a += x0 * x0
-        b += x0 * x1
-        c += x0 * x2
-        d += x1 * x1
-        e += x1 * x2
-        f += x2 * x2
-        r0 += x0 * g[i]
-        r1 += x1 * g[i]
-        r2 += x2 * g[i]
-    A0, A1, A2 = d * f - e * e, c * e - b * f, b * e - c * d
-    B1, B2, C2 = a * f - c * c, b * c - a * e, a * d - b * b
-    det = a * A0 + b * A1 + c * A2
-    y[0] = (A0 * r0 + A1 * r1 + A2 * r2) / det
-    y[1] = (A1 * r0 + B1 * r1 + B2 * r2) / det
-    y[2] = (A2 * r0 + B2 * r1 + C2 * r2) / det
+        r0 += J[0, i] * g[i]
+        r1 += J[1, i] * g[i]
+        r2 += J[2, i] * g[i]
+    a, b, c, d, e, f = gram3(J)
+    _, y[0], y[1], y[2] = solve_sym3(a, b, c, d, e, f, r0, r1, r2)
