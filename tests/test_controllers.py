@@ -103,6 +103,21 @@ def test_closed_form_sigma_min_matches_the_svd() -> None:
         assert abs(sigma_min(J) - np.linalg.svd(J, compute_uv=False)[-1]) < 1e-7
 
 
+def test_closed_form_sigma_min_near_the_straight_pose() -> None:
+    """Next to the straight (singular) arm the trigonometric form loses digits: the documented
+    bounds (pseudoinverse.sigma_min) hold, far below the 0.08 threshold it is compared with."""
+    from wmm_qp.pseudoinverse import sigma_min
+
+    rng = np.random.default_rng(3)
+    worst = {1e-3: 0.0, 1e-4: 0.0, 0.0: 0.0}
+    for _ in range(1000):
+        J = model().kinematics(np.zeros(3), rng.normal(size=7) * 10.0 ** rng.uniform(-5, -1)).J_m
+        s = np.linalg.svd(J, compute_uv=False)[-1]
+        band = 1e-3 if s >= 1e-3 else 1e-4 if s >= 1e-4 else 0.0
+        worst[band] = max(worst[band], abs(sigma_min(J) - s))
+    assert worst[1e-3] < 1e-7 and worst[1e-4] < 1e-5 and worst[0.0] < 1e-4, worst
+
+
 def test_paper_controller_switches_to_damped_least_squares_below_the_threshold() -> None:
     """σ_min(J_m) just above 0.08: the plain J#; just below: the damped one (paper's controller)."""
     from wmm_qp.pseudoinverse import sigma_min

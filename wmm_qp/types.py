@@ -27,7 +27,7 @@ class Mode(enum.StrEnum):
 
 
 def _vec(a: object, n: int, name: str) -> FloatArray:
-    v = np.asarray(a, dtype=float).reshape(-1)
+    v = np.array(a, dtype=np.float64).reshape(-1)  # an own, writable, contiguous copy
     if v.shape != (n,):
         raise ValueError(f"{name} must have {n} entries, got {v.shape[0]}")
     return v
@@ -54,6 +54,13 @@ class RobotState:
         self.q_arm = _vec(self.q_arm, N_ARM, "q_arm")
         self.v_arm = _vec(self.v_arm, N_ARM, "v_arm")
         self.wheel_speeds = _vec(self.wheel_speeds, N_WHEELS, "wheel_speeds")
+
+    def has_shapes(self) -> bool:
+        """Every field a float vector of its length (the fields may be replaced after construction)."""
+        return all(
+            isinstance(a, np.ndarray) and a.dtype == np.float64 and a.shape == (n,)
+            for a, n in ((self.q_base, 3), (self.q_arm, N_ARM), (self.v_arm, N_ARM), (self.wheel_speeds, N_WHEELS))
+        )
 
     def is_finite(self) -> bool:
         return all(all_finite(a) for a in (self.q_base, self.q_arm, self.v_arm, self.wheel_speeds))

@@ -100,6 +100,8 @@ class Controller(ABC):
     def step(self, state: RobotState, reference: Reference) -> Command:
         """One control tick. Never raises: failures become a safe stop with a reason."""
         try:
+            if not state.has_shapes():  # RobotState is mutable: fields may have been replaced
+                return self.safe_stop(state, "state arrays have the wrong shapes")
             if not state.is_finite():
                 return self.safe_stop(state, "state holds NaN or inf")
             if not reference.is_finite():
@@ -126,8 +128,14 @@ class Controller(ABC):
             q_arm = 0.5 * (lo + hi) + 0.3  # off the straight (singular) pose
         state = RobotState(q_base=np.zeros(3), q_arm=q_arm)
         for mode in Mode:
-            self.step(state, Reference(mode))
+            cmd = self.step(state, Reference(mode))
+            if cmd.status == Status.SAFE_STOP:  # at rest, mid-range: only a broken kernel stops here
+                raise RuntimeError(f"{self.name} controller failed its warm-up tick in {mode}: {cmd.reason}")
         self.reset()
+        self.clear_statistics()
+
+    def clear_statistics(self) -> None:  # noqa: B027 (optional hook, no-op by default)
+        """Zero the controller's diagnostic counters (after :meth:`warm_up`)."""
 
     @abstractmethod
     def _step(self, state: RobotState, reference: Reference) -> Command:

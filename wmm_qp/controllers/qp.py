@@ -271,6 +271,10 @@ class QpController(Controller):
         self._arm.reset()
         self._full.reset()
 
+    def clear_statistics(self) -> None:
+        self.fallbacks = self.closed_form_hits = self.task_checks = 0
+        self.task_recovered = self.task_without_objective = 0
+
     # ------------------------------------------------------------------ building
     def box(self, ctx: TickContext) -> tuple[FloatArray, FloatArray]:
         """Hard bounds on v = [v_b; v_m]: wheel bounds and eq. (13)."""
@@ -313,7 +317,7 @@ class QpController(Controller):
         g = np.zeros(N_V)
         if mode == Mode.DM_NULLSPACE:
             assert ctx.grad_q is not None
-            _add_nullspace_term(self.cost_diagonal(ctx, mode), ctx.grad_q, self.config.k_N, self._v_n_max, g)
+            _add_nullspace_term(self.cost_diagonal(ctx, mode), ctx.grad_q, float(self.config.k_N), self._v_n_max, g)
         return g
 
     def slack_weights(self) -> tuple[float, float]:
@@ -390,7 +394,7 @@ class QpController(Controller):
         p.g[:N_V] = 0.0
         if mode == Mode.DM_NULLSPACE:
             assert ctx.grad_q is not None
-            _add_nullspace_term(cost, ctx.grad_q, self.config.k_N, self._v_n_max, p.g)
+            _add_nullspace_term(cost, ctx.grad_q, float(self.config.k_N), self._v_n_max, p.g)
         arm = self.robot.arm
         _add_return_term(ctx.kin.q_arm, arm.position_lower, arm.position_upper, self._return_gain, p.g[N_WHEELS:])
         if C.shape[0]:

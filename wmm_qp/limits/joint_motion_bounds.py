@@ -127,6 +127,8 @@ class MotionBounds:
 
     def __call__(self, q: FloatArray, v_prev: FloatArray) -> tuple[FloatArray, FloatArray]:
         """(lo, hi) for positions q [rad] and current rates v_prev [rad/s]; lo ≤ hi, finite."""
+        if q.shape != (self.n,) or v_prev.shape != (self.n,):  # the kernel does not bounds-check
+            raise ValueError(f"q and v_prev must have {self.n} entries, got {q.shape} and {v_prev.shape}")
         lo, hi = np.empty(self.n), np.empty(self.n)
         _motion_bounds(q, v_prev, self.q_min, self.q_max, self.v_max, self.a_max, self.dt, self.latency, lo, hi)
         return lo, hi

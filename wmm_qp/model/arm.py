@@ -63,7 +63,10 @@ class ArmModel:
 
     def pin_q(self, q: FloatArray) -> FloatArray:
         """Pinocchio configuration of the 7 joint angles q [rad] (a reused buffer)."""
-        _pin_q(np.asarray(q, dtype=np.float64), self._idx_q, self._nq, self._q)
+        q = np.asarray(q, dtype=np.float64)
+        if q.shape != (N_ARM,):  # the kernel does not bounds-check
+            raise ValueError(f"q must have {N_ARM} entries, got shape {q.shape}")
+        _pin_q(q, self._idx_q, self._nq, self._q)
         return self._q
 
     def position(self, q: FloatArray) -> FloatArray:

@@ -112,6 +112,8 @@ class WmmModel:
     def kinematics(self, q_base: FloatArray, q_arm: FloatArray, hessian: bool = False) -> Kinematics:
         """FK and Jacobians at (q_b, q_m); with ``hessian`` also ∂J_arm/∂q (for eq. (9))."""
         q_base, q_arm = np.asarray(q_base, float), np.asarray(q_arm, float)
+        if q_base.shape != (3,):  # the kernel does not bounds-check
+            raise ValueError(f"q_base must have 3 entries, got shape {q_base.shape}")
         p_arm, J_arm = self.arm.position_jacobian(q_arm)
         R, x, J_b, P, J = _assemble(q_base, p_arm, J_arm, self.mount, self.base.M)  # eqs. (2), (3), (5)
         J_m = J[:, N_WHEELS:]
