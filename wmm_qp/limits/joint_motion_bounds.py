@@ -123,10 +123,13 @@ class MotionBounds:
             np.array(a, dtype=np.float64) for a in (q_min, q_max, v_max, a_max)
         )
         self.n = self.a_max.shape[0]
+        if any(a.shape != (self.n,) for a in (self.q_min, self.q_max, self.v_max)):
+            raise ValueError("q_min, q_max, v_max and a_max must be vectors of one length")
         self.dt, self.latency = float(dt), float(latency)
 
     def __call__(self, q: FloatArray, v_prev: FloatArray) -> tuple[FloatArray, FloatArray]:
         """(lo, hi) for positions q [rad] and current rates v_prev [rad/s]; lo ≤ hi, finite."""
+        q, v_prev = np.asarray(q, dtype=np.float64), np.asarray(v_prev, dtype=np.float64)
         if q.shape != (self.n,) or v_prev.shape != (self.n,):  # the kernel does not bounds-check
             raise ValueError(f"q and v_prev must have {self.n} entries, got {q.shape} and {v_prev.shape}")
         lo, hi = np.empty(self.n), np.empty(self.n)
