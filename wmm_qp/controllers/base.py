@@ -90,7 +90,8 @@ class Controller(ABC):
             config.state_latency,
         )  # eq. (13) for the arm; for the wheels (no position limit) it reduces to the wheel bounds
         self._no_wheel_q = np.zeros(N_WHEELS)
-        self._boxed_axes = np.flatnonzero(np.isfinite(config.ee_box_lower) | np.isfinite(config.ee_box_upper)).tolist()
+        boxed = np.isfinite(config.ee_box_lower) | np.isfinite(config.ee_box_upper)
+        self._boxed_axes = np.flatnonzero(boxed).astype(np.int64)  # the EE box's axes, eq. (17)
         self._u = config.direction / math.sqrt(float(config.direction @ config.direction))  # unit DM direction
 
     def reset(self) -> None:  # noqa: B027 (optional hook, no-op by default)
@@ -159,9 +160,8 @@ class Controller(ABC):
     def context(self, state: RobotState, reference: Reference, need_gradient: bool) -> TickContext:
         """Kinematics, DM (and its gradient when needed), σ_min, damping and bounds (13)."""
         kin = self.model.kinematics(state.q_base, state.q_arm, hessian=need_gradient)
-        u = self._u if reference.direction is None else reference.direction
-        if u is not self._u:
-            u = u / math.sqrt(float(u @ u))
+        d = reference.direction
+        u = self._u if d is None else d / math.sqrt(float(d @ d))
         W = self.config.W
         if need_gradient:
             assert kin.dJ_arm is not None
@@ -199,7 +199,7 @@ class Controller(ABC):
         grad_x = dm_cartesian_gradient(ctx.grad_q, ctx.kin.J_m, ctx.sigma)  # eq. (10)
         lo, hi, x = self.config.ee_box_lower, self.config.ee_box_upper, ctx.kin.x
         v_c = np.zeros(3)
-        for i in self._boxed_axes:  # eq. (17)
+        for i in self._boxed_axes.tolist():  # eq. (17)
             if lo[i] <= x[i] <= hi[i]:
                 v_c[i] = self.config.k_C * grad_x[i]
         return v_c

@@ -253,7 +253,6 @@ class QpController(Controller):
         self._w_inv = 1.0 / weight_matrix_diag(qp.alpha)  # W_x⁻¹, eq. (12)
         self._w_inv_dm = 1.0 / weight_matrix_diag(qp.dm_alpha)  # W_x⁻¹ in DM_NULLSPACE
         self._v_n_max = 10.0 * self.robot.arm.velocity_max
-        self._box_rows = np.array(self._boxed_axes, dtype=np.int64)  # the EE box's axes
         self._return_gain = RETURN_WEIGHT * self._w_inv[N_WHEELS:] / RETURN_TIME  # see return_term
         self._last_problem: QPProblem | None = None
         self.last_stage = ""
@@ -290,10 +289,10 @@ class QpController(Controller):
         """
         if mode != Mode.DM_CARTESIAN:
             return _NO_ROWS, _NO_BOUNDS, _NO_BOUNDS
-        k = len(self._boxed_axes)
+        k = self._boxed_axes.shape[0]
         C, l, u = np.empty((k, N_V)), np.empty(k), np.empty(k)
         box_lo, box_hi = self.config.ee_box_lower, self.config.ee_box_upper
-        _ee_box(ctx.kin.J, ctx.kin.x, box_lo, box_hi, self._box_rows, lb, ub, self.dt, C, l, u)
+        _ee_box(ctx.kin.J, ctx.kin.x, box_lo, box_hi, self._boxed_axes, lb, ub, self.dt, C, l, u)
         return C, l, u
 
     def return_term(self, q: FloatArray) -> FloatArray:
@@ -310,15 +309,6 @@ class QpController(Controller):
         arm = self.robot.arm
         _add_return_term(q, arm.position_lower, arm.position_upper, self._return_gain, out)
         return out
-
-    def linear_term(self, ctx: TickContext, mode: Mode) -> FloatArray:
-        """−W_x⁻¹ v_n with v_n of eq. (19) (clipped to ±10·V) in DM_NULLSPACE, else 0 (for tests
-        and logs: the builder computes it in its compiled fill)."""
-        g = np.zeros(N_V)
-        if mode == Mode.DM_NULLSPACE:
-            assert ctx.grad_q is not None
-            _add_nullspace_term(self.cost_diagonal(ctx, mode), ctx.grad_q, float(self.config.k_N), self._v_n_max, g)
-        return g
 
     def slack_weights(self) -> tuple[float, float]:
         """(ρ₁, ρ₂): the slack's exact penalty and quadratic weight."""
