@@ -8,6 +8,7 @@ from core_fixtures import Q0, config, model, random_arm_q
 
 import wmm_qp as w
 from wmm_qp.pseudoinverse import damping_factor, weight_matrix_diag, weighted_pinv
+from wmm_qp.verify import check_command
 
 
 @pytest.mark.parametrize("alpha", [0.0, 0.2, 0.5, 0.99])  # α = 1: rank 2, see below
@@ -142,3 +143,107 @@ def test_paper_controller_switches_to_damped_least_squares_below_the_threshold()
         np.testing.assert_allclose(cmd.v, expected, atol=1e-12)
         assert (lam > 0) == (key == "below")
         assert (cmd.status == w.Status.DAMPED) == (key == "below")
+
+
+# Malformed input (issue 11, item 12) ---------------------------------------------------------
+ROBOT_WHEELS = model().base.M.shape[1]  # the robot's own sizes, from the model and its config
+ROBOT_JOINTS = model().config.arm.acceleration_max.shape[0]
+FIELDS = {"q_base": 3, "q_arm": ROBOT_JOINTS, "v_arm": ROBOT_JOINTS, "wheel_speeds": ROBOT_WHEELS}
+MOVING_V = np.linspace(-1.0, 1.0, ROBOT_JOINTS) * 0.5  # the robot is moving: the stop must brake
+MOVING_W = np.full(ROBOT_WHEELS, 3.0)
+
+
+def malformed(n: int) -> dict[str, object]:
+    """Every way a state field can be the wrong thing, for a field of n entries."""
+    return {
+        "short": np.zeros(n - 1),
+        "long": np.zeros(n + 1),
+        "2d": np.zeros((2, n)),
+        "column": np.zeros((n, 1)),
+        "scalar": np.float64(0.5),
+        "0d": np.array(0.5),
+        "empty": np.zeros(0),
+        "None": None,
+        "None-array": np.array(None),
+        "object-array": np.array([None] * n),
+        "list": [0.0] * n,
+        "string": "0.0",
+        "float32": np.full(n, 0.25, dtype=np.float32),  # the wrong type, but rates one can brake from
+    }
+
+
+USABLE = {"float32"}  # malformed for the controller, usable rates for the safe stop
+
+
+def moving_state() -> w.RobotState:
+    return w.RobotState(np.zeros(3), Q0, v_arm=MOVING_V, wheel_speeds=MOVING_W)
+
+
+def assert_safe_stop_of_the_robot_s_sizes(cmd: w.Command, state: w.RobotState, bad_field: str, how: str) -> None:
+    """A safe stop of the robot's sizes that brakes from the state's usable rates inside the
+    acceleration bounds; a malformed rate field is unknown: its part is zero, the reason says so."""
+    assert cmd.status == w.Status.SAFE_STOP, cmd.reason
+    for got, n in ((cmd.wheel_speeds, ROBOT_WHEELS), (cmd.arm_rates, ROBOT_JOINTS)):
+        assert isinstance(got, np.ndarray) and got.dtype == np.float64 and got.shape == (n,)
+        assert np.isfinite(got).all()
+    arm, base, dt = model().config.arm, model().config.base, config().dt
+    unknown = bad_field in ("v_arm", "wheel_speeds") and how not in USABLE
+    v0, w0 = (np.asarray(a, dtype=float) for a in (state.v_arm, state.wheel_speeds))
+    if unknown:
+        v0, w0 = (np.zeros(ROBOT_JOINTS), w0) if bad_field == "v_arm" else (v0, np.zeros(ROBOT_WHEELS))
+    a, aw = arm.acceleration_max * dt, base.wheel_acceleration_max * dt
+    np.testing.assert_allclose(cmd.arm_rates, np.sign(v0) * np.maximum(np.abs(v0) - a, 0.0), atol=1e-15, rtol=0)
+    np.testing.assert_allclose(cmd.wheel_speeds, np.sign(w0) * np.maximum(np.abs(w0) - aw, 0.0), atol=1e-15, rtol=0)
+    if unknown:
+        assert f"{bad_field} unusable" in cmd.reason and "commanded 0" in cmd.reason
+    else:
+        assert "unusable" not in cmd.reason
+        good = w.RobotState(np.zeros(3), Q0, v_arm=v0, wheel_speeds=w0)
+        assert sum(check_command(model().config, dt, good, cmd).values()) == 0
+
+
+@pytest.mark.parametrize("kind", ["traditional", "paper", "qp"])
+@pytest.mark.parametrize("field", list(FIELDS))
+@pytest.mark.parametrize("how", list(malformed(7)))
+def test_a_malformed_state_gives_a_safe_stop_of_the_robot_s_sizes(kind: str, field: str, how: str) -> None:
+    ctl = w.make_controller(kind, model(), config())
+    state = moving_state()
+    setattr(state, field, malformed(FIELDS[field])[how])  # RobotState is mutable: a field replaced
+    for mode in w.Mode:
+        cmd = ctl.step(state, w.Reference(mode))
+        assert "wrong shapes" in cmd.reason
+        assert_safe_stop_of_the_robot_s_sizes(cmd, state, field, how)
+
+
+@pytest.mark.parametrize("field", list(FIELDS))
+@pytest.mark.parametrize("how", list(malformed(7)))
+def test_safe_stop_itself_never_raises_and_has_the_robot_s_sizes(field: str, how: str) -> None:
+    ctl = w.make_controller("qp", model(), config())
+    state = moving_state()
+    setattr(state, field, malformed(FIELDS[field])[how])
+    assert_safe_stop_of_the_robot_s_sizes(ctl.safe_stop(state, "test"), state, field, how)
+
+
+@pytest.mark.parametrize("not_a_state", [None, object(), "state", np.zeros(18)])
+def test_safe_stop_of_something_that_is_not_a_state_is_zero(not_a_state: object) -> None:
+    ctl = w.make_controller("qp", model(), config())
+    for cmd in (ctl.safe_stop(not_a_state, "test"), ctl.step(not_a_state, w.Reference("track"))):  # type: ignore[arg-type]
+        assert cmd.status == w.Status.SAFE_STOP
+        np.testing.assert_array_equal(cmd.wheel_speeds, np.zeros(ROBOT_WHEELS))
+        np.testing.assert_array_equal(cmd.arm_rates, np.zeros(ROBOT_JOINTS))
+
+
+@pytest.mark.parametrize("kind", ["traditional", "paper", "qp"])
+@pytest.mark.parametrize("field", ["x_d", "xd_d", "direction", "mode"])
+@pytest.mark.parametrize("how", ["short", "long", "2d", "scalar", "empty", "object-array", "float32", "list", "string"])
+def test_a_malformed_reference_gives_a_safe_stop_not_a_broadcast(kind: str, field: str, how: str) -> None:
+    """x_d of one entry used to broadcast into a command towards a wrong target, a direction of one
+    or five entries reached the (not bounds-checked) DM kernels."""
+    ctl = w.make_controller(kind, model(), config())
+    x = model().ee_position(np.zeros(3), Q0)
+    for mode in w.Mode:
+        ref = w.Reference(mode, x_d=x, direction=[1.0, 0.0, 0.0])
+        setattr(ref, field, malformed(3)[how])
+        cmd = ctl.step(moving_state(), ref)
+        assert "reference arrays have the wrong shapes" in cmd.reason
+        assert_safe_stop_of_the_robot_s_sizes(cmd, moving_state(), "", how)

@@ -33,6 +33,10 @@ def _vec(a: object, n: int, name: str) -> FloatArray:
     return v
 
 
+def _is_vec3(a: object) -> bool:
+    return isinstance(a, np.ndarray) and a.dtype == np.float64 and a.shape == (3,)
+
+
 @dataclass(slots=True)
 class RobotState:
     """What the robot reports (the controller's input).
@@ -90,6 +94,16 @@ class Reference:
         self.xd_d = _vec(self.xd_d, 3, "xd_d")
         if self.direction is not None:
             self.direction = _vec(self.direction, 3, "direction")
+
+    def has_shapes(self) -> bool:
+        """The mode a :class:`Mode` and every array a float vector of 3 (or None where allowed):
+        the fields may be replaced after construction, and the kernels do not bounds-check."""
+        return (
+            isinstance(self.mode, Mode)
+            and _is_vec3(self.xd_d)
+            and (self.x_d is None or _is_vec3(self.x_d))
+            and (self.direction is None or _is_vec3(self.direction))
+        )
 
     def is_finite(self) -> bool:
         d = self.direction

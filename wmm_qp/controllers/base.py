@@ -64,6 +64,21 @@ def _task_error(J: FloatArray, v: FloatArray, xdot_ref: FloatArray) -> float:
     return math.sqrt(s)
 
 
+def _usable_rates(a: object, n: int) -> FloatArray | None:
+    """``a`` as a float vector of n entries, non-finite entries as 0; None unless ``a`` is a
+    real-valued numpy array of shape (n,)."""
+    if not isinstance(a, np.ndarray) or a.shape != (n,) or a.dtype.kind not in "fiu":
+        return None
+    return np.nan_to_num(a.astype(np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+
+
+def _describe(a: object) -> str:
+    """A short description of a malformed field for a reason string."""
+    if isinstance(a, np.ndarray):
+        return f"{a.dtype} array of shape {a.shape}"
+    return type(a).__name__
+
+
 class Controller(ABC):
     """A kinematic controller of the WMM.
 
@@ -90,6 +105,9 @@ class Controller(ABC):
             config.state_latency,
         )  # eq. (13) for the arm; for the wheels (no position limit) it reduces to the wheel bounds
         self._no_wheel_q = np.zeros(N_WHEELS)
+        # the robot's own sizes, for the safe stop (which must not trust the state's arrays)
+        self.n_wheels = int(model.base.M.shape[1])
+        self.n_arm = int(arm.acceleration_max.shape[0])
         boxed = np.isfinite(config.ee_box_lower) | np.isfinite(config.ee_box_upper)
         self._boxed_axes = np.flatnonzero(boxed).astype(np.int64)  # the EE box's axes, eq. (17)
         self._u = config.direction / math.sqrt(float(config.direction @ config.direction))  # unit DM direction
@@ -103,6 +121,8 @@ class Controller(ABC):
         try:
             if not state.has_shapes():  # RobotState is mutable: fields may have been replaced
                 return self.safe_stop(state, "state arrays have the wrong shapes")
+            if not reference.has_shapes():  # so is Reference (the kernels do not bounds-check)
+                return self.safe_stop(state, "reference arrays have the wrong shapes or the mode is unknown")
             if not state.is_finite():
                 return self.safe_stop(state, "state holds NaN or inf")
             if not reference.is_finite():
@@ -143,19 +163,38 @@ class Controller(ABC):
         """The controller's own computation (may raise; :meth:`step` catches)."""
 
     # ------------------------------------------------------------------ helpers
-    def safe_stop(self, state: RobotState, reason: str) -> Command:
-        """Maximal braking inside the acceleration bounds, from the state's rates.
+    def safe_stop(self, state: object, reason: str) -> Command:
+        """Maximal braking inside the acceleration bounds, from the state's rates. Never raises.
 
-        Non-finite rates (a NaN state) are taken as 0: the command is then zero.
+        The command always has the robot's own sizes (``n_wheels`` wheels, ``n_arm`` joints, taken
+        from the model and the robot config), whatever the state holds. Each rate vector is braked
+        from only if it can be trusted: a ``v_arm`` or ``wheel_speeds`` that is not a numeric
+        numpy vector of the robot's length (wrong length, 2-D, a scalar, empty, None, an object
+        array: the state is malformed) is treated as unknown, and its part of the command is the
+        braking step from zero, i.e. zero — the stop command, as the robot's own stale-command
+        stop would apply; the reason says so. Non-finite entries of an otherwise usable vector (a
+        NaN state) are taken as 0 as well.
         """
-        v_arm = np.nan_to_num(np.asarray(state.v_arm, dtype=float), nan=0.0, posinf=0.0, neginf=0.0)
-        w = np.nan_to_num(np.asarray(state.wheel_speeds, dtype=float), nan=0.0, posinf=0.0, neginf=0.0)
-        return Command(
-            wheel_speeds=wheel_braking_command(w, self.robot.base, self.dt),
-            arm_rates=braking_command(v_arm, self.robot.arm.acceleration_max, self.dt),
-            status=Status.SAFE_STOP,
-            reason=reason,
-        )
+        try:
+            w = _usable_rates(getattr(state, "wheel_speeds", None), self.n_wheels)
+            v_arm = _usable_rates(getattr(state, "v_arm", None), self.n_arm)
+            for name, rates in (("wheel_speeds", w), ("v_arm", v_arm)):
+                if rates is None:
+                    reason += f"; {name} unusable ({_describe(getattr(state, name, None))}): rates unknown, commanded 0"
+            a_max, dt = self.robot.arm.acceleration_max, self.dt
+            return Command(
+                wheel_speeds=np.zeros(self.n_wheels) if w is None else wheel_braking_command(w, self.robot.base, dt),
+                arm_rates=np.zeros(self.n_arm) if v_arm is None else braking_command(v_arm, a_max, dt),
+                status=Status.SAFE_STOP,
+                reason=reason,
+            )
+        except Exception as e:  # the last resort: the stop command itself
+            return Command(
+                wheel_speeds=np.zeros(self.n_wheels),
+                arm_rates=np.zeros(self.n_arm),
+                status=Status.SAFE_STOP,
+                reason=f"{reason}; braking failed ({type(e).__name__}): commanded 0",
+            )
 
     def context(self, state: RobotState, reference: Reference, need_gradient: bool) -> TickContext:
         """Kinematics, DM (and its gradient when needed), σ_min, damping and bounds (13)."""
