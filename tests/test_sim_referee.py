@@ -17,11 +17,17 @@ def model() -> wmm_qp.WmmModel:
     return wmm_qp.WmmModel(wmm_qp.load_robot_config())
 
 
-def run(model: wmm_qp.WmmModel, commands: list[tuple[np.ndarray, np.ndarray]]) -> dict[str, int]:
-    sim = SimRobot(model, SimConfig().with_(slip={"enabled": False}))
+def bare() -> SimConfig:
+    """No slip, no firmware: the referee alone (the firmware's own tests are below)."""
+    return SimConfig(firmware=False).with_(slip={"enabled": False})
+
+
+def run(model: wmm_qp.WmmModel, commands: list[tuple[np.ndarray, np.ndarray]],
+        cfg: SimConfig | None = None, ramp: bool = False) -> dict[str, int]:
+    sim = SimRobot(model, cfg or bare(), ramp=ramp)
     sim.reset()
-    for wheels, arm in commands:
-        sim.step(SimCommand(wheels, arm), DT)
+    for k, (wheels, arm) in enumerate(commands):
+        sim.step(SimCommand(wheels, arm, period=CTRL_DT, seq=k), DT)
         sim.step(None, DT)
     return sim.state().violations
 
@@ -29,8 +35,7 @@ def run(model: wmm_qp.WmmModel, commands: list[tuple[np.ndarray, np.ndarray]]) -
 def ramp(model: wmm_qp.WmmModel, fraction: float, n: int) -> list[tuple[np.ndarray, np.ndarray]]:
     """Accelerate every joint and wheel at `fraction` of its limit for n commands, then hold.
 
-    The final repeated command makes the referee judge the last change (it judges a change
-    when the next command arrives).
+    The final repeated command holds the last rate (a change of zero).
     """
     a = np.array(model.config.arm.acceleration_max) * fraction
     wa = model.config.base.wheel_acceleration_max * fraction
@@ -65,7 +70,7 @@ def test_velocity_violation_is_caught(model: wmm_qp.WmmModel) -> None:
 def test_position_violation_is_caught_and_continuous_joints_are_free(
     model: wmm_qp.WmmModel,
 ) -> None:
-    sim = SimRobot(model, SimConfig().with_(slip={"enabled": False}))
+    sim = SimRobot(model, bare())
     upper = np.array(model.config.arm.position_upper)
     q = np.zeros(7)
     q[1] = upper[1] - 0.001
@@ -86,9 +91,46 @@ def test_position_violation_is_caught_and_continuous_joints_are_free(
 
 def test_tolerance_accepts_round_off(model: wmm_qp.WmmModel) -> None:
     vmax = np.array(model.config.arm.velocity_max)
-    sim = SimRobot(model, SimConfig().with_(slip={"enabled": False}))
+    sim = SimRobot(model, bare())
     sim.reset()
-    sim.referee.on_new_rates(0.0, vmax, np.zeros(4), vmax * (1 + 1e-12), np.zeros(4))
+    z = np.zeros(4)
+    sim.referee.on_command(0.0, vmax * (1 + 1e-12), z, vmax, z, period=1.0)
     assert sim.referee.counts["velocity"] == 0
-    sim.referee.on_new_rates(1.0, vmax, np.zeros(4), vmax * (1 + 1e-6), np.zeros(4))
+    sim.referee.on_command(1.0, vmax * (1 + 1e-6), z, vmax, z, period=1.0)
     assert sim.referee.counts["velocity"] == 7
+
+
+def test_the_referee_judges_the_command_as_received_not_as_ramped(model: wmm_qp.WmmModel) -> None:
+    """The drive ramp executes every command within A·dt; a jump in the commands is still
+    counted (before the fix the adapter ramped first and the referee saw only the ramp)."""
+    a = np.array(model.config.arm.acceleration_max)
+    jump = [(np.zeros(4), a * CTRL_DT * 3.0)] * 5  # 3·A·dt from rest in one command
+    v = run(model, jump, ramp=True)
+    assert v["acceleration"] == 7 and v["position"] == 0
+    legal = run(model, ramp(model, 1.0, 50), ramp=True)
+    assert legal == dict.fromkeys(legal, 0)
+
+
+def test_the_drive_ramp_executes_within_the_acceleration_limit(model: wmm_qp.WmmModel) -> None:
+    a = np.array(model.config.arm.acceleration_max)
+    sim = SimRobot(model, bare(), ramp=True)
+    sim.reset()
+    prev = sim.state().v_arm
+    for k in range(60):  # a 25·A·dt jump, then held, as a daemon at 500 Hz would send it
+        st = sim.step(SimCommand(np.zeros(4), a * 0.05, period=CTRL_DT, seq=k), DT) if k % 2 == 0 else sim.step(None, DT)
+        assert np.all(np.abs(st.v_arm - prev) <= a * DT * (1 + 1e-12) + 1e-15)
+        prev = st.v_arm
+    np.testing.assert_allclose(prev, a * 0.05)
+
+
+def test_a_lost_command_widens_the_window(model: wmm_qp.WmmModel) -> None:
+    """Commands 1 and 3 arrive (2 was lost): their change is judged over two periods."""
+    a = np.array(model.config.arm.acceleration_max)
+    sim = SimRobot(model, bare())
+    sim.reset()
+    z = np.zeros(4)
+    sim.step(SimCommand(z, a * CTRL_DT, period=CTRL_DT, seq=1), DT)
+    sim.step(SimCommand(z, a * CTRL_DT * 3, period=CTRL_DT, seq=3), DT)
+    assert sim.state().violations["acceleration"] == 0
+    sim.step(SimCommand(z, a * CTRL_DT * 5, period=CTRL_DT, seq=4), DT)  # 2 A·dt in one period
+    assert sim.state().violations["acceleration"] == 7

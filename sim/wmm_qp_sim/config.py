@@ -85,6 +85,10 @@ class SimConfig:
         rate_hz: [Hz] the sim loop's integration rate (the Zenoh adapter's tick).
         seed: seed of the slip/drift noise.
         stale_timeout: [s] without a new command the sim brakes the robot to rest itself.
+        firmware: model the robot's own protections: refuse commands beyond the rate limits
+            and any motion that could not stop before a position limit, with a protective
+            stop (see :mod:`.robot`). The in-process experiments turn it off, so that the
+            referee measures the controllers themselves.
         slip: base slip and drift model.
         referee: tolerance of the limit referee.
         box: the box of the push experiment, or None (no box).
@@ -93,6 +97,7 @@ class SimConfig:
     rate_hz: float = 1000.0
     seed: int = 0
     stale_timeout: float = 0.025
+    firmware: bool = True
     slip: SlipConfig = field(default_factory=SlipConfig)
     referee: RefereeConfig = field(default_factory=RefereeConfig)
     box: BoxConfig | None = None
@@ -126,7 +131,7 @@ def load_sim_config(path: Path | str | None = None) -> SimConfig:
             return SimConfig()
     path = Path(path)
     r = TomlTable(path, read_toml(path))
-    r.unknown({"rate_hz", "seed", "stale_timeout", "slip", "referee", "box"})
+    r.unknown({"rate_hz", "seed", "stale_timeout", "firmware", "slip", "referee", "box"})
     d = SimConfig()
     seed = r.get("seed", d.seed)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
@@ -162,6 +167,7 @@ def load_sim_config(path: Path | str | None = None) -> SimConfig:
         rate_hz=r.number("rate_hz", d.rate_hz, positive=True),
         seed=seed,
         stale_timeout=r.number("stale_timeout", d.stale_timeout, positive=True),
+        firmware=r.boolean("firmware", d.firmware),
         slip=slip,
         referee=referee,
         box=box,

@@ -4,17 +4,22 @@ It deliberately does not use :mod:`wmm_qp.limits`: the limits come straight from
 config and the checks are written out here. A value is legal when
 ``|v| <= limit·(1 + rtol) + atol`` (``configs/sim.toml`` [referee], default 1e-9 and 1e-9).
 
-Kinds and what one count means:
+The referee judges each **command as it was received** — before the robot's own protections
+(the firmware's refusal and protective stop, the drive's acceleration ramp, see
+:mod:`.robot`) act on it — and the **executed joint positions** after every step. Kinds and
+what one count means:
 
-- ``position``: a (sim step, joint) pair whose angle is outside [lower − tol, upper + tol]
-  after integration; continuous joints (±inf limits) are never counted.
-- ``velocity``: a (new executed rate, joint) pair with |q̇| above velocity_max.
-- ``acceleration``: a (rate change, joint) pair with |q̇_new − q̇_old| / Δt above
-  acceleration_max, where Δt is the time the new rate was held, i.e. the time between this
-  command and the next one (the period over which the controller's bound
-  q̇_prev ± A·Δt allows the change). It is judged when the next command (or stale-stop braking
-  step) arrives, so the count lags one command.
-- ``wheel_speed`` / ``wheel_acceleration``: the same for the four wheels.
+- ``position``: a (sim step, joint) pair whose executed angle is outside
+  [lower − tol, upper + tol]; continuous joints (±inf limits) are never counted.
+- ``velocity``: a (received command, joint) pair with |q̇_cmd| above velocity_max.
+- ``acceleration``: a (received command, joint) pair with |q̇_cmd,k − q̇_cmd,k−1| above
+  acceleration_max·Δt. Δt is the command's own period times the number of periods since the
+  previous command (``SimCommand.period`` × seq gap: a lost command widens the window), or,
+  when the command gives no period (in-process experiments), the time since the previous
+  command. After a break in the stream (the first command, or the first after a stale or
+  protective stop) the baseline is the executed rate and Δt one period: the command must
+  start from what the robot is doing.
+- ``wheel_speed`` / ``wheel_acceleration``: the same for the wheels.
 """
 
 from __future__ import annotations
@@ -46,12 +51,17 @@ class Referee:
         self.wa_max = float(b.wheel_acceleration_max)
         self.rtol, self.atol = config.rtol, config.atol
         self.counts: dict[str, int] = dict.fromkeys(VIOLATION_KINDS, 0)
-        self._pending: tuple[FloatArray, FloatArray, float] | None = None
+        self._prev: tuple[FloatArray, FloatArray, float, int | None] | None = None
 
     def reset(self) -> None:
-        """Zero every count and forget the pending rate change."""
+        """Zero every count and forget the previous command."""
         self.counts = dict.fromkeys(VIOLATION_KINDS, 0)
-        self._pending = None
+        self._prev = None
+
+    def break_stream(self) -> None:
+        """The robot stopped following the command stream (stale or protective stop): the next
+        command is judged against the executed rates."""
+        self._prev = None
 
     def _exceeds(self, value: FloatArray, limit: FloatArray | float) -> int:
         return int(
@@ -66,24 +76,39 @@ class Referee:
             bad = (q_arm < self.q_lo - tol_lo) | (q_arm > self.q_hi + tol_hi)
         self.counts["position"] += int(np.count_nonzero(bad))
 
-    def on_new_rates(
-        self, t: float, v_old: FloatArray, w_old: FloatArray, v_new: FloatArray, w_new: FloatArray
+    def on_command(
+        self,
+        t: float,
+        v_cmd: FloatArray,
+        w_cmd: FloatArray,
+        v_exec: FloatArray,
+        w_exec: FloatArray,
+        period: float | None = None,
+        seq: int | None = None,
     ) -> None:
-        """A new executed rate starts at time t [s] (a command, or a braking step).
+        """Judge a command as received at sim time t [s].
 
-        Judges the previous change over the time its rate was held, checks the new rates'
-        magnitudes, and keeps this change pending until the next one.
+        Args:
+            t: [s] sim time of receipt.
+            v_cmd, w_cmd: [rad/s] the commanded joint rates and wheel speeds.
+            v_exec, w_exec: [rad/s] the rates the robot executes at receipt (the baseline
+                after a break in the stream).
+            period: [s] the command's own period (the Δt its sender's bounds assume), or None.
+            seq: the command's sequence number (with ``period``: lost commands widen Δt).
         """
-        self._judge_pending(t)
-        self.counts["velocity"] += self._exceeds(v_new, self.v_max)
-        self.counts["wheel_speed"] += self._exceeds(w_new, self.w_max)
-        self._pending = (v_new - v_old, w_new - w_old, t)
-
-    def _judge_pending(self, t: float) -> None:
-        if self._pending is None:
-            return
-        dv, dw, t0 = self._pending
-        held = t - t0
-        self.counts["acceleration"] += self._exceeds(dv, self.a_max * held)
-        self.counts["wheel_acceleration"] += self._exceeds(dw, self.wa_max * held)
-        self._pending = None
+        self.counts["velocity"] += self._exceeds(v_cmd, self.v_max)
+        self.counts["wheel_speed"] += self._exceeds(w_cmd, self.w_max)
+        prev = self._prev
+        if prev is None:  # a new stream: it must start from what the robot executes
+            base_v, base_w, held = v_exec, w_exec, period
+        else:
+            base_v, base_w, t_prev, seq_prev = prev
+            if period is not None:
+                gap = seq - seq_prev if (seq is not None and seq_prev is not None) else 1
+                held = period * max(gap, 1)
+            else:
+                held = t - t_prev
+        if held is not None and held > 0.0:
+            self.counts["acceleration"] += self._exceeds(v_cmd - base_v, self.a_max * held)
+            self.counts["wheel_acceleration"] += self._exceeds(w_cmd - base_w, self.wa_max * held)
+        self._prev = (v_cmd.copy(), w_cmd.copy(), t, seq)

@@ -35,10 +35,16 @@ class SimCommand:
     Attributes:
         wheel_speeds: [rad/s] wheel speeds (FL, FR, RL, RR).
         arm_rates: [rad/s] joint rates.
+        period: [s] the command's own period (the Δt of its sender's bounds (13)); the referee
+            judges the change from the previous command over it. None: over the time since the
+            previous command.
+        seq: the sender's sequence number (a gap widens the referee's window), or None.
     """
 
     wheel_speeds: FloatArray
     arm_rates: FloatArray
+    period: float | None = None
+    seq: int | None = None
 
     def __post_init__(self) -> None:
         self.wheel_speeds = np.asarray(self.wheel_speeds, dtype=float).reshape(-1)
@@ -75,6 +81,11 @@ class SimState:
         stale_stop: the sim is braking because commands went stale.
         rejected_commands: malformed commands ignored since reset.
         commands: valid commands received since reset.
+        protective_stop: the firmware is braking the robot (or holds it at rest) after a
+            command it refused.
+        protective_stops: protective stops since reset.
+        protective_reason: why the last protective stop started ("" = none yet).
+        refused_commands: commands the firmware refused since reset.
     """
 
     t: float
@@ -93,6 +104,10 @@ class SimState:
     stale_stop: bool
     rejected_commands: int = 0
     commands: int = 0
+    protective_stop: bool = False
+    protective_stops: int = 0
+    protective_reason: str = ""
+    refused_commands: int = 0
 
 
 class SimRobot:
@@ -102,9 +117,12 @@ class SimRobot:
         model: the robot's kinematic model (its config gives the limits the referee enforces).
         config: the sim's config.
         seed: seed of the slip/drift noise; None = ``config.seed``.
+        ramp: the drives ramp the executed rates towards the command at the acceleration
+            limits (see the module docstring); False: each command is executed at once.
     """
 
-    def __init__(self, model: wmm_qp.WmmModel, config: SimConfig, seed: int | None = None) -> None:
+    def __init__(self, model: wmm_qp.WmmModel, config: SimConfig, seed: int | None = None,
+                 ramp: bool = False) -> None:
         self.model = model
         self.config = config
         self.seed = config.seed if seed is None else seed
@@ -114,6 +132,15 @@ class SimRobot:
         self.torque_limit = np.array(model.config.arm.torque_limit, dtype=float)
         self.a_max = np.array(model.config.arm.acceleration_max, dtype=float)
         self.wa_max = float(model.config.base.wheel_acceleration_max)
+        arm = model.config.arm
+        self.q_lo = np.array(arm.position_lower, dtype=float)
+        self.q_hi = np.array(arm.position_upper, dtype=float)
+        self.v_max = np.array(arm.velocity_max, dtype=float)
+        self.w_max = float(model.config.base.wheel_speed_max)
+        tol = config.referee
+        self._v_tol = self.v_max * (1.0 + tol.rtol) + tol.atol
+        self._w_tol = self.w_max * (1.0 + tol.rtol) + tol.atol
+        self.ramp = ramp
         self.reset()
 
     def reset(
@@ -145,6 +172,12 @@ class SimRobot:
         self.stale = False
         self.rejected = 0
         self.n_commands = 0
+        self.target_arm = np.zeros(N_ARM)  # the command the drives follow
+        self.target_wheels = np.zeros(N_WHEELS)
+        self.protective = False
+        self.protective_stops = 0
+        self.protective_reason = ""
+        self.refused = 0
         self.tau = np.zeros(N_ARM)
         self.force = np.zeros(3)
         self.stalled_joint: int | None = None
@@ -164,30 +197,78 @@ class SimRobot:
             self.rejected += 1
             command = None
         if command is not None:
-            self._set_rates(command.arm_rates.copy(), command.wheel_speeds.copy())
-            self.t_last_command = self.t
-            self.stale = False
-            self.n_commands += 1
-        elif self.t - self.t_last_command >= self.config.stale_timeout - 1e-12:
+            self._receive(command)
+        elif self.t - self.t_last_command >= self.config.stale_timeout - 1e-12 and not self.stale:
             self.stale = True
-        if self.stale:
-            self._brake(dt)
+            self.referee.break_stream()
+        if self.stale or self.protective:
+            v, w = self._braked(dt)
+        elif self.ramp:
+            v = self.v_arm + np.clip(self.target_arm - self.v_arm, -self.a_max * dt, self.a_max * dt)
+            w = self.wheels + np.clip(self.target_wheels - self.wheels, -self.wa_max * dt, self.wa_max * dt)
+        else:
+            v, w = self.target_arm, self.target_wheels
+        if self.config.firmware and not self.protective and (j := self._cannot_stop(v, dt)) >= 0:
+            side = "upper" if v[j] > 0 else "lower"
+            self._protective_stop(f"joint {j + 1} at {self.q_arm[j]:.4f} rad moving {v[j]:.3f} rad/s "
+                                  f"could not stop before its {side} limit")
+            v, w = self._braked(dt)
+        self.v_arm, self.wheels = np.array(v, dtype=float), np.array(w, dtype=float)
         self._integrate(dt)
         self.t += dt
         self.referee.check_positions(self.q_arm)
         return self.state()
 
-    def _set_rates(self, v_arm: FloatArray, wheels: FloatArray) -> None:
-        self.referee.on_new_rates(self.t, self.v_arm, self.wheels, v_arm, wheels)
-        self.v_arm, self.wheels = v_arm, wheels
+    def _receive(self, command: SimCommand) -> None:
+        """A valid command arrived: the referee judges it as received, then the firmware."""
+        arm, wheels = command.arm_rates, command.wheel_speeds
+        self.referee.on_command(self.t, arm, wheels, self.v_arm, self.wheels,
+                                period=command.period, seq=command.seq)
+        self.n_commands += 1
+        self.t_last_command = self.t
+        self.stale = False
+        if self.config.firmware:
+            bad_v = np.flatnonzero(np.abs(arm) > self._v_tol)
+            bad_w = np.flatnonzero(np.abs(wheels) > self._w_tol)
+            if bad_v.size or bad_w.size:
+                self.refused += 1
+                what = (f"joint {bad_v[0] + 1} rate {arm[bad_v[0]]:.3g} rad/s beyond {self.v_max[bad_v[0]]:.3g}"
+                        if bad_v.size else
+                        f"wheel {bad_w[0] + 1} speed {wheels[bad_w[0]]:.3g} rad/s beyond {self.w_max:.3g}")
+                self._protective_stop(f"refused command: {what}")
+                return
+            if self.protective:
+                if self.v_arm.any() or self.wheels.any():
+                    self.refused += 1  # still braking: commands wait until the robot is at rest
+                    return
+                self.protective = False  # at rest, and a legal command: resume
+                self.referee.break_stream()
+        self.target_arm, self.target_wheels = arm.copy(), wheels.copy()
 
-    def _brake(self, dt: float) -> None:
-        """One braking step toward rest at the acceleration limits."""
-        if not (self.v_arm.any() or self.wheels.any()):
-            return
+    def _protective_stop(self, why: str) -> None:
+        if not self.protective:
+            self.protective_stops += 1
+        self.protective = True
+        self.protective_reason = why
+        self.referee.break_stream()
+
+    def _braked(self, dt: float) -> tuple[FloatArray, FloatArray]:
+        """One braking step toward rest at the acceleration limits; the targets become rest."""
+        self.target_arm = np.zeros(N_ARM)
+        self.target_wheels = np.zeros(N_WHEELS)
         dv = np.clip(-self.v_arm, -self.a_max * dt, self.a_max * dt)
         dw = np.clip(-self.wheels, -self.wa_max * dt, self.wa_max * dt)
-        self._set_rates(self.v_arm + dv, self.wheels + dw)
+        return self.v_arm + dv, self.wheels + dw
+
+    def _cannot_stop(self, v: FloatArray, dt: float) -> int:
+        """The first joint that, after one step at rate v, could not brake to rest at its
+        acceleration limit before its position limit (-1: none). Braking distance v²/(2A)."""
+        q = self.q_arm + v * dt
+        stop = v * np.abs(v) / (2.0 * self.a_max)
+        with np.errstate(invalid="ignore"):
+            bad = ((v > 0) & (q + stop > self.q_hi)) | ((v < 0) & (q + stop < self.q_lo))
+        idx = np.flatnonzero(bad)
+        return int(idx[0]) if idx.size else -1
 
     def _integrate(self, dt: float) -> None:
         q_new = self.q_arm + self.v_arm * dt
@@ -230,6 +311,10 @@ class SimRobot:
             stale_stop=self.stale,
             rejected_commands=self.rejected,
             commands=self.n_commands,
+            protective_stop=self.protective,
+            protective_stops=self.protective_stops,
+            protective_reason=self.protective_reason,
+            refused_commands=self.refused,
         )
 
     def robot_state(self) -> wmm_qp.RobotState:

@@ -42,7 +42,7 @@ def run(delay: int, duration: float = 20.0) -> tuple[dict[str, int], float]:
         hist.append(sim.robot_state())
         x, xd = circle(x0, k * dt)
         cmd = s.controller.step(hist[0], w.Reference(mode=w.Mode.TRACK, x_d=x, xd_d=xd))
-        st = sim.step(SimCommand(cmd.wheel_speeds, cmd.arm_rates), dt / n_sub)
+        st = sim.step(SimCommand(cmd.wheel_speeds, cmd.arm_rates, period=dt, seq=k), dt / n_sub)
         for _ in range(n_sub - 1):
             st = sim.step(None, dt / n_sub)
         worst = max(worst, float(np.max(st.q_arm - hi)))

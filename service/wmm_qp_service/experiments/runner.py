@@ -209,7 +209,7 @@ def run(
         rows["tau"].append(st.tau)
         rows["box"].append(st.box_displacement)
         rows["stall"].append(-1 if st.stalled_joint is None else st.stalled_joint)
-        st = sim.step(SimCommand(cmd.wheel_speeds, cmd.arm_rates), sim_dt)
+        st = sim.step(SimCommand(cmd.wheel_speeds, cmd.arm_rates, period=dt, seq=k), sim_dt)
         for _ in range(n_sub - 1):
             st = sim.step(None, sim_dt)
         if bar is not None and k % 50 == 0:
@@ -292,7 +292,9 @@ def make_setup(
     if solver is not None:
         cfg = cfg.with_(qp={"solver": solver})
     ctl = wmm_qp.make_controller(controller, model, cfg)
-    sim_cfg = load_sim_config()
+    # firmware off: the experiments measure the controllers, so the referee must see what a
+    # controller commands without the robot's own protective stop masking it
+    sim_cfg = load_sim_config().with_(firmware=False)
     if not slip:
         sim_cfg = sim_cfg.with_(slip={"enabled": False})
     return Setup(model=model, controller=ctl, ctl_cfg=cfg, sim_cfg=sim_cfg, seed=seed)
