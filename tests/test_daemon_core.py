@@ -25,18 +25,26 @@ class Plant:
         self.q_arm = np.array(w.PAPER_START_Q_ARM)
         self.v_arm = np.zeros(7)
         self.wheels = np.zeros(4)
+        self.seq = 0
+        self.instance = "sim-A"
+        self.violations: dict[str, int] = {"position": 0}
+        self.cmd_seq = -1
 
     def apply(self, cmd: w.Command) -> None:
         self.v_arm, self.wheels = cmd.arm_rates.copy(), cmd.wheel_speeds.copy()
         self.q_arm = self.q_arm + DT * self.v_arm
         self.q_base = self.q_base + DT * (self.model.base.P(float(self.q_base[2])) @ self.wheels)
 
-    def msg(self) -> StateMsg:
-        return StateMsg(robot="wmm", t=0.0, q_base=self.q_base.tolist(), q_arm=self.q_arm.tolist(),
-                        v_arm=self.v_arm.tolist(), wheel_speeds=self.wheels.tolist(),
-                        base_true=self.q_base.tolist(),
-                        ee_true=self.model.ee_position(self.q_base, self.q_arm).tolist(),
-                        tau=[0.0] * 7, contact_force=[0.0] * 3)
+    def msg(self, **kw: object) -> StateMsg:
+        self.seq += 1
+        d: dict[str, object] = dict(
+            robot="wmm", seq=self.seq, stamp=0.0, t=0.0, q_base=self.q_base.tolist(),
+            q_arm=self.q_arm.tolist(), v_arm=self.v_arm.tolist(), wheel_speeds=self.wheels.tolist(),
+            base_true=self.q_base.tolist(), ee_true=self.model.ee_position(self.q_base, self.q_arm).tolist(),
+            tau=[0.0] * 7, contact_force=[0.0] * 3, instance=self.instance, lease="core",
+            violations=dict(self.violations), cmd_seq=self.cmd_seq)
+        d.update(kw)
+        return StateMsg(**d)  # type: ignore[arg-type]
 
 
 @pytest.fixture(scope="module")
@@ -55,7 +63,7 @@ def run(core: ControlCore, plant: Plant, t: float, n: int,
     for _ in range(n):
         core.on_state(plant.msg(), t)
         if setpoint is not None:
-            core.on_setpoint(SetpointMsg(robot="wmm", stamp=t, x=setpoint.tolist()), t)
+            core.on_setpoint(SetpointMsg(robot="wmm", seq=1, stamp=t, x=setpoint.tolist(), source="op"), t)
         cmd = core.tick(t)
         assert cmd is not None
         plant.apply(cmd)
@@ -82,13 +90,13 @@ def test_no_command_before_a_state(robot: w.RobotConfig) -> None:
 def test_tracks_a_stream_and_mode_changes_never_jump(robot: w.RobotConfig) -> None:
     core, plant = make(robot)
     x0 = core.model.ee_position(plant.q_base, plant.q_arm)
-    core.on_mode(ModeMsg(robot="wmm", mode="track"))
+    core.on_mode(ModeMsg(robot="wmm", seq=1, stamp=0.0, mode="track"))
     t, cmds = run(core, plant, 0.0, 600, setpoint=x0 + np.array([0.05, 0.03, -0.02]))
     x = core.model.ee_position(plant.q_base, plant.q_arm)
     assert np.linalg.norm(x - (x0 + np.array([0.05, 0.03, -0.02]))) < 2e-3
     all_cmds = list(cmds)
     for mode in ("hold", "dm_nullspace", "dm_cartesian", "track", "hold"):
-        core.on_mode(ModeMsg(robot="wmm", mode=mode))
+        core.on_mode(ModeMsg(robot="wmm", seq=1, stamp=0.0, mode=mode))
         t, cmds = run(core, plant, t, 150, setpoint=x0 + np.array([-0.05, 0.0, 0.0]))
         all_cmds += cmds
     assert max_step_ratio(robot, all_cmds) <= 1.0 + 1e-6  # inside A·dt every tick
@@ -104,7 +112,7 @@ def test_setpoints_are_ignored_in_hold(robot: w.RobotConfig) -> None:
 def test_stale_setpoints_bring_the_target_to_rest(robot: w.RobotConfig) -> None:
     core, plant = make(robot)
     x0 = core.model.ee_position(plant.q_base, plant.q_arm)
-    core.on_mode(ModeMsg(robot="wmm", mode="track"))
+    core.on_mode(ModeMsg(robot="wmm", seq=1, stamp=0.0, mode="track"))
     t, _ = run(core, plant, 0.0, 50, setpoint=x0 + np.array([0.3, 0.0, 0.0]))
     assert not core.smoother.resting
     t, _ = run(core, plant, t, 500)  # no more setpoints for 1 s > setpoint_timeout
@@ -114,7 +122,7 @@ def test_stale_setpoints_bring_the_target_to_rest(robot: w.RobotConfig) -> None:
 def test_stale_state_gives_a_safe_stop_inside_the_bounds(robot: w.RobotConfig) -> None:
     core, plant = make(robot)
     x0 = core.model.ee_position(plant.q_base, plant.q_arm)
-    core.on_mode(ModeMsg(robot="wmm", mode="track"))
+    core.on_mode(ModeMsg(robot="wmm", seq=1, stamp=0.0, mode="track"))
     t, cmds = run(core, plant, 0.0, 300, setpoint=x0 + np.array([0.3, 0.2, 0.0]))
     assert np.abs(cmds[-1].v).max() > 1e-3
     stops = []

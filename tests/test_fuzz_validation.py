@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.daemon import ControlCore
 from wmm_qp_service.fuzz import KEYS, KINDS, Mutator, templates
-from wmm_qp_service.protocol import CommandMsg, ModeMsg, SetpointMsg, StateMsg
+from wmm_qp_service.protocol import PROTOCOL_VERSION, CommandMsg, ModeMsg, SetpointMsg, StateMsg
 from wmm_qp_service.validation import Reject, Validator
 
 import wmm_qp as w
@@ -36,7 +36,7 @@ def validators() -> dict[str, Validator[Any]]:
 
 def well_formed(msg: msgspec.Struct) -> None:
     """What every accepted message guarantees."""
-    assert msg.robot == ROBOT and msg.v == 1  # type: ignore[attr-defined]
+    assert msg.robot == ROBOT and msg.v == PROTOCOL_VERSION  # type: ignore[attr-defined]
     assert math.isfinite(msg.stamp)  # type: ignore[attr-defined]
     sizes = {"q_base": 3, "q_arm": 7, "v_arm": 7, "wheel_speeds": 4, "x": 3, "xd": 3, "direction": 3,
              "arm_rates": 7}
@@ -119,10 +119,10 @@ def test_mutation_fuzz_through_the_validators_and_the_controller() -> None:
                 core.on_mode(msg)
             # accepted forged states are not fed: the plant below is the truth
         if i % 4 == 3:  # one control tick per four messages, with the true state
-            core.on_state(StateMsg(robot=ROBOT, t=t, q_base=q_base.tolist(), q_arm=q_arm.tolist(),
-                                   v_arm=v_arm.tolist(), wheel_speeds=wheels.tolist(),
+            core.on_state(StateMsg(robot=ROBOT, seq=i + 1, stamp=t, t=t, q_base=q_base.tolist(),
+                                   q_arm=q_arm.tolist(), v_arm=v_arm.tolist(), wheel_speeds=wheels.tolist(),
                                    base_true=q_base.tolist(), ee_true=[0.0] * 3, tau=[0.0] * 7,
-                                   contact_force=[0.0] * 3), t)
+                                   contact_force=[0.0] * 3, instance="sim"), t)
             cmd = core.tick(t)
             assert cmd is not None
             assert np.isfinite(cmd.arm_rates).all() and np.isfinite(cmd.wheel_speeds).all()
@@ -152,12 +152,12 @@ def test_one_bogus_stamp_does_not_freeze_the_velocity_estimate() -> None:
 
 def test_non_finite_stamp_is_rejected() -> None:
     v = validators()["setpoint"]
-    bad = msgspec.msgpack.encode(SetpointMsg(robot=ROBOT, stamp=math.inf, x=[0.6, 0.0, 0.5]))
+    bad = msgspec.msgpack.encode(SetpointMsg(robot=ROBOT, seq=1, stamp=math.inf, x=[0.6, 0.0, 0.5], source="op"))
     assert v(bad) is None and v.rejected == Counter({"non_finite": 1})
 
 
 def test_huge_payload_is_rejected_before_decoding() -> None:
     v = validators()["setpoint"]
-    big = msgspec.msgpack.encode(SetpointMsg(robot=ROBOT, x=[0.5] * 20_000))
+    big = msgspec.msgpack.encode(SetpointMsg(robot=ROBOT, seq=1, stamp=0.0, x=[0.5] * 20_000, source="op"))
     assert v(big) is None and v.rejected == Counter({"size": 1})
     assert "bytes exceeds" in v.last_rejection

@@ -16,6 +16,7 @@ Example::
 from __future__ import annotations
 
 import contextlib
+import secrets
 import time
 from collections.abc import Sequence
 from types import TracebackType
@@ -35,13 +36,16 @@ class Client:
 
     Args:
         svc: service config (prefix, robot id, endpoints).
-        name: this client's name (its liveliness token is ``alive/<name>``).
+        name: this client's name (its liveliness token is ``alive/<name>``). Its setpoints
+            carry ``source = "<name>-<random>"`` (:attr:`source`): one operator holds the
+            daemon's setpoint stream at a time.
         telemetry: also subscribe to per-tick telemetry (see :meth:`telemetry`).
     """
 
     def __init__(self, svc: ServiceConfig, name: str = "client", telemetry: bool = False) -> None:
         self.svc = svc
         self.name = name
+        self.source = f"{name}-{secrets.token_hex(4)}"
         self.keys = Keys.of(svc.prefix, svc.robot)
         self._want_telemetry = telemetry
         self._seq = 0
@@ -92,7 +96,8 @@ class Client:
     def send_setpoint(self, x: Sequence[float] | Any, xd: Sequence[float] | Any | None = None) -> None:
         """Stream an EE target x [m] (world); xd [m/s] its velocity (None: the daemon estimates)."""
         msg = SetpointMsg(robot=self.svc.robot, seq=self._next(), stamp=time.time(),
-                          x=[float(v) for v in x], xd=None if xd is None else [float(v) for v in xd])
+                          x=[float(v) for v in x], xd=None if xd is None else [float(v) for v in xd],
+                          source=self.source)
         self._pub_sp.put(encode(msg))
 
     def set_mode(self, mode: str, direction: Sequence[float] | None = None) -> None:
@@ -115,6 +120,28 @@ class Client:
         self.session.put(f"{self.keys.root}/{key}", payload)
 
     # ------------------------------------------------------------------ reading
+    def daemon_alive(self, timeout: float = 0.5) -> bool:
+        """The daemon's liveliness token for this robot is present."""
+        assert self.session is not None
+        replies = self.session.liveliness().get(self.keys.alive("daemon"), timeout=timeout)
+        return any(r.ok is not None for r in replies)
+
+    def robots(self, timeout: float = 0.5) -> list[str]:
+        """``<prefix>/<robot>`` of every robot whose daemon this session can see (liveliness)."""
+        assert self.session is not None
+        prefix = self.svc.prefix.strip("/")
+        out = set()
+        for r in self.session.liveliness().get(f"{prefix}/*/alive/daemon", timeout=timeout):
+            if r.ok is not None:
+                out.add(str(r.ok.key_expr).removesuffix("/alive/daemon"))
+        return sorted(out)
+
+    def no_daemon_reason(self) -> str:
+        """Why no daemon answers: "no daemon for robot X" and the robots that are seen."""
+        seen = self.robots()
+        return (f"no daemon for robot {self.keys.root} (no liveliness token {self.keys.alive('daemon')}); "
+                f"daemons seen: {', '.join(seen) if seen else 'none'}")
+
     def info(self, timeout: float = 2.0) -> InfoMsg | None:
         """Query the daemon's status and configuration (None: no daemon answered)."""
         assert self.session is not None
@@ -127,9 +154,14 @@ class Client:
         return None
 
     def wait_for_daemon(self, timeout: float = 10.0) -> InfoMsg | None:
-        """Query until the daemon answers (None after ``timeout`` [s])."""
+        """Query until the daemon answers (None after ``timeout`` [s]; then
+        :meth:`no_daemon_reason` says why). Queries are sent only while the daemon's liveliness
+        token is present, so a mistyped robot id costs no query time-outs."""
         end = time.monotonic() + timeout
         while time.monotonic() < end:
+            if not self.daemon_alive(timeout=min(0.5, max(0.05, end - time.monotonic()))):
+                time.sleep(0.05)
+                continue
             info = self.info(timeout=min(1.0, max(0.1, end - time.monotonic())))
             if info is not None:
                 return info

@@ -42,6 +42,8 @@ class LoopConfig:
         telemetry_every: publish telemetry every N ticks (0 = never).
         rt_priority: SCHED_FIFO priority of the control thread (1–99; 0 = normal scheduling).
             Needs CAP_SYS_NICE (root); without it the daemon says so and runs normally.
+        queries_per_tick: ``info`` queries answered per tick at most (the others wait in
+            their FIFO for the next ticks), so a burst of queries cannot stall the loop.
     """
 
     rate_hz: float = 500.0
@@ -49,6 +51,7 @@ class LoopConfig:
     status_hz: float = 10.0
     telemetry_every: int = 1
     rt_priority: int = 0
+    queries_per_tick: int = 1
 
 
 @dataclass(frozen=True)
@@ -62,11 +65,25 @@ class WatchdogConfig:
             (sim.toml ``stale_timeout``) plus the state's age. The controller's bounds (13)
             brake from where the joints can be by then (its ``state_latency``), so a stalled
             daemon cannot push a joint past a position limit.
+        state_age_max: [s] the state age bounds (13) allow for: ``command_hold`` minus the
+            robot's command timeout. The daemon measures the age without shared clocks, as the
+            round trip from publishing command k to reading a state that applied it (the
+            smallest of the last ``ROUND_TRIPS`` ticks, so jitter does not count); above this
+            it is a fault and a safe stop (a slow link, a constant delay).
+        resume: after a safe stop ends (the fault cleared), ``manual``: hold where the robot
+            is until a mode message resumes (``status.resume_needed``); ``auto``: go on with
+            the last mode by itself.
+        operator_timeout: [s] one operator holds the setpoint stream while its setpoints keep
+            arriving; another source is refused (counted, reported) until the holder has been
+            silent this long.
     """
 
     state_timeout: float = 0.05
     setpoint_timeout: float = 0.25
     command_hold: float = 0.03
+    state_age_max: float = 0.005
+    resume: str = "manual"
+    operator_timeout: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -184,6 +201,10 @@ def load_service_config(path: Path | str | None = None) -> ServiceConfig:
     )
     if cfg.validation.z_min >= cfg.validation.z_max:
         raise ConfigError(p, "validation.z_min", "must be < validation.z_max")
+    if cfg.watchdog.resume not in ("manual", "auto"):
+        raise ConfigError(p, "watchdog.resume", f"must be \"manual\" or \"auto\", got {cfg.watchdog.resume!r}")
+    if cfg.loop.queries_per_tick < 1:
+        raise ConfigError(p, "loop.queries_per_tick", "must be >= 1")
     return cfg
 
 

@@ -5,6 +5,11 @@ lost), the latest setpoint (ring, depth 1), the ``info`` queries and the sim's l
 validate everything on receipt; run the watchdogs; smooth the setpoint (Ruckig); call the
 controller ``ctl.step(state, ref)``; publish the command; publish status and telemetry.
 Nothing in the loop raises: failures become a safe stop and a reason in the status.
+
+One controller per robot: the daemon holds the robot's control lease (a liveliness token
+``<robot>/lease/<id>``); a second daemon finds the token at start and refuses to start
+(:class:`LeaseHeld`) or waits for it. The sim applies commands only from the holder, and
+only those addressed to its own instance (the daemon latches the first instance it hears).
 """
 
 from __future__ import annotations
@@ -16,7 +21,7 @@ import os
 import sys
 import threading
 import time
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import asdict
 from typing import Any
 
@@ -43,6 +48,25 @@ from .transport import ROLE_DAEMON, open_session
 from .validation import Validator
 
 _NAN3 = [math.nan] * 3
+ROUND_TRIPS = 50
+"""Round trips (command → a state that applied it) in the state-age window."""
+_SENT = 1024  # publication times kept per command seq (a ring)
+
+
+class LeaseHeld(Exception):
+    """Another daemon holds the robot's control lease.
+
+    Attributes:
+        robot: ``<prefix>/<robot>``.
+        holder: the holder's id.
+    """
+
+    def __init__(self, robot: str, holder: str) -> None:
+        self.robot = robot
+        self.holder = holder
+        super().__init__(f"robot {robot} is already controlled by daemon {holder} "
+                         f"(its lease token {robot}/lease/{holder} is alive); stop that daemon first, "
+                         f"or start this one with --wait-lease to take over when it ends")
 
 
 def realtime_priority(priority: int) -> str:
@@ -112,33 +136,152 @@ class ControlCore:
         self.now = 0.0
         self.t0 = 0.0  # [s] clock value at the loop's start (fault messages say time since)
         self.state_fresh = False
+        self.lease = "core"  # this daemon's control lease id (the Daemon sets its Zenoh id)
+        self.lease_holder = ""  # the holder the sim reports
+        # one robot: the sim instance latched from the first state, and a second source
+        self.instance = ""
+        self.foreign = ""
+        self.foreign_time = -math.inf
+        self.last_state_seq = -1
+        # the sim's own referee and firmware
+        self.sim_violations_seen = -1  # total count of the latched instance (-1: no state yet)
+        self.event_fault = ""  # a fault that happened (not a condition): holds the safe stop
+        self.event_until = -math.inf
+        self.protective = ""
+        # state age without shared clocks: command seq → its publication time
+        self.seq = 0
+        self._sent_t = np.full(_SENT, -math.inf)
+        self._sent_seq = np.full(_SENT, -1, dtype=np.int64)
+        self._rtt: deque[float] = deque(maxlen=ROUND_TRIPS)
+        self._last_cmd_seq = -1
+        self.round_trip = math.nan
+        # one operator per setpoint stream
+        self.operator = ""
+        self.operator_time = -math.inf
+        self.operator_stamp = -math.inf
+        self.operator_conflicts = 0
+        self.refused: Counter[str] = Counter()  # setpoints and states refused after validation
+        self.resume_needed = False
+        self.anchor_on_command = False  # bounds (13) start from the last command (see _anchored)
+        self.cmd_state_seq = -1  # seq of the state this tick's command comes from (-1: predicted)
+        # the daemon's own stall: past the robot's command timeout the robot stops by itself
+        wd = svc.watchdog
+        self.stream_break = wd.command_hold - wd.state_age_max  # [s] the robot's command timeout
+        self._last_sent_t = -math.inf
+        self.stream_broken = False
 
     # ------------------------------------------------------------------ inputs
-    def on_state(self, msg: StateMsg, now: float) -> None:
-        """A validated state arrived at ``now`` [s]."""
+    def on_state(self, msg: StateMsg, now: float) -> bool:
+        """A validated state arrived at ``now`` [s]; False: refused (another source, old seq).
+
+        The first state latches the sim's instance. A state of another instance while the
+        latched one is alive is a second robot on this key: refused, counted and a fault (a
+        safe stop while it lasts); once the latched instance has been silent for
+        ``state_timeout`` a new instance is a restarted sim and is latched instead. A state
+        whose seq does not increase (a replay, or reordering) is refused.
+        """
+        if msg.instance != self.instance:
+            if self.instance and now - self.state_time <= self.svc.watchdog.state_timeout:
+                self.refused["instance"] += 1
+                self.foreign, self.foreign_time = msg.instance, now
+                return False
+            if self.instance:
+                self._fault(f"sim instance changed ({self.instance} -> {msg.instance}: a restarted sim)")
+            self.instance = msg.instance
+            self.anchor_on_command = False  # a new robot: its rates are what it executes
+            self.last_state_seq = -1
+            self.sim_violations_seen = -1
+            self._rtt.clear()
+        if msg.seq <= self.last_state_seq:
+            self.refused["state_seq"] += 1
+            return False
+        self.last_state_seq = msg.seq
         self.state_msg = msg
         self.state = w.RobotState(q_base=np.array(msg.q_base), q_arm=np.array(msg.q_arm),
                                   v_arm=np.array(msg.v_arm), wheel_speeds=np.array(msg.wheel_speeds))
         self.state_time = now
         self.state_fresh = True
+        self.lease_holder = msg.lease
+        total = sum(msg.violations.values())
+        if 0 <= self.sim_violations_seen < total:
+            new = {k: v for k, v in msg.violations.items() if v}
+            self._event(f"sim referee counted {total - self.sim_violations_seen} new violation(s) {new}",
+                        "sim referee", now)
+        self.sim_violations_seen = total
+        self.protective = msg.protective_reason if msg.protective_stop else ""
+        cs = msg.cmd_seq
+        if cs != self._last_cmd_seq and cs >= 0 and self._sent_seq[cs % _SENT] == cs:
+            self._rtt.append(now - float(self._sent_t[cs % _SENT]))  # ≥ the state's age
+            self.round_trip = min(self._rtt)
+        self._last_cmd_seq = cs
+        return True
+
+    def sent(self, seq: int, now: float) -> None:
+        """Command ``seq`` was published at ``now`` [s] (for the round trip and the stream)."""
+        self._sent_t[seq % _SENT] = now
+        self._sent_seq[seq % _SENT] = seq
+        self._last_sent_t = now
+
+    def _event(self, what: str, kind: str, now: float) -> None:
+        """A fault that happened once: a safe stop for ``state_timeout``, then (manual) a hold."""
+        self._fault(what, kind)
+        self.event_fault = what
+        self.event_until = now + self.svc.watchdog.state_timeout
 
     def on_mode(self, msg: ModeMsg) -> None:
-        """A validated mode change: switch and re-latch the target from the current EE."""
+        """A validated mode change: switch and re-latch the target from the current EE.
+
+        It is also the explicit act that resumes after a safe stop (``resume = "manual"``):
+        one sent during the safe stop itself is overruled by the hold that follows the fault,
+        so resuming takes a mode message after the fault has cleared.
+        """
         self.mode = w.Mode(msg.mode)
         self.direction = None if msg.direction is None else np.asarray(msg.direction, dtype=float)
         self.need_latch = True
+        if not self.safe:
+            self.resume_needed = False
 
-    def on_setpoint(self, msg: SetpointMsg, now: float) -> None:
-        """A validated setpoint: feed the smoother (track and null-space DM modes only)."""
+    def on_setpoint(self, msg: SetpointMsg, now: float) -> bool:
+        """A validated setpoint: feed the smoother (track and null-space DM modes only).
+
+        One operator holds the stream: the first source, for as long as its setpoints keep
+        coming (``operator_timeout``); another source's setpoints are refused and counted
+        (``operator``), and so is a setpoint whose stamp does not increase (``stamp``: a frozen
+        or replayed stream would otherwise look alive and never move the EE). A stamp more than
+        ``setpoint_timeout`` behind the last one starts a new stream (a restarted client, or
+        one bogus far-future stamp before it), reported as a fault.
+
+        Returns:
+            False when the setpoint was refused.
+        """
+        wd = self.svc.watchdog
+        if msg.source != self.operator:
+            if self.operator and now - self.operator_time < wd.operator_timeout:
+                self.refused["operator"] += 1
+                self.operator_conflicts += 1
+                self._fault(f"setpoint conflict (from {msg.source!r} refused: {self.operator!r} holds the stream)")
+                return False
+            self.operator, self.operator_stamp = msg.source, -math.inf
+        if not msg.stamp > self.operator_stamp:
+            if msg.stamp < self.operator_stamp - wd.setpoint_timeout:  # far behind: a new stream
+                self._fault(f"setpoint stamp jumped back (from {msg.source!r}: {msg.stamp!r} after "
+                            f"{self.operator_stamp!r}; taken as a restarted stream)")
+            else:
+                self.refused["stamp"] += 1
+                self._fault(f"setpoint stamp not increasing (from {msg.source!r}: {msg.stamp!r} after "
+                            f"{self.operator_stamp!r})")
+                return False
+        self.operator_time, self.operator_stamp = now, msg.stamp
         self.setpoint_time = now
         if self.mode not in (w.Mode.TRACK, w.Mode.DM_NULLSPACE) or self.need_latch:
-            return
+            return True
         x = np.asarray(msg.x, dtype=float)
         if msg.xd is not None:  # a scripted trajectory: its own feed-forward velocity
             self.smoother.set_target(x, np.asarray(msg.xd, dtype=float))
         else:
             xf, v = self.estimator.update(x, msg.stamp)
             self.smoother.set_target(xf, v)
+        return True
 
     def on_sim_alive(self, alive: bool) -> None:
         """The sim's liveliness token appeared or vanished."""
@@ -148,8 +291,13 @@ class ControlCore:
             self.safe = self.state is not None  # the next ticks brake (see _safe_stop)
         self.sim_alive = alive
 
-    def _fault(self, what: str) -> None:
-        """Record a fault (and say it once on stderr when it is new)."""
+    def _fault(self, what: str, kind: str | None = None) -> None:
+        """Record a fault (and say it once on stderr when it is new).
+
+        Args:
+            what: the fault, as the status shows it.
+            kind: its key in ``status.faults`` (default: ``what`` up to its first " (").
+        """
         if what != self.last_fault:
             st = self.state
             where = (f" [t={self.now - self.t0:.3f} s, mode {self.mode.value}, q_base "
@@ -157,7 +305,7 @@ class ControlCore:
                      if st is not None else "")
             print(f"wmm-qp serve: fault: {what}{where}", file=sys.stderr, flush=True)
         self.last_fault = what
-        self.faults[what.split(" (")[0]] += 1
+        self.faults[kind or what.split(" (")[0]] += 1
 
     def _latch(self) -> None:
         """Re-latch: the smoother restarts from the current EE position and velocity."""
@@ -178,11 +326,28 @@ class ControlCore:
         self.now = now
         if self.state is None:
             return None
-        if now - self.state_time > wd.state_timeout:
-            return self._safe_stop(f"state stale (none valid for > {wd.state_timeout * 1e3:.0f} ms)")
-        if self.safe:  # the state is back: resume from the measured state
+        if not self.stream_broken and math.isfinite(self._last_sent_t) and now - self._last_sent_t > self.stream_break:
+            # this daemon stalled (scheduler, SIGSTOP) past the robot's command timeout: the robot
+            # is braking by itself, at rates the daemon does not know. A command now would jump
+            # from them; send none until a state shows the robot's own stop, then start from it.
+            self._fault(f"command stream broken ({(now - self._last_sent_t) * 1e3:.0f} ms without a "
+                        f"command: the robot stops itself)")
+            self.stream_broken = self.safe = True
+        if self.stream_broken:
+            msg = self.state_msg
+            if not (self.state_fresh and msg is not None and (msg.stale_stop or msg.protective_stop)):
+                return None
+            self.stream_broken = False
+            self.anchor_on_command = False
+        if (why := self.hazard(now)) is not None:
+            return self._safe_stop(why)
+        if self.safe:  # the fault cleared: re-latch from the measured state
             self.safe = False
             self.need_latch = True
+            if wd.resume == "manual":  # hold where the robot is until a mode message resumes
+                self.mode, self.direction = w.Mode.HOLD, None
+                self.resume_needed = True
+        self.cmd_state_seq = self.last_state_seq if self.state_fresh else -1
         if not self.state_fresh and self.cmd is not None:
             self._predict_state()
         self.state_fresh = False
@@ -201,12 +366,56 @@ class ControlCore:
         x_d, xd_d = self.smoother.step()
         self.ref = w.Reference(mode=self.mode, x_d=x_d, xd_d=xd_d, direction=self.direction)
         self.ref_valid = True
-        cmd = self.ctl.step(self.state, self.ref)
+        cmd = self.ctl.step(self._anchored(), self.ref)
+        self.anchor_on_command = True
         if cmd.status == w.Status.SAFE_STOP:
             self._fault(f"controller: {cmd.reason}")
             self.smoother.reset(cmd.x if np.isfinite(cmd.x).all() else x_d)
         self.cmd = cmd
         return cmd
+
+    def hazard(self, now: float) -> str | None:
+        """The fault that forces a safe stop now, or None.
+
+        Conditions: no valid state for ``state_timeout`` (or the sim's token vanished); a second
+        sim instance on the key within ``state_timeout``; the sim's firmware in a protective
+        stop; the state older than ``state_age_max`` (round trip); and, for ``state_timeout``
+        after it happened, a rise of the sim's violation counts.
+        """
+        wd = self.svc.watchdog
+        if now - self.state_time > wd.state_timeout:
+            return f"state stale (none valid for > {wd.state_timeout * 1e3:.0f} ms)"
+        if now - self.foreign_time <= wd.state_timeout:
+            return (f"second state source (sim instance {self.foreign} on the key besides the latched "
+                    f"{self.instance}: two robots under one id)")
+        if self.protective:
+            return f"sim protective stop ({self.protective})"
+        if len(self._rtt) == ROUND_TRIPS and self.round_trip > wd.state_age_max:
+            return (f"state too old (round trip >= {self.round_trip * 1e3:.1f} ms over {ROUND_TRIPS} "
+                    f"commands; bounds (13) allow {wd.state_age_max * 1e3:.1f} ms)")
+        if now < self.event_until:
+            return self.event_fault
+        return None
+
+    def _anchored(self) -> w.RobotState:
+        """The state handed to the controller: its rates replaced by the last command while
+        the robot follows the command stream.
+
+        The acceleration bounds of (13) are q̇_prev ± A·Δt around what the robot will execute
+        next: the last command (its drives ramp towards it, and the referee judges each
+        command against the previous one). The measured rates lag it by the state's age, and
+        a late state would pull the bounds back and let two consecutive commands differ by
+        more than A·Δt. The measured rates are used for the first command to a sim instance
+        and whenever the robot is not following the stream (its state shows a stale or a
+        protective stop).
+        """
+        st, cmd, msg = self.state, self.cmd, self.state_msg
+        assert st is not None
+        if (not self.anchor_on_command or cmd is None
+                or (msg is not None and (msg.stale_stop or msg.protective_stop))):
+            return st
+        return w.RobotState(q_base=st.q_base, q_arm=st.q_arm, v_arm=cmd.arm_rates,
+                            wheel_speeds=cmd.wheel_speeds)
 
     def _predict_state(self) -> None:
         """No new state this tick: assume the last command executed for one period.
@@ -224,7 +433,8 @@ class ControlCore:
     def _safe_stop(self, why: str) -> w.Command:
         """Brake from the last command at the acceleration limits (the state is not trusted)."""
         if not self.safe:
-            self._fault(why)
+            if why != self.last_fault:  # an event fault is recorded where it happened
+                self._fault(why)
             self.safe = True
         assert self.state is not None
         last = self.cmd
@@ -234,6 +444,7 @@ class ControlCore:
             wheel_speeds=last.wheel_speeds if last is not None else self.state.wheel_speeds)
         cmd = self.ctl.safe_stop(base, why)
         self.cmd = cmd
+        self.anchor_on_command = True
         return cmd
 
     def status(self, loop: RateLoop, rejected: Counter[str], accepted: dict[str, int]) -> StatusMsg:
@@ -247,7 +458,11 @@ class ControlCore:
             accepted=accepted,
             sim_violations=dict(self.state_msg.violations) if self.state_msg else {},
             x=cmd.x.tolist() if cmd is not None else [], x_d=_xd(self.ref),
-            dm=float(cmd.dm) if cmd is not None else math.nan, sim_alive=self.sim_alive)
+            dm=float(cmd.dm) if cmd is not None else math.nan, sim_alive=self.sim_alive,
+            faults=dict(self.faults), lease=self.lease, lease_holder=self.lease_holder,
+            sim_instance=self.instance, operator=self.operator,
+            operator_conflicts=self.operator_conflicts, resume_needed=self.resume_needed,
+            round_trip_ms=self.round_trip * 1e3, protective_stop=bool(self.protective))
 
     def config_dict(self) -> dict[str, Any]:
         """The running configuration as plain data (for the ``info`` queryable)."""
@@ -278,10 +493,17 @@ class Daemon:
         ctl_cfg: controller config.
         robot: robot config.
         kind: controller kind; None = the controller config's.
+        wait_lease: when another daemon holds the robot's lease, wait until it is free
+            instead of refusing to start (:class:`LeaseHeld`).
     """
 
+    LEASE_GRACE = 1.0
+    """[s] the sim may name another holder this long (tokens propagate) before this daemon
+    concludes that it lost a start-up race for the lease."""
+
     def __init__(self, svc: ServiceConfig, ctl_cfg: w.ControllerConfig, robot: w.RobotConfig,
-                 kind: str | None = None) -> None:
+                 kind: str | None = None, wait_lease: bool = False) -> None:
+        self.wait_lease = wait_lease
         self.svc = svc
         self.core = ControlCore(svc, ctl_cfg, robot, kind)
         self.keys = Keys.of(svc.prefix, svc.robot)
@@ -293,8 +515,8 @@ class Daemon:
         self.scheduling = "not started"  # set by run(): the control thread's scheduling policy
 
     def rejected(self) -> Counter[str]:
-        """Rejected messages by reason, all keys together."""
-        return self.v_state.rejected + self.v_mode.rejected + self.v_setpoint.rejected
+        """Rejected and refused messages by reason, all keys together."""
+        return self.v_state.rejected + self.v_mode.rejected + self.v_setpoint.rejected + self.core.refused
 
     def accepted(self) -> dict[str, int]:
         """Accepted messages by key."""
@@ -302,9 +524,60 @@ class Daemon:
                 "setpoint": self.v_setpoint.accepted}
 
     def run(self, stop: threading.Event, max_ticks: int | None = None) -> StatusMsg:
-        """Run until ``stop`` is set (or ``max_ticks``); returns the final status."""
+        """Run until ``stop`` is set (or ``max_ticks``); returns the final status.
+
+        Raises:
+            LeaseHeld: another daemon holds the robot's lease (and ``wait_lease`` is off), at
+                start or — after a start-up race the other one won — within ``LEASE_GRACE``.
+        """
         with open_session(self.svc, ROLE_DAEMON) as session:
+            self.core.lease = str(session.info.zid())
+            if not self._acquire_lease(session, stop):
+                return self.core.status(self.loop, self.rejected(), self.accepted())
             return self._run(session, stop, max_ticks)
+
+    def answer_queries(self, queryable: Any, limit: int) -> int:
+        """Answer at most ``limit`` pending ``info`` queries (the rest wait in the queryable's
+        FIFO for the next ticks: a burst costs the loop ``limit`` replies a tick, not a stall).
+
+        Returns:
+            the number answered.
+        """
+        core, k = self.core, self.keys
+        n = 0
+        while n < limit and (q := queryable.try_recv()) is not None:
+            n += 1
+            info = InfoMsg(robot=self.svc.robot, stamp=time.time(),
+                           status=core.status(self.loop, self.rejected(), self.accepted()),
+                           config=core.config_dict())
+            try:
+                q.reply(k.info, encode(info))
+            except Exception as e:  # a vanished querier must not stop the loop
+                core.last_fault = f"info reply failed: {e}"
+        return n
+
+    def _holders(self, session: zenoh.Session) -> list[str]:
+        """The lease holders alive now (liveliness query)."""
+        out = []
+        for reply in session.liveliness().get(self.keys.lease_all, timeout=0.5):
+            if reply.ok is not None:
+                out.append(str(reply.ok.key_expr).rsplit("/", 1)[-1])
+        return [h for h in out if h != self.core.lease]
+
+    def _acquire_lease(self, session: zenoh.Session, stop: threading.Event) -> bool:
+        """Refuse (or wait) while another daemon holds the lease; False: stopped while waiting."""
+        robot = self.keys.root
+        said = False
+        while (held := self._holders(session)):
+            if not self.wait_lease:
+                raise LeaseHeld(robot, held[0])
+            if not said:
+                print(f"wmm-qp serve: waiting: robot {robot} is controlled by daemon {held[0]}",
+                      file=sys.stderr, flush=True)
+                said = True
+            if stop.wait(0.2):
+                return False
+        return True
 
     def _run(self, session: zenoh.Session, stop: threading.Event, max_ticks: int | None) -> StatusMsg:
         k, core, svc = self.keys, self.core, self.svc
@@ -319,6 +592,9 @@ class Daemon:
         queryable = session.declare_queryable(k.info, fifo(64))
         alive_sub = session.liveliness().declare_subscriber(k.alive("sim"), fifo(64), history=True)
         token = session.liveliness().declare_token(k.alive("daemon"))
+        lease_token = session.liveliness().declare_token(k.lease(core.lease))
+        lost_since = math.inf  # [s] since when the sim names another lease holder
+        lost = ""
         pub_cmd = session.declare_publisher(k.cmd, express=True,
                                             congestion_control=zenoh.CongestionControl.DROP,
                                             priority=zenoh.Priority.REAL_TIME)
@@ -326,7 +602,8 @@ class Daemon:
         pub_tel = session.declare_publisher(k.telemetry, congestion_control=zenoh.CongestionControl.DROP)
         status_every = max(1, round(svc.loop.rate_hz / svc.loop.status_hz))
         tel_every = svc.loop.telemetry_every
-        seq = 0
+        queries_per_tick = svc.loop.queries_per_tick
+        period = 1.0 / svc.loop.rate_hz
         gc.collect()
         gc.freeze()
         loop = self.loop
@@ -340,6 +617,13 @@ class Daemon:
                 s = sub_state.try_recv()
                 if s is not None and (m := self.v_state(s.payload.to_bytes())) is not None:
                     core.on_state(m, now)
+                    if core.lease_holder and core.lease_holder != core.lease:
+                        lost_since = min(lost_since, now)
+                        if now - lost_since > self.LEASE_GRACE and not self.wait_lease:
+                            lost = core.lease_holder  # a start-up race, lost: leave the loop
+                            break
+                    else:
+                        lost_since = math.inf
                 while (s := sub_mode.try_recv()) is not None:
                     if (mm := self.v_mode(s.payload.to_bytes())) is not None:
                         core.on_mode(mm)
@@ -349,11 +633,15 @@ class Daemon:
                 # ---- control
                 cmd = core.tick(now)
                 if cmd is not None:
-                    seq += 1
+                    core.seq += 1
+                    seq = core.seq
                     pub_cmd.put(encode(CommandMsg(
                         robot=svc.robot, seq=seq, stamp=time.time(),
                         wheel_speeds=cmd.wheel_speeds.tolist(), arm_rates=cmd.arm_rates.tolist(),
-                        status=cmd.status.value)))
+                        status=cmd.status.value, lease=core.lease, instance=core.instance,
+                        period=period,
+                        state_seq=core.cmd_state_seq)))
+                    core.sent(seq, now)
                     if tel_every and loop.ticks % tel_every == 0:
                         ee = core.state_msg.ee_true if core.state_msg is not None else _NAN3
                         pub_tel.put(encode(TelemetryMsg(
@@ -366,20 +654,15 @@ class Daemon:
                 # ---- status, queries
                 if loop.ticks % status_every == 0:
                     pub_status.put(encode(core.status(loop, self.rejected(), self.accepted())))
-                while (q := queryable.try_recv()) is not None:
-                    info = InfoMsg(robot=svc.robot, stamp=time.time(),
-                                   status=core.status(loop, self.rejected(), self.accepted()),
-                                   config=core.config_dict())
-                    try:
-                        q.reply(k.info, encode(info))
-                    except Exception as e:  # a vanished querier must not stop the loop
-                        core.last_fault = f"info reply failed: {e}"
+                self.answer_queries(queryable, queries_per_tick)
                 now = loop.wait()
         finally:
             gc.unfreeze()
             final = core.status(loop, self.rejected(), self.accepted())
-            for ent in (token, sub_state, sub_setpoint, sub_mode, queryable, alive_sub,
+            for ent in (token, lease_token, sub_state, sub_setpoint, sub_mode, queryable, alive_sub,
                         pub_cmd, pub_status, pub_tel):
                 with contextlib.suppress(Exception):
                     ent.undeclare()
+        if lost:
+            raise LeaseHeld(k.root, lost)
         return final

@@ -44,12 +44,12 @@ def templates(robot: str) -> dict[str, dict[str, Any]]:
         "state": StateMsg(robot=robot, seq=1, stamp=time.time(), t=1.0, q_base=[0.0] * 3, q_arm=q,
                           v_arm=[0.0] * 7, wheel_speeds=[0.0] * 4, base_true=[0.0] * 3,
                           ee_true=[0.650, -0.0249, 0.492], tau=[0.0] * 7, contact_force=[0.0] * 3,
-                          box_position=0.0, violations={"position": 0}),
+                          box_position=0.0, violations={"position": 0}, instance="fuzz-sim"),
         "setpoint": SetpointMsg(robot=robot, seq=1, stamp=time.time(), x=[0.65, -0.02, 0.49],
-                                xd=[0.0, 0.01, 0.0]),
+                                xd=[0.0, 0.01, 0.0], source="fuzz"),
         "mode": ModeMsg(robot=robot, seq=1, stamp=time.time(), mode="hold", direction=[1.0, 0.0, 0.0]),
         "cmd": CommandMsg(robot=robot, seq=1, stamp=time.time(), wheel_speeds=[0.0] * 4,
-                          arm_rates=[0.0] * 7),
+                          arm_rates=[0.0] * 7, lease="fuzz", instance="fuzz-sim", period=0.002),
     }
     out = {k: msgspec.to_builtins(m) for k, m in msgs.items()}
     out["info"] = {"query": "status"}

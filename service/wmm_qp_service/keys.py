@@ -64,6 +64,15 @@ class Keys:
         """Liveliness token of one process (``daemon``, ``sim`` or a client name)."""
         return f"{self.root}/alive/{node}"
 
+    def lease(self, holder: str) -> str:
+        """Liveliness token of the control lease held by ``holder`` (a daemon's id)."""
+        return f"{self.root}/lease/{holder}"
+
+    @property
+    def lease_all(self) -> str:
+        """Every control-lease token of this robot (at most one daemon should hold one)."""
+        return f"{self.root}/lease/*"
+
     @property
     def alive_all(self) -> str:
         """Every liveliness token of this robot."""

@@ -2,9 +2,10 @@
 
 Every message is a msgpack map with ``type`` (the schema's tag), ``v`` (protocol version),
 ``robot`` (the robot id), ``seq`` (sender's counter) and ``stamp`` ([s], sender's
-``time.time()``), plus its own fields. Vectors are lists of floats with fixed lengths,
-checked on receipt by :mod:`wmm_qp_service.validation`. Units are SI, angles rad.
-See docs/protocol.md.
+``time.time()``), plus its own fields. On receipt all five are required (a message that lacks
+one is rejected, ``schema``), although the Python constructors fill ``type`` and ``v``.
+Vectors are lists of floats with fixed lengths, checked on receipt by
+:mod:`wmm_qp_service.validation`. Units are SI, angles rad. See docs/protocol.md.
 """
 
 from __future__ import annotations
@@ -13,8 +14,9 @@ from typing import Any, TypeVar
 
 import msgspec
 
-PROTOCOL_VERSION = 1
-"""Bumped on any incompatible change of a schema below."""
+PROTOCOL_VERSION = 2
+"""Bumped on any incompatible change of a schema below (2: the sim instance, the control lease,
+the setpoint's source and the command's period and state seq are required fields)."""
 
 
 class _Msg(msgspec.Struct, kw_only=True, forbid_unknown_fields=True, tag_field="type"):
@@ -25,14 +27,17 @@ class _Msg(msgspec.Struct, kw_only=True, forbid_unknown_fields=True, tag_field="
 
 
 class Header(msgspec.Struct, forbid_unknown_fields=False):
-    """The fields every message has (used to explain a rejected message)."""
+    """The fields every message has (checked for presence on receipt, and used to explain a
+    rejected message)."""
 
     type: str | None = None
     v: int | None = None
     robot: str | None = None
+    seq: int | None = None
+    stamp: float | None = None
 
 
-class StateMsg(_Msg, tag="state"):
+class StateMsg(_Msg, tag="state", kw_only=True):
     """sim → daemon: the robot's measured state (published at the sim's rate).
 
     Attributes:
@@ -50,6 +55,17 @@ class StateMsg(_Msg, tag="state"):
         violations: limit-referee counts by kind.
         stale_stop: the sim is braking because commands went stale.
         cmd_seq: seq of the last command the sim applied (-1: none).
+        instance: this sim process's identity (random, fixed for its life): the daemon
+            latches it and treats states of another instance as a second source (a fault).
+        lease: the control lease holder whose commands the sim applies ("" = none).
+        protective_stop: the robot's firmware is braking (a refused command or a motion that
+            could not stop before a limit), or holds it at rest until a legal command.
+        protective_stops: protective stops since the sim started.
+        protective_reason: why the last one started.
+        refused: commands not applied, by reason (``lease``, ``instance``, ``firmware``,
+            and the validation reasons).
+
+    ``seq`` is the sim's step counter: consecutive states of one instance have consecutive seq.
     """
 
     t: float
@@ -66,20 +82,35 @@ class StateMsg(_Msg, tag="state"):
     violations: dict[str, int] = msgspec.field(default_factory=dict)
     stale_stop: bool = False
     cmd_seq: int = -1
+    instance: str
+    lease: str = ""
+    protective_stop: bool = False
+    protective_stops: int = 0
+    protective_reason: str = ""
+    refused: dict[str, int] = msgspec.field(default_factory=dict)
 
 
-class CommandMsg(_Msg, tag="cmd"):
+class CommandMsg(_Msg, tag="cmd", kw_only=True):
     """daemon → sim: one tick's command, held by the sim until the next.
 
     Attributes:
         wheel_speeds: [rad/s] 4 wheel speeds (FL, FR, RL, RR).
         arm_rates: [rad/s] 7 joint rates.
         status: controller status (ok, saturated, damped, safe_stop).
+        lease: the sender's control lease id (the sim applies commands of the holder only).
+        instance: the sim instance the command is for (the daemon's latched one).
+        period: [s] the control period Δt the command's bounds (13) assume; the sim's referee
+            judges the change from the previous command over it.
+        state_seq: seq of the state the command was computed from (-1: a predicted state).
     """
 
     wheel_speeds: list[float]
     arm_rates: list[float]
     status: str = "ok"
+    lease: str
+    instance: str
+    period: float
+    state_seq: int = -1
 
 
 class BoxMsg(_Msg, tag="box"):
@@ -102,17 +133,19 @@ class BoxMsg(_Msg, tag="box"):
     height: float = 0.6
 
 
-class SetpointMsg(_Msg, tag="setpoint"):
+class SetpointMsg(_Msg, tag="setpoint", kw_only=True):
     """client → daemon: an EE target (world frame).
 
     Attributes:
         x: [m] target EE position.
         xd: [m/s] the target's velocity (feed-forward, e.g. a scripted trajectory);
             None: the daemon estimates it from the stream.
+        source: the sending operator's id (one operator holds the stream at a time).
     """
 
     x: list[float]
     xd: list[float] | None = None
+    source: str
 
 
 class ModeMsg(_Msg, tag="mode"):
@@ -163,6 +196,15 @@ class StatusMsg(_Msg, tag="status"):
         x, x_d: [m] EE position (model, odometry) and smoothed target.
         dm: directional manipulability along the active direction.
         sim_alive: the sim's liveliness token is present.
+        faults: faults seen since start, by kind.
+        lease: this daemon's control lease id; ``lease_holder``: the holder the sim reports.
+        sim_instance: the latched sim instance ("" = none yet).
+        operator: the source holding the setpoint stream ("" = none).
+        operator_conflicts: setpoints refused because another operator held the stream.
+        resume_needed: a safe stop ended, and the daemon holds until a mode message resumes.
+        round_trip_ms: [ms] the smallest command → state round trip of the recent window
+            (an upper bound of the state's age measured without shared clocks).
+        protective_stop: the sim's firmware reports a protective stop.
     """
 
     mode: str
@@ -179,6 +221,15 @@ class StatusMsg(_Msg, tag="status"):
     x_d: list[float] = msgspec.field(default_factory=list)
     dm: float = float("nan")
     sim_alive: bool = False
+    faults: dict[str, int] = msgspec.field(default_factory=dict)
+    lease: str = ""
+    lease_holder: str = ""
+    sim_instance: str = ""
+    operator: str = ""
+    operator_conflicts: int = 0
+    resume_needed: bool = False
+    round_trip_ms: float = float("nan")
+    protective_stop: bool = False
 
 
 class TelemetryMsg(_Msg, tag="telemetry"):

@@ -1,12 +1,15 @@
 """Validation on receipt: bytes → a checked message, or a rejection reason (counted).
 
 Nothing malformed reaches the controller. Checks, in order: the payload's length
-(``size``, before decoding), msgpack at all (``decode``),
-the expected schema (``schema``; ``version`` when the header shows another protocol
-version), the robot id (``robot``), NaN/inf in the time stamp (``non_finite``), vector
-sizes (``size``), NaN/inf (``non_finite``), ranges (``range``), the mode name (``mode``).
+(``size``, before decoding), msgpack at all (``decode``), the protocol version when the
+header has one (``version``), the header's five fields present (``type``, ``v``, ``robot``,
+``seq``, ``stamp``; else ``schema``), the expected schema (``schema``), the robot id (``robot``), NaN/inf in the
+time stamp (``non_finite``), vector sizes (``size``), NaN/inf (``non_finite``), ranges
+(``range``), the mode name (``mode``).
 A box (:class:`~.protocol.BoxMsg`): finite, mass in (0, 1000] kg, μ in [0, 5], face x and
-centre y within ``position_abs_max``, width and height in (0, 10] m.
+centre y within ``position_abs_max``, width and height in (0, 10] m. A command: a non-empty
+``lease`` and ``instance``, ``period`` in (0, ``PERIOD_MAX``]. A setpoint: a non-empty
+``source``. A state: a non-empty ``instance``.
 """
 
 from __future__ import annotations
@@ -27,6 +30,8 @@ from .protocol import PROTOCOL_VERSION, BoxMsg, CommandMsg, Header, ModeMsg, Set
 BOX_MASS_MAX = 1000.0  # [kg]
 BOX_MU_MAX = 5.0  # [-]
 BOX_SIZE_MAX = 10.0  # [m] face width, height
+PERIOD_MAX = 0.1  # [s] the longest control period a command may claim
+_HEADER_FIELDS = ("type", "v", "robot", "seq", "stamp")
 
 
 class Reject(enum.StrEnum):
@@ -116,9 +121,22 @@ class Validator(Generic[M]):
         if len(data) > self.limits.payload_max_bytes:  # never spend time decoding a huge payload
             raise Rejected(Reject.SIZE, f"payload of {len(data)} bytes exceeds {self.limits.payload_max_bytes}")
         try:
+            h = _HEADER.decode(data)
+        except msgspec.ValidationError as e:
+            raise Rejected(Reject.SCHEMA, f"header: {e}") from None
+        except msgspec.DecodeError as e:
+            raise Rejected(Reject.DECODE, str(e)) from None
+        except Exception as e:  # never let anything escape into the loop
+            raise Rejected(Reject.DECODE, f"{type(e).__name__}: {e}") from None
+        if h.v is not None and h.v != PROTOCOL_VERSION:  # another version may have other fields
+            raise Rejected(Reject.VERSION, f"version {h.v}, expected {PROTOCOL_VERSION}")
+        for name in _HEADER_FIELDS:  # the constructors' defaults must not stand in for the wire's
+            if getattr(h, name) is None:
+                raise Rejected(Reject.SCHEMA, f"missing required field `{name}`")
+        try:
             msg = self._decoder.decode(data)
         except msgspec.ValidationError as e:
-            raise self._explain(data, str(e)) from None
+            raise Rejected(Reject.SCHEMA, str(e)) from None
         except msgspec.DecodeError as e:
             raise Rejected(Reject.DECODE, str(e)) from None
         except Exception as e:  # never let anything escape into the loop
@@ -131,19 +149,11 @@ class Validator(Generic[M]):
         self._check_fields(msg)
         return msg
 
-    def _explain(self, data: bytes, detail: str) -> Rejected:
-        """A schema failure: say ``version`` or ``robot`` when the header shows why."""
-        try:
-            h = _HEADER.decode(data)
-        except Exception:
-            return Rejected(Reject.SCHEMA, detail)
-        if h.v is not None and h.v != PROTOCOL_VERSION:
-            return Rejected(Reject.VERSION, f"version {h.v}, expected {PROTOCOL_VERSION}")
-        return Rejected(Reject.SCHEMA, detail)
-
     def _check_fields(self, msg: msgspec.Struct) -> None:
         lim = self.limits
         if isinstance(msg, SetpointMsg):
+            if not msg.source:
+                raise Rejected(Reject.SCHEMA, "source is empty")
             _vector("x", msg.x, 3, math.inf)
             _vector("xd", msg.xd, 3, math.inf)
             if max(abs(msg.x[0]), abs(msg.x[1])) > lim.position_abs_max:
@@ -159,6 +169,8 @@ class Validator(Generic[M]):
             if msg.direction is not None and math.sqrt(sum(v * v for v in msg.direction)) < 1e-9:
                 raise Rejected(Reject.RANGE, "direction is zero")
         elif isinstance(msg, StateMsg):
+            if not msg.instance:
+                raise Rejected(Reject.SCHEMA, "instance is empty")
             m = lim.state_abs_max
             _finite("t", [msg.t])
             for name, n in (("q_base", 3), ("q_arm", 7), ("v_arm", 7), ("wheel_speeds", 4)):
@@ -178,5 +190,10 @@ class Validator(Generic[M]):
             if max(abs(msg.face_x), abs(msg.center_y)) > lim.position_abs_max:
                 raise Rejected(Reject.RANGE, f"box face x, y beyond ±{lim.position_abs_max:g} m")
         elif isinstance(msg, CommandMsg):
+            if not (msg.lease and msg.instance):
+                raise Rejected(Reject.SCHEMA, "lease or instance is empty")
+            _finite("period", [msg.period])
+            if not 0.0 < msg.period <= PERIOD_MAX:
+                raise Rejected(Reject.RANGE, f"period {msg.period:g} s outside (0, {PERIOD_MAX:g}]")
             _vector("wheel_speeds", msg.wheel_speeds, 4, lim.command_abs_max)
             _vector("arm_rates", msg.arm_rates, 7, lim.command_abs_max)

@@ -7,11 +7,19 @@ When commands go stale the pure model brakes the robot to rest by itself. A clie
 a box in the scene at run time (``sim/box``, :class:`~wmm_qp_service.protocol.BoxMsg`, FIFO,
 validated on receipt); it is applied between two steps with :meth:`SimRobot.place_box`.
 
-Drive model: like a real joint or wheel drive, the adapter ramps the executed rate towards
-the commanded one at the acceleration limit (A·dt per sim step). The controller's command
-already respects A over its own period, but commands cross the network with jitter: two
-commands 1 ms apart instead of 2 ms would otherwise double the executed acceleration.
-``ramp=False`` applies each command at once (the referee then sees the transport jitter).
+One robot, one controller:
+
+- **instance**: the node draws a random id at start; every state carries it and a continuous
+  ``seq`` (the step counter) and ``t``, so a daemon can tell two sims on one key apart.
+- **lease**: the sim watches the control-lease tokens ``<robot>/lease/<id>`` (liveliness) and
+  applies commands only from the holder — the earliest token still alive — and only those
+  addressed to its own instance; every other command is counted in ``state.refused`` and
+  dropped. The holder is reported in ``state.lease``.
+
+Drive model: like a real joint or wheel drive, the pure model ramps the executed rate towards
+the commanded one at the acceleration limit (``ramp``, on by default here); the referee judges
+every command as it was received, before the ramp and before the firmware's protective stop
+(:mod:`.robot`, :mod:`.referee`). ``ramp=False`` executes each command at once.
 
 Fault injection (reliability tests, docs/reliability.md): ``state_loss`` drops each state
 publication with that probability (seeded), ``state_delay`` holds every state back for a
@@ -21,9 +29,10 @@ fixed time before publishing it (a slow link).
 from __future__ import annotations
 
 import contextlib
+import secrets
 import threading
 import time
-from collections import deque
+from collections import Counter, deque
 
 import numpy as np
 import zenoh
@@ -63,16 +72,15 @@ class SimNode:
         self.svc = svc
         self.cfg = sim_cfg
         self.model = w.WmmModel(robot)
-        self.sim = SimRobot(self.model, sim_cfg, seed=seed)
+        self.sim = SimRobot(self.model, sim_cfg, seed=seed, ramp=ramp)
         self.keys = Keys.of(svc.prefix, svc.robot)
         self.validate = Validator(CommandMsg, svc.robot, svc.validation)
         self.validate_box = Validator(BoxMsg, svc.robot, svc.validation)
-        self.ramp = ramp
         self.loop = RateLoop(sim_cfg.rate_hz, spin_s)
-        self.a_max = np.asarray(robot.arm.acceleration_max, dtype=float)
-        self.wa_max = float(robot.base.wheel_acceleration_max)
-        self.target: SimCommand | None = None
         self.cmd_seq = -1
+        self.instance = secrets.token_hex(8)
+        self.leases: dict[str, None] = {}  # alive lease holders, in the order they appeared
+        self.refused: Counter[str] = Counter()
         if not (0.0 <= state_loss < 1.0 and 0.0 <= state_delay < 10.0):
             raise ValueError("state_loss must be in [0, 1) and state_delay in [0, 10) s")
         self.state_loss = state_loss
@@ -81,25 +89,36 @@ class SimNode:
         self._delayed: deque[tuple[float, bytes]] = deque()
         self.states_dropped = 0
 
-    def next_command(self, new: CommandMsg | None, dt: float) -> SimCommand | None:
-        """The command handed to the pure model this step (None: nothing new)."""
-        if new is not None:
-            self.cmd_seq = new.seq
-            self.target = SimCommand(wheel_speeds=np.array(new.wheel_speeds),
-                                     arm_rates=np.array(new.arm_rates))
-            if not self.ramp:
-                return self.target
-        if not self.ramp or self.target is None:
+    @property
+    def holder(self) -> str:
+        """The control lease holder whose commands are applied ("" = none)."""
+        return next(iter(self.leases), "")
+
+    def on_lease(self, holder: str, alive: bool) -> None:
+        """A lease token appeared (alive) or vanished."""
+        if alive:
+            self.leases.setdefault(holder, None)
+        else:
+            self.leases.pop(holder, None)
+
+    def accept(self, data: bytes) -> SimCommand | None:
+        """Validate a command and check that it comes from the lease holder for this instance.
+
+        Returns the command for the pure model, or None (rejected or refused, counted).
+        """
+        msg = self.validate(data)
+        if msg is None:
+            self.refused["invalid"] += 1
             return None
-        s = self.sim
-        dv = self.target.arm_rates - s.v_arm
-        dw = self.target.wheel_speeds - s.wheels
-        if new is None and not (dv.any() or dw.any()):
-            self.target = None  # reached: hand nothing more, so staleness can be noticed
+        if msg.lease != self.holder:
+            self.refused["lease"] += 1
             return None
-        return SimCommand(
-            wheel_speeds=s.wheels + np.clip(dw, -self.wa_max * dt, self.wa_max * dt),
-            arm_rates=s.v_arm + np.clip(dv, -self.a_max * dt, self.a_max * dt))
+        if msg.instance != self.instance:
+            self.refused["instance"] += 1
+            return None
+        self.cmd_seq = msg.seq
+        return SimCommand(wheel_speeds=np.array(msg.wheel_speeds), arm_rates=np.array(msg.arm_rates),
+                          period=msg.period, seq=msg.seq)
 
     def place_box(self, data: bytes) -> bool:
         """Validate a box request and put the box in the scene (False: rejected, counted)."""
@@ -119,7 +138,10 @@ class SimNode:
             ee_true=st.ee_true.tolist(), tau=st.tau.tolist(),
             contact_force=st.contact_force.tolist(), box_position=st.box_position,
             stalled_joint=-1 if st.stalled_joint is None else st.stalled_joint,
-            violations=dict(st.violations), stale_stop=st.stale_stop, cmd_seq=self.cmd_seq)
+            violations=dict(st.violations), stale_stop=st.stale_stop, cmd_seq=self.cmd_seq,
+            instance=self.instance, lease=self.holder, protective_stop=st.protective_stop,
+            protective_stops=st.protective_stops, protective_reason=st.protective_reason,
+            refused={**self.refused, "firmware": st.refused_commands} if st.refused_commands else dict(self.refused))
 
     def outgoing(self, payload: bytes, now: float) -> list[bytes]:
         """The state payloads to publish now, after the injected loss and delay (if any).
@@ -150,22 +172,26 @@ class SimNode:
                                             congestion_control=zenoh.CongestionControl.DROP,
                                             priority=zenoh.Priority.REAL_TIME)
             token = session.liveliness().declare_token(k.alive("sim"))
+            lease_sub = session.liveliness().declare_subscriber(k.lease_all, zenoh.handlers.FifoChannel(64),
+                                                                history=True)
             dt = self.cfg.dt
             st = self.sim.state()
             self.loop.start()
             try:
                 while not stop.is_set() and (max_ticks is None or self.loop.ticks < max_ticks):
+                    while (a := lease_sub.try_recv()) is not None:
+                        self.on_lease(str(a.key_expr).rsplit("/", 1)[-1], a.kind == zenoh.SampleKind.PUT)
                     while (b := sub_box.try_recv()) is not None:
                         self.place_box(b.payload.to_bytes())
                     s = sub.try_recv()
-                    new = self.validate(s.payload.to_bytes()) if s is not None else None
-                    st = self.sim.step(self.next_command(new, dt), dt)
+                    new = self.accept(s.payload.to_bytes()) if s is not None else None
+                    st = self.sim.step(new, dt)
                     for payload in self.outgoing(encode(self.state_msg(st, self.loop.ticks)),
                                                  time.monotonic()):
                         pub.put(payload)
                     self.loop.wait()
             finally:
-                for ent in (token, sub, sub_box, pub):
+                for ent in (token, lease_sub, sub, sub_box, pub):
                     with contextlib.suppress(Exception):
                         ent.undeclare()
             return st

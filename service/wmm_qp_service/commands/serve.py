@@ -17,13 +17,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="controller kind (default: controller.toml's)")
     parser.add_argument("--solver", help="QP solver (default: controller.toml's)")
     parser.add_argument("--controller-config", metavar="TOML", help="default: configs/controller.toml")
+    parser.add_argument("--wait-lease", action="store_true",
+                        help="when another daemon controls this robot, wait for its lease instead of "
+                             "refusing to start")
 
 
 def run(args: argparse.Namespace) -> int:
     import wmm_qp as w
 
     from ..cli_common import service_config, stop_on_signals
-    from ..daemon import Daemon
+    from ..daemon import Daemon, LeaseHeld
 
     svc = service_config(args)
     if args.rate is not None:
@@ -40,12 +43,16 @@ def run(args: argparse.Namespace) -> int:
                   f"{', '.join(available_solvers())}", file=sys.stderr)
             return 2
         ctl_cfg = ctl_cfg.with_(qp={"solver": args.solver})
-    daemon = Daemon(svc, ctl_cfg, w.load_robot_config(), kind=args.controller)
+    daemon = Daemon(svc, ctl_cfg, w.load_robot_config(), kind=args.controller, wait_lease=args.wait_lease)
     stop = stop_on_signals()
     print(f"wmm-qp serve: {svc.prefix}/{svc.robot} at {svc.loop.rate_hz:g} Hz "
           f"({daemon.core.kind}), listening on {svc.zenoh.daemon_endpoint}",
           file=sys.stderr, flush=True)
-    final = daemon.run(stop)
+    try:
+        final = daemon.run(stop)
+    except LeaseHeld as e:
+        print(f"wmm-qp serve: error: {e}", file=sys.stderr, flush=True)
+        return 3
     lp = final.loop
     print(f"wmm-qp serve: stopped after {lp.ticks} ticks, {lp.deadline_misses} deadline misses, "
           f"tick p50 {lp.tick_p50_us:.0f} µs p99 {lp.tick_p99_us:.0f} µs", file=sys.stderr, flush=True)

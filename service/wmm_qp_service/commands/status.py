@@ -26,9 +26,10 @@ def run(args: argparse.Namespace) -> int:
     svc = service_config(args)
     with Client(svc, name="status-cli") as c:
         info = c.wait_for_daemon(args.timeout)
+        why = c.no_daemon_reason() if info is None and not c.daemon_alive() else ""
     if info is None:
-        print(f"wmm-qp status: error: no daemon answers on {svc.prefix}/{svc.robot}/info",
-              file=sys.stderr)
+        why = why or f"the daemon of {svc.prefix}/{svc.robot} is alive but does not answer on its info key"
+        print(f"wmm-qp status: error: {why}", file=sys.stderr)
         return 1
     if args.json:
         print(json.dumps(msgspec.to_builtins(info), default=str))
@@ -45,7 +46,12 @@ def run(args: argparse.Namespace) -> int:
           f"max {lp.tick_max_us:.0f} µs")
     rej = ", ".join(f"{k} {v}" for k, v in sorted(s.rejected.items())) or "none"
     print(f"rejected   {rej}")
-    print(f"last fault {s.last_fault or 'none'}")
+    print(f"last fault {s.last_fault or 'none'}"
+          f"{'   RESUME NEEDED (send a mode)' if s.resume_needed else ''}")
+    lease = ("held" if s.lease_holder == s.lease else
+             f"NOT HELD (the sim applies {s.lease_holder}'s commands)" if s.lease_holder else "not yet granted")
+    print(f"lease      {lease}   sim instance {s.sim_instance or 'none'}   round trip {s.round_trip_ms:.1f} ms"
+          f"   operator {s.operator or 'none'} (conflicts {s.operator_conflicts})")
     print(f"sim        violations {total_viol} {s.sim_violations if total_viol else ''}".rstrip())
     if s.x:
         print(f"EE         x {[round(v, 4) for v in s.x]}   x_d {[round(v, 4) for v in s.x_d]}"

@@ -1,0 +1,334 @@
+"""The daemon's safety logic (issue 11), driven through ControlCore with a fake clock.
+
+Each test is an attack from the blind drill or the review, and what the daemon does now: one
+robot per key (instance latch), sim faults it reacts to, one operator per stream, setpoint
+stamps, the acceleration anchor, the state's age without shared clocks, manual resume and
+bounded queries. No transport, no timing.
+"""
+
+from __future__ import annotations
+
+import collections
+import itertools
+
+import numpy as np
+import pytest
+from wmm_qp_service.config import ServiceConfig
+from wmm_qp_service.daemon import ControlCore, Daemon
+from wmm_qp_service.protocol import ModeMsg, SetpointMsg, StateMsg
+
+import wmm_qp as w
+
+from test_daemon_core import DT, Plant
+
+
+@pytest.fixture(scope="module")
+def robot() -> w.RobotConfig:
+    return w.load_robot_config()
+
+
+def make(robot: w.RobotConfig, **watchdog: object) -> tuple[ControlCore, Plant]:
+    svc = ServiceConfig().with_(watchdog=watchdog) if watchdog else ServiceConfig()
+    core = ControlCore(svc, w.load_controller_config(), robot)
+    return core, Plant(core.model)
+
+
+def mode(core: ControlCore, name: str) -> None:
+    core.on_mode(ModeMsg(robot="wmm", seq=1, stamp=0.0, mode=name))
+
+
+def setpoint(x: np.ndarray, stamp: float, source: str = "op") -> SetpointMsg:
+    return SetpointMsg(robot="wmm", seq=1, stamp=stamp, x=x.tolist(), source=source)
+
+
+def tick(core: ControlCore, plant: Plant, t: float) -> w.Command:
+    cmd = core.tick(t)
+    assert cmd is not None
+    core.seq += 1
+    core.sent(core.seq, t)
+    plant.apply(cmd)
+    plant.cmd_seq = core.seq
+    return cmd
+
+
+def steps_over(robot: w.RobotConfig, cmds: list[w.Command]) -> float:
+    """The largest |Δ command| between consecutive commands, in units of A·dt."""
+    a = np.asarray(robot.arm.acceleration_max) * DT
+    wa = robot.base.wheel_acceleration_max * DT
+    worst = 0.0
+    for p, q in itertools.pairwise(cmds):
+        worst = max(worst, float(np.max(np.abs(q.arm_rates - p.arm_rates) / a)),
+                    float(np.max(np.abs(q.wheel_speeds - p.wheel_speeds) / wa)))
+    return worst
+
+
+# ---------------------------------------------------------------- 1. two robots under one id
+def test_a_second_sim_instance_is_a_fault_not_mixed(robot: w.RobotConfig) -> None:
+    core, plant = make(robot)
+    other = Plant(core.model)
+    other.instance = "sim-B"
+    other.q_arm = other.q_arm + 0.3  # another robot, elsewhere
+    t = 0.0
+    for _ in range(20):
+        core.on_state(plant.msg(), t)
+        tick(core, plant, t)
+        t += DT
+    assert core.instance == "sim-A" and not core.safe
+    used = []
+    for k in range(100):  # both sims publish on the key, interleaved
+        src = plant if k % 2 else other
+        accepted = core.on_state(src.msg(), t)
+        assert accepted == (src is plant)
+        cmd = tick(core, plant, t)
+        used.append(core.state.q_arm.copy() if core.state is not None else None)
+        t += DT
+    assert core.safe and "second state source" in core.last_fault
+    assert cmd.status == w.Status.SAFE_STOP
+    assert core.refused["instance"] == 50
+    # the controller never saw the other robot's joints
+    assert all(np.max(np.abs(q - plant.q_arm)) < 0.05 for q in used)
+    # the second source goes away: the fault clears, and the daemon holds until told to resume
+    for _ in range(60):
+        core.on_state(plant.msg(), t)
+        tick(core, plant, t)
+        t += DT
+    assert not core.safe and core.resume_needed and core.mode == w.Mode.HOLD
+
+
+def test_a_restarted_sim_is_latched_after_the_old_one_fell_silent(robot: w.RobotConfig) -> None:
+    core, plant = make(robot)
+    t = 0.0
+    for _ in range(5):
+        core.on_state(plant.msg(), t)
+        tick(core, plant, t)
+        t += DT
+    t += 2 * core.svc.watchdog.state_timeout  # the old sim is gone
+    plant.instance, plant.seq = "sim-C", 0
+    assert core.on_state(plant.msg(), t)
+    assert core.instance == "sim-C" and "sim instance changed" in core.last_fault
+
+
+def test_a_state_whose_seq_does_not_increase_is_refused(robot: w.RobotConfig) -> None:
+    core, plant = make(robot)
+    m1, m2 = plant.msg(), plant.msg()
+    assert core.on_state(m2, 0.0)
+    assert not core.on_state(m1, 0.001)  # older: replayed or reordered
+    assert core.refused["state_seq"] == 1
+
+
+# ---------------------------------------------------------------- 3. the sim's referee and firmware
+def test_rising_sim_violation_counts_are_a_fault(robot: w.RobotConfig) -> None:
+    core, plant = make(robot)
+    plant.violations = {"position": 12}  # counts from before this daemon: the baseline
+    t = 0.0
+    for _ in range(5):
+        core.on_state(plant.msg(), t)
+        tick(core, plant, t)
+        t += DT
+    assert not core.safe
+    plant.violations = {"position": 12, "velocity": 3}  # e.g. a rogue client's commands
+    core.on_state(plant.msg(), t)
+    cmd = tick(core, plant, t)
+    assert cmd.status == w.Status.SAFE_STOP and core.safe
+    assert "sim referee counted 3 new violation" in core.last_fault
+    assert core.faults["sim referee"] == 1
+
+
+def test_a_protective_stop_of_the_sim_is_a_fault(robot: w.RobotConfig) -> None:
+    core, plant = make(robot)
+    core.on_state(plant.msg(), 0.0)
+    tick(core, plant, 0.0)
+    core.on_state(plant.msg(protective_stop=True, protective_reason="refused command: joint 4"), DT)
+    assert tick(core, plant, DT).status == w.Status.SAFE_STOP
+    assert core.last_fault.startswith("sim protective stop (refused command: joint 4")
+
+
+# ---------------------------------------------------------------- 5. one operator per stream
+def test_a_second_operator_is_refused_and_counted(robot: w.RobotConfig) -> None:
+    core, plant = make(robot)
+    x0 = core.model.ee_position(plant.q_base, plant.q_arm)
+    mode(core, "track")
+    t = 0.0
+    a, b = x0 + np.array([0.04, 0.0, 0.0]), x0 + np.array([-0.04, 0.0, 0.0])
+    for k in range(400):  # two clients stream alternately to targets 8 cm apart
+        core.on_state(plant.msg(), t)
+        assert core.on_setpoint(setpoint(a, t, "alice"), t)
+        assert not core.on_setpoint(setpoint(b, t, "bob"), t)
+        tick(core, plant, t)
+        t += DT
+        if k == 399:
+            break
+    x = core.model.ee_position(plant.q_base, plant.q_arm)
+    assert np.linalg.norm(x - a) < 2e-3  # alice's target, never swung towards bob's
+    assert core.refused["operator"] == 400 and core.operator_conflicts == 400
+    assert core.operator == "alice" and "setpoint conflict" in core.last_fault
+    # alice stops; after operator_timeout bob may take the stream
+    t += core.svc.watchdog.operator_timeout
+    assert core.on_setpoint(setpoint(b, t, "bob"), t) and core.operator == "bob"
+
+
+# ---------------------------------------------------------------- 11. frozen setpoint stamps
+def test_a_frozen_setpoint_stamp_is_refused_and_reported(robot: w.RobotConfig) -> None:
+    core, plant = make(robot)
+    x0 = core.model.ee_position(plant.q_base, plant.q_arm)
+    mode(core, "track")
+    accepted = 0
+    t = 0.0
+    for _ in range(250):
+        core.on_state(plant.msg(), t)
+        accepted += core.on_setpoint(setpoint(x0 + np.array([0.05, 0, 0]), 17.0), t)  # constant stamp
+        tick(core, plant, t)
+        t += DT
+    assert accepted == 1 and core.refused["stamp"] == 249
+    assert "setpoint stamp not increasing" in core.last_fault
+
+
+# ---------------------------------------------------------------- 7. the acceleration anchor
+def run_with_stale_states(robot: w.RobotConfig, every: int, age: int, n: int) -> list[w.Command]:
+    """Track a moving target; the daemon gets a state every `every` ticks, `age` ticks old."""
+    core, plant = make(robot)
+    x0 = core.model.ee_position(plant.q_base, plant.q_arm)
+    mode(core, "track")
+    hist: collections.deque[StateMsg] = collections.deque(maxlen=age + 1)
+    cmds = []
+    t = 0.0
+    for k in range(n):
+        hist.append(plant.msg())
+        if k % every == 0:
+            core.on_state(hist[0], t)
+        x = x0 + np.array([0.15 * np.sin(2.0 * t), 0.1 * (1 - np.cos(2.0 * t)), 0.0])
+        core.on_setpoint(setpoint(x, t), t)
+        cmds.append(tick(core, plant, t))
+        t += DT
+    return cmds
+
+
+def test_consecutive_commands_stay_inside_the_acceleration_bound_with_stale_states(
+    robot: w.RobotConfig,
+) -> None:
+    """A state every 4th tick, 4 ticks old: on the old anchor (the measured rates) consecutive
+    commands differed by up to 2 A·dt; anchored on the last command they stay inside A·dt."""
+    cmds = run_with_stale_states(robot, every=4, age=4, n=2000)
+    assert max(np.abs(c.v).max() for c in cmds) > 0.05  # it does move
+    assert steps_over(robot, cmds) <= 1.0 + 1e-9
+
+
+# ---------------------------------------------------------------- 10. a constant delay
+def test_a_constant_state_delay_is_a_fault(robot: w.RobotConfig) -> None:
+    """States 20 ms late (10 ticks at 500 Hz): the command → applied-state round trip shows it."""
+    core, plant = make(robot)
+    hist: collections.deque[StateMsg] = collections.deque(maxlen=11)
+    t = 0.0
+    for _ in range(200):
+        hist.append(plant.msg())
+        core.on_state(hist[0], t)
+        tick(core, plant, t)
+        t += DT
+    assert core.round_trip == pytest.approx(11 * DT)
+    assert core.safe and core.last_fault.startswith("state too old")
+
+
+def test_a_prompt_state_is_no_fault(robot: w.RobotConfig) -> None:
+    core, plant = make(robot)
+    t = 0.0
+    for _ in range(200):
+        core.on_state(plant.msg(), t)  # the state after the last command, one tick later
+        tick(core, plant, t)
+        t += DT
+    assert core.round_trip == pytest.approx(DT) and not core.safe and not core.last_fault
+
+
+# ---------------------------------------------------------------- 15. resuming is an explicit act
+@pytest.mark.parametrize("resume", ["manual", "auto"])
+def test_resume_after_a_safe_stop(robot: w.RobotConfig, resume: str) -> None:
+    core, plant = make(robot, resume=resume)
+    x0 = core.model.ee_position(plant.q_base, plant.q_arm)
+    target = x0 + np.array([0.1, 0.0, 0.0])
+    mode(core, "track")
+    t = 0.0
+    for _ in range(100):
+        core.on_state(plant.msg(), t)
+        core.on_setpoint(setpoint(target, t), t)
+        tick(core, plant, t)
+        t += DT
+    for _ in range(300):  # the sim hangs: no state
+        core.on_setpoint(setpoint(target, t), t)
+        tick(core, plant, t)
+        t += DT
+    assert core.safe
+    x_stop = core.model.ee_position(plant.q_base, plant.q_arm)
+    for _ in range(500):  # the sim is back, the operator still streams
+        core.on_state(plant.msg(), t)
+        core.on_setpoint(setpoint(target, t), t)
+        tick(core, plant, t)
+        t += DT
+    x = core.model.ee_position(plant.q_base, plant.q_arm)
+    if resume == "manual":
+        assert core.mode == w.Mode.HOLD and core.resume_needed
+        assert np.linalg.norm(x - x_stop) < 0.01  # it stayed where the stop left it
+        mode(core, "track")  # the explicit act
+        assert not core.resume_needed
+        for _ in range(500):
+            core.on_state(plant.msg(), t)
+            core.on_setpoint(setpoint(target, t), t)
+            tick(core, plant, t)
+            t += DT
+        x = core.model.ee_position(plant.q_base, plant.q_arm)
+    else:
+        assert core.mode == w.Mode.TRACK and not core.resume_needed
+    assert np.linalg.norm(x - target) < 5e-3
+
+
+# ---------------------------------------------------------------- 13. queries bounded per tick
+class FakeQuery:
+    def __init__(self) -> None:
+        self.replies = 0
+
+    def reply(self, key: str, payload: bytes) -> None:
+        self.replies += 1
+
+
+class FakeQueryable:
+    def __init__(self, n: int) -> None:
+        self.pending = [FakeQuery() for _ in range(n)]
+        self.all = list(self.pending)
+
+    def try_recv(self) -> FakeQuery | None:
+        return self.pending.pop(0) if self.pending else None
+
+
+def test_info_queries_are_bounded_per_tick(robot: w.RobotConfig) -> None:
+    d = Daemon(ServiceConfig(), w.load_controller_config(), robot)
+    q = FakeQueryable(64)
+    assert d.answer_queries(q, 1) == 1 and len(q.pending) == 63  # one per tick; the rest wait
+    answered = [d.answer_queries(q, 1) for _ in range(70)]
+    assert sum(answered) == 63 and max(answered) == 1
+    assert all(x.replies == 1 for x in q.all)
+
+
+# ---------------------------------------------------------------- the daemon's own stall
+def test_after_its_own_stall_the_daemon_waits_for_the_robots_stop(robot: w.RobotConfig) -> None:
+    """A SIGSTOPped daemon: the robot stopped following its commands after its timeout. The
+    first command after the stall must start from what the robot does, not from the last one."""
+    core, plant = make(robot)
+    x0 = core.model.ee_position(plant.q_base, plant.q_arm)
+    mode(core, "track")
+    t = 0.0
+    last = None
+    for _ in range(200):
+        core.on_state(plant.msg(), t)
+        core.on_setpoint(setpoint(x0 + np.array([0.2, 0.0, 0.0]), t), t)
+        last = tick(core, plant, t)
+        t += DT
+    assert last is not None and np.abs(last.v).max() > 0.05  # moving
+    t += 0.2  # stalled for 200 ms
+    core.on_state(plant.msg(), t)  # an old state, from before the stall, arrives first
+    assert core.tick(t) is None and core.stream_broken and "command stream broken" in core.last_fault
+    # the robot braked itself to rest meanwhile; its state says so
+    plant.v_arm, plant.wheels = np.zeros(7), np.zeros(4)
+    core.on_state(plant.msg(stale_stop=True), t + DT)
+    cmd = core.tick(t + DT)
+    assert cmd is not None and not core.stream_broken
+    a = np.asarray(robot.arm.acceleration_max) * DT
+    assert np.all(np.abs(cmd.arm_rates) <= a * (1 + 1e-9))  # from rest, inside A·dt
+    assert np.all(np.abs(cmd.wheel_speeds) <= robot.base.wheel_acceleration_max * DT * (1 + 1e-9))
