@@ -62,8 +62,10 @@ def run(args: argparse.Namespace) -> int:
         e = summary["ee_error_max"]
         print(f"      EE error max (ground truth) {'n/a' if e is None else f'{e * 100:.2f} cm'}; "
               f"DM along x {summary['dm_start']:.3f} → {summary['dm_end']:.3f}")
-        print(f"      rejected {summary['rejected']}; processes exited {codes}")
-    ok = summary["violations_total"] == 0 and all(c == 0 for c in codes.values())
+        print(f"      rejected {summary['rejected']}; faults {summary['faults'] or 'none'}; "
+              f"protective stops {summary['protective_stops']}; processes exited {codes}")
+    ok = (summary["violations_total"] == 0 and not summary["protective_stops"]
+          and all(c == 0 for c in codes.values()))
     return 0 if ok else 1
 
 
@@ -147,5 +149,8 @@ def _drive(svc: Any, duration: float, quiet: bool) -> dict[str, Any] | None:
         "dm_end": next(p["dm"] for p in per_phase if p["phase"] == "dm_nullspace"),
         "rejected": final.status.rejected,
         "last_fault": final.status.last_fault,
+        "faults": final.status.faults,
+        "protective_stops": st.protective_stops if st is not None else None,
+        "sim_refused": dict(st.refused) if st is not None else {},
         "phases": per_phase,
     }
