@@ -362,3 +362,98 @@ def test_hold_without_a_target_holds_still() -> None:
     ctl = qp("daqp")
     cmd = ctl.step(w.RobotState(np.zeros(3), Q0), w.Reference("hold"))
     np.testing.assert_allclose(cmd.v, 0.0, atol=1e-12)
+
+
+# The EE box of DM_CARTESIAN, eq. (17), re-checked on every solver path (issue 11, item 14) ----
+def _box_edge_case() -> tuple[w.ControllerConfig, w.RobotState, w.Reference, np.ndarray]:
+    """At rest at the paper's start, DM along z moves the EE down by dt·1.76 mm/s per tick; the box's
+    floor sits half a tick's motion below it. The exact-task command (the paper's J# v_c, inside
+    bounds (13)) crosses the floor; a command that respects the box must leave the task unmet."""
+    state = w.RobotState(np.zeros(3), Q0)
+    ref = w.Reference("dm_cartesian", direction=[0.0, 0.0, 1.0])
+    v_task = w.PaperController(model(), config()).step(state, ref).v
+    x, J, dt = model().ee_position(state.q_base, Q0), model().kinematics(state.q_base, Q0).J, config().dt
+    assert (J @ v_task)[2] < -1e-3  # moving down
+    floor = x[2] + 0.5 * dt * (J @ v_task)[2]
+    cfg = config().with_(ee_box_lower=np.array([-np.inf, -np.inf, floor]))
+    return cfg, state, ref, v_task
+
+
+def _solution(v: np.ndarray) -> object:
+    from wmm_qp.solvers import QPSolution
+
+    return QPSolution(z=np.concatenate([v, np.zeros(6)]), ok=True, status="solved")
+
+
+PATHS = [("primary", s) for s in SOLVERS] + [("task_first", s) for s in SOLVERS]
+PATHS += [("fallback", s) for s in SOLVERS if s != "daqp"] + [("real", s) for s in SOLVERS]
+
+
+@pytest.mark.parametrize(("path", "solver"), PATHS)
+def test_the_ee_box_holds_whatever_solved_the_stage(path: str, solver: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A solver answer that meets the task but leaves the EE box (within a solver's primal
+    tolerance, DAQP's and OSQP's are ~1e-6 on these rows) is pulled back onto the box: from the
+    configured solver ("primary"), from the DAQP fallback after a failure ("fallback"), from DAQP's
+    exact re-solve of a stage that left slack ("task_first"); "real": no solver replaced."""
+    from wmm_qp.solvers import QPSolution
+
+    cfg, state, ref, v_task = _box_edge_case()
+    ctl = w.QpController(model(), cfg.with_(qp={"solver": solver}))
+    crossing = _solution(v_task)
+    failed = QPSolution(z=None, ok=False, status="forced failure")
+    slack_left = _solution(np.zeros(11))  # meets no task: the stage is re-solved with the task exact
+    assert ctl._fallback is not None
+    if path == "primary":
+        monkeypatch.setattr(ctl._full, "solve", lambda p: crossing)
+    elif path == "fallback":
+        monkeypatch.setattr(ctl._full, "solve", lambda p: failed)
+        monkeypatch.setattr(ctl._fallback, "solve", lambda p: crossing)
+    elif path == "task_first":
+        monkeypatch.setattr(ctl._full, "solve", lambda p: slack_left)
+        monkeypatch.setattr(ctl._fallback, "solve", lambda p: crossing)
+    cmd = ctl.step(state, ref)
+    box = (cfg.ee_box_lower, cfg.ee_box_upper)
+    assert check_command(model().config, ctl.dt, state, cmd, model=model(), ee_box=box) == dict.fromkeys(
+        ("position", "velocity", "acceleration", "wheel", "ee_box"), 0
+    )
+    x, J = model().ee_position(state.q_base, Q0), model().kinematics(state.q_base, Q0).J
+    z_next = x[2] + ctl.dt * (J @ cmd.v)[2]
+    assert z_next >= cfg.ee_box_lower[2] - 1e-15  # the EE stays above the floor ...
+    assert z_next < cfg.ee_box_lower[2] + 1e-12  # ... and goes down to it: the least change
+    assert cmd.status == w.Status.SATURATED
+    if path != "real":
+        assert ctl.ee_box_corrections == 1 and "EE box" in cmd.reason
+        assert np.abs(cmd.v - v_task).max() < np.abs(v_task).max()  # projected, not a full stop
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    rows=st.integers(1, 3),
+    relaxed=st.booleans(),
+)
+def test_the_ee_box_recheck_restores_every_row_inside_the_box_bounds(seed: int, rows: int, relaxed: bool) -> None:
+    """_hold_ee_box on random rows that admit v₀ = clip(0, lb, ub) (as _ee_box builds them, some
+    relaxed to exactly C v₀): after it, every row and every box bound holds."""
+    from wmm_qp.controllers.qp import EE_BOX_TOL, _hold_ee_box
+
+    rng = np.random.default_rng(seed)
+    n = 11
+    lb = rng.uniform(-1.0, 0.5, n)
+    ub = lb + rng.uniform(0.0, 1.0, n)
+    C = np.zeros((rows, n + 6))
+    C[:, :n] = rng.normal(size=(rows, n)) * 1e-3
+    reach = C[:, :n] @ np.clip(0.0, lb, ub)
+    l = np.minimum(reach, reach - rng.uniform(0, 1e-3, rows) * (not relaxed))
+    u = np.maximum(reach, reach + rng.uniform(0, 1e-3, rows) * (not relaxed))
+    z = np.concatenate([rng.uniform(lb, ub), np.zeros(6)])
+    before = z.copy()
+    worst = _hold_ee_box(C, l, u, lb, ub, z, n)
+    Cv = C[:, :n] @ z[:n]
+    assert (Cv <= u + EE_BOX_TOL).all() and (Cv >= l - EE_BOX_TOL).all()
+    assert (z[:n] >= lb).all() and (z[:n] <= ub).all()
+    was = C[:, :n] @ before[:n]
+    held = ((was <= u + EE_BOX_TOL) & (was >= l - EE_BOX_TOL)).all()
+    assert (worst == 0.0) == held
+    if held:
+        np.testing.assert_array_equal(z, before)  # a command inside the box is not touched

@@ -48,3 +48,66 @@ def test_verify_catches_a_controller_without_the_braking_bound(monkeypatch: pyte
 
     monkeypatch.setattr(ctl, "bounds", one_step_only)
     assert verify_controller(ctl, model(), 150, 0).by_kind["position"] > 0
+
+
+# The EE box of DM_CARTESIAN, eq. (17) (issue 11, item 14) --------------------------------------
+BOX_LO, BOX_HI = config().ee_box_lower, config().ee_box_upper
+
+
+def box_state(z_offset: float, v_z: float) -> tuple[w.RobotState, np.ndarray]:
+    """The paper's start, arm moving so that the EE moves at v_z along z; the box's floor lies
+    z_offset below the EE. Returns the state and the box's lower corner."""
+    kin = model().kinematics(np.zeros(3), Q0)
+    v = np.linalg.pinv(kin.J_m) @ np.array([0.0, 0.0, v_z])  # the arm alone
+    lower = np.array([-np.inf, -np.inf, kin.x[2] - z_offset])
+    return w.RobotState(np.zeros(3), Q0, v_arm=v), lower
+
+
+def braking(state: w.RobotState) -> np.ndarray:
+    a = ARM.acceleration_max * DT
+    return state.v_arm - np.clip(state.v_arm, -a, a)
+
+
+def ee_box_count(state: w.RobotState, arm: np.ndarray, lower: np.ndarray) -> int:
+    c = w.Command(wheel_speeds=np.zeros(4), arm_rates=arm)
+    return check_command(model().config, DT, state, c, model=model(), ee_box=(lower, BOX_HI))["ee_box"]
+
+
+def test_the_referee_counts_an_ee_box_crossing_and_asks_only_what_is_possible() -> None:
+    kin = model().kinematics(np.zeros(3), Q0)
+    down = np.linalg.pinv(kin.J_m) @ np.array([0.0, 0.0, -0.01])  # 20 µm down in one tick
+    state, lower = box_state(z_offset=10e-6, v_z=-0.01)  # moving down at 1 cm/s, 10 µm above the floor
+    assert ee_box_count(state, down, lower) == 1  # keeps going: 10 µm through the floor
+    assert ee_box_count(state, 0.4 * down, lower) == 0  # 8 µm: stays above
+    assert ee_box_count(state, braking(state), lower) == 0
+    # already below the floor: going further down is a violation, staying or going back up is not
+    state, lower = box_state(z_offset=-1e-3, v_z=0.0)
+    assert ee_box_count(state, 0.01 * down, lower) == 1
+    assert ee_box_count(state, np.zeros(7), lower) == 0
+    assert ee_box_count(state, -down, lower) == 0
+    # moving down too fast to stop inside: no further than full braking takes it
+    state, lower = box_state(z_offset=1e-6, v_z=-0.2)
+    assert ee_box_count(state, braking(state), lower) == 0
+    assert ee_box_count(state, state.v_arm, lower) == 1  # not braking at all
+
+
+@pytest.mark.parametrize("kind", ["paper", "traditional"])
+def test_the_baselines_leave_the_box_and_the_referee_sees_it(kind: str) -> None:
+    """The paper's controller and the traditional one do not respect the box (v = J# v_c), so with a
+    Cartesian DM gain large enough for a tick to reach a face, verify must count ee_box violations;
+    the QP with the same gain must not."""
+    cfg = config().with_(k_C=1e3)
+    assert verify_controller(w.make_controller(kind, model(), cfg), model(), 100, 0).by_kind["ee_box"] > 0
+    assert verify_controller(w.make_controller("qp", model(), cfg), model(), 100, 0).by_kind["ee_box"] == 0
+
+
+@pytest.mark.parametrize("solver", ["osqp", "daqp"])
+def test_verify_catches_the_qp_without_its_ee_box_recheck(solver: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """OSQP and DAQP meet the EE box rows only to their primal tolerance (~1e-6 m per tick): without
+    the re-check after the solve the referee finds the EE past the box; with it, nothing."""
+    import wmm_qp.controllers.qp as qp_module
+
+    ctl = w.QpController(model(), config().with_(qp={"solver": solver}))
+    assert verify_controller(ctl, model(), 300, 0).by_kind["ee_box"] == 0
+    monkeypatch.setattr(qp_module, "_hold_ee_box", lambda *a: 0.0)
+    assert verify_controller(ctl, model(), 300, 0).by_kind["ee_box"] > 0

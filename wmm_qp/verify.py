@@ -11,9 +11,14 @@ It asks of a command only what is physically possible from the state:
   command must be that full braking; and the robot must still be able to stop: holding the
   command for dt and then braking at A tick by tick must end inside the limits, or no further
   out than braking right now would;
-* wheel: wheel speed and acceleration, the same way.
+* wheel: wheel speed and acceleration, the same way;
+* ee_box (DM_CARTESIAN only, on the axes with a finite bound of eq. (17)'s box): the EE position
+  predicted after one tick, p = x + Δt·J v (eqs. (2), (5), the model's kinematics), stays inside
+  the box, or — if the EE is already outside — no further out than it is, or — if even full
+  braking at A cannot keep it in — no further out than full braking takes it. The box comes from
+  the controller's config (like the limits from the robot's), the rule is re-derived here.
 
-Tolerance: 1e-9 (absolute, in rad/s).
+Tolerance: 1e-9 (absolute, in rad/s; for ee_box in m/s, i.e. 1e-9·Δt on the position).
 """
 
 from __future__ import annotations
@@ -23,16 +28,29 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .config import N_ARM, N_WHEELS, RobotConfig
+from .config import N_ARM, N_WHEELS, FloatArray, RobotConfig
 from .model.wmm import WmmModel
 from .types import Command, Mode, Reference, RobotState
 
-KINDS = ("position", "velocity", "acceleration", "wheel")
+KINDS = ("position", "velocity", "acceleration", "wheel", "ee_box")
 TOL = 1e-9
 
 
-def check_command(robot: RobotConfig, dt: float, state: RobotState, cmd: Command, tol: float = TOL) -> dict[str, int]:
-    """Number of joints (or wheels) whose command violates each kind of hard bound."""
+def check_command(
+    robot: RobotConfig,
+    dt: float,
+    state: RobotState,
+    cmd: Command,
+    tol: float = TOL,
+    *,
+    model: WmmModel | None = None,
+    ee_box: tuple[FloatArray, FloatArray] | None = None,
+) -> dict[str, int]:
+    """Number of joints (or wheels, or EE axes) whose command violates each kind of hard bound.
+
+    ``ee_box`` = (lower, upper) [m], given with ``model``, also checks the EE box of eq. (17) (pass
+    it for a DM_CARTESIAN command only); otherwise the "ee_box" count is 0.
+    """
     arm, base = robot.arm, robot.base
     v, v0, q = np.asarray(cmd.arm_rates), state.v_arm, state.q_arm
     a = arm.acceleration_max * dt
@@ -59,7 +77,36 @@ def check_command(robot: RobotConfig, dt: float, state: RobotState, cmd: Command
         | (np.abs(w) > np.maximum(base.wheel_speed_max, np.abs(w0) - aw) + tol)
     )
     out["wheel"] = int(np.sum(bad_w))
+    if model is not None and ee_box is not None:
+        out["ee_box"] = check_ee_box(model, dt, state, cmd, ee_box[0], ee_box[1], tol)
     return out
+
+
+def check_ee_box(
+    model: WmmModel,
+    dt: float,
+    state: RobotState,
+    cmd: Command,
+    lower: FloatArray,
+    upper: FloatArray,
+    tol: float = TOL,
+) -> int:
+    """Number of EE axes on which the command leaves the box [lower, upper] of eq. (17) (see the
+    module docstring): p = x + Δt·J v against the box widened to x and to full braking's p."""
+    arm, base = model.config.arm, model.config.base
+    lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+    kin = model.kinematics(state.q_base, state.q_arm)  # eqs. (2), (5)
+    a, aw = arm.acceleration_max * dt, base.wheel_acceleration_max * dt
+    v0, w0 = state.v_arm, state.wheel_speeds
+    brake = np.concatenate([w0 - np.clip(w0, -aw, aw), v0 - np.clip(v0, -a, a)])  # full braking at A
+    v = np.concatenate([np.asarray(cmd.wheel_speeds, dtype=float), np.asarray(cmd.arm_rates, dtype=float)])
+    p, p_brake = kin.x + dt * (kin.J @ v), kin.x + dt * (kin.J @ brake)
+    hi = np.maximum(np.maximum(upper, kin.x), p_brake)
+    lo = np.minimum(np.minimum(lower, kin.x), p_brake)
+    boxed = np.isfinite(lower) | np.isfinite(upper)
+    with np.errstate(invalid="ignore"):
+        bad = ~np.isfinite(p) | (p > hi + tol * dt) | (p < lo - tol * dt)
+    return int(np.sum(boxed & bad))
 
 
 def _stop_position(q: np.ndarray, v: np.ndarray, a_dt: np.ndarray, dt: float) -> np.ndarray:
@@ -150,7 +197,14 @@ class VerifyReport:
     examples: list[dict[str, object]] = field(default_factory=list)
 
 
-def verify_controller(controller: object, model: WmmModel, n: int, seed: int, progress: object = None) -> VerifyReport:
+def verify_controller(
+    controller: object,
+    model: WmmModel,
+    n: int,
+    seed: int,
+    progress: object = None,
+    ee_box: tuple[FloatArray, FloatArray] | None = None,
+) -> VerifyReport:
     """Run one step of ``controller`` for each of n random states in every mode; referee each.
 
     Args:
@@ -159,15 +213,22 @@ def verify_controller(controller: object, model: WmmModel, n: int, seed: int, pr
         n: number of random states.
         seed: RNG seed.
         progress: optional callable(i, n) called after each state.
+        ee_box: (lower, upper) [m] of eq. (17), refereed in DM_CARTESIAN; default: the box of the
+            controller's ``config`` (``ee_box_lower``, ``ee_box_upper``), if it has one.
     """
     rep = VerifyReport(by_mode={m.value: dict.fromkeys(KINDS, 0) for m in Mode})
     dt = float(controller.dt)  # type: ignore[attr-defined]
+    if ee_box is None:
+        cfg = getattr(controller, "config", None)
+        if hasattr(cfg, "ee_box_lower") and hasattr(cfg, "ee_box_upper"):
+            ee_box = (cfg.ee_box_lower, cfg.ee_box_upper)  # type: ignore[union-attr]
     modes = tuple(Mode)
     for k, s in enumerate(sample_states(model, n, seed, modes)):
         cmd = controller.step(s.state, s.reference)  # type: ignore[attr-defined]
         rep.steps += 1
         rep.statuses[cmd.status.value] = rep.statuses.get(cmd.status.value, 0) + 1
-        res = check_command(model.config, dt, s.state, cmd)
+        box = ee_box if s.reference.mode == Mode.DM_CARTESIAN else None
+        res = check_command(model.config, dt, s.state, cmd, model=model, ee_box=box)
         total = sum(res.values())
         if total:
             rep.violations += total

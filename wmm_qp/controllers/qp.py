@@ -52,6 +52,13 @@ it meets every KKT condition (``qp.closed_form_first``); otherwise the solver ru
 A stage the configured solver fails on is solved again by DAQP (when the configured solver is
 another one); only if that fails too is the command a safe stop. Every result is clipped to the box bounds (a no-op for
 exact solvers; the guarantee for iterative solvers' tolerances).
+
+The EE box rows (DM_CARTESIAN) are not bounds the clip can restore, and every backend meets them
+only to its primal tolerance (DAQP's and OSQP's ~1e-6 m per tick on these rows: up to 5e-7 m in
+``wmm-qp verify``'s random states, proxsuite's up to 2e-8 m): so the achieved command is
+re-checked against them after every solver path (closed form, the configured solver, the DAQP
+fallback, the exact re-solve) and, where it leaves a row, projected back onto it inside the box
+bounds (``_hold_ee_box``; status SATURATED with the reason).
 """
 
 from __future__ import annotations
@@ -78,6 +85,7 @@ _NO_ROWS, _NO_BOUNDS = np.zeros((0, N_V)), np.zeros(0)  # no EE box rows (read o
 _NO_ROWS.setflags(write=False)
 _NO_HOLD = np.zeros(0)  # stage 2 holds no column
 _NO_BOUNDS.setflags(write=False)
+EE_BOX_TOL = 1e-14  # [m] over one tick: an EE box row violated by less is roundoff (the referee allows 1e-9·Δt)
 RETURN_WEIGHT = 1e3  # outweighs minimal-motion costs (the base's too), stays below the task's ρ₁
 
 
@@ -220,6 +228,73 @@ def _ee_box(
         u[k] = min(max(max(hi[r], x[r]) - x[r], reach), INF)
 
 
+@jit
+def _hold_ee_box(
+    C: FloatArray, l: FloatArray, u: FloatArray, lb: FloatArray, ub: FloatArray, z: FloatArray, n: int
+) -> float:
+    """The EE box re-checked on the achieved command v = z[:n], whatever solved the stage.
+
+    A solver meets the rows l ≤ C v ≤ u of ``_ee_box`` (eq. (17)) only to its primal tolerance
+    (DAQP's and OSQP's are ~1e-6 on these rows; the clip to lb ≤ v ≤ ub does not touch them).
+    A row left by more than ``EE_BOX_TOL`` is restored by the Euclidean projection of v onto
+    that row's half-space inside the box bounds, v ← clip(v − λ·C_k, lb, ub) with the least λ ≥ 0
+    that meets it (by bisection; it exists: the rows admit v₀ = clip(0, lb, ub), the braking
+    command). If one row's projection moved another out, v ← v₀ + t(v − v₀) with the largest
+    t ∈ [0, 1) that meets every row (both ends inside the box bounds, so v still is). Returns
+    the largest violation found [m over one tick], 0.0 if v met every row (then unchanged).
+    """
+    worst = 0.0
+    for k in range(C.shape[0]):
+        e = 0.0
+        for i in range(n):
+            e += C[k, i] * z[i]
+        if e > u[k] + EE_BOX_TOL:
+            target, sign = u[k], 1.0
+        elif e < l[k] - EE_BOX_TOL:
+            target, sign = l[k], -1.0
+        else:
+            continue
+        worst = max(worst, abs(e - target))
+        lam_lo, lam_hi = 0.0, 0.0  # at lam_hi every entry that lowers sign·C_k v sits at its bound
+        for i in range(n):
+            c = sign * C[k, i]
+            if c > 0.0:
+                lam_hi = max(lam_hi, (z[i] - lb[i]) / c)
+            elif c < 0.0:
+                lam_hi = max(lam_hi, (z[i] - ub[i]) / c)
+        for _ in range(200):  # bisection on λ until the bracket stops shrinking
+            mid = 0.5 * (lam_lo + lam_hi)
+            if not lam_lo < mid < lam_hi:
+                break
+            g = 0.0
+            for i in range(n):
+                g += sign * C[k, i] * min(max(z[i] - mid * sign * C[k, i], lb[i]), ub[i])
+            if g <= sign * target:
+                lam_hi = mid
+            else:
+                lam_lo = mid
+        for i in range(n):
+            z[i] = min(max(z[i] - lam_hi * sign * C[k, i], lb[i]), ub[i])
+    if worst > 0.0:  # every row again (a projection may have moved another row); else towards v₀
+        t = 1.0
+        for k in range(C.shape[0]):
+            e, r = 0.0, 0.0
+            for i in range(n):
+                e += C[k, i] * z[i]
+                r += C[k, i] * min(max(0.0, lb[i]), ub[i])
+            if e > u[k] + EE_BOX_TOL:  # r ≤ u[k] by construction
+                t = min(t, (u[k] - r) / (e - r))
+            elif e < l[k] - EE_BOX_TOL:
+                t = min(t, (l[k] - r) / (e - r))
+        if not t >= 0.0:  # NaN, or a row that does not admit v₀ (cannot happen): brake
+            t = 0.0
+        if t < 1.0:
+            for i in range(n):
+                v0 = min(max(0.0, lb[i]), ub[i])
+                z[i] = v0 + t * (z[i] - v0)
+    return worst
+
+
 class QpController(Controller):
     """QP controller (DESIGN.md §2).
 
@@ -249,6 +324,7 @@ class QpController(Controller):
         self.task_checks = 0  # stages that left slack and were re-solved with the task as an equality
         self.task_recovered = 0  # ... and turned out feasible (the penalty alone was too weak)
         self.task_without_objective = 0  # ... of which only with the DM/return terms dropped
+        self.ee_box_corrections = 0  # commands the EE box re-check had to pull back into the box
         self._templates: dict[tuple[int, int], QPProblem] = {}
         self._w_inv = 1.0 / weight_matrix_diag(qp.alpha)  # W_x⁻¹, eq. (12)
         self._w_inv_dm = 1.0 / weight_matrix_diag(qp.dm_alpha)  # W_x⁻¹ in DM_NULLSPACE
@@ -272,7 +348,7 @@ class QpController(Controller):
 
     def clear_statistics(self) -> None:
         self.fallbacks = self.closed_form_hits = self.task_checks = 0
-        self.task_recovered = self.task_without_objective = 0
+        self.task_recovered = self.task_without_objective = self.ee_box_corrections = 0
 
     # ------------------------------------------------------------------ building
     def box(self, ctx: TickContext) -> tuple[FloatArray, FloatArray]:
@@ -486,7 +562,13 @@ class QpController(Controller):
             return self.safe_stop(state, f"qp ({self.solver}): the solver failed")
         self.last_stage = "full"
         status, reason = Status.OK, ""
-        if not self._closed_form_hit and task_residual(problem, z) > 1e-6:
+        if problem.n_in:  # the EE box (DM_CARTESIAN, eq. (17)), re-checked whatever solved the stage
+            out = _hold_ee_box(problem.C, problem.l, problem.u, problem.lb, problem.ub, z, N_V)
+            if out > 0.0:
+                self.ee_box_corrections += 1
+                status = Status.SATURATED
+                reason = f"EE box: the solution left it by {out / self.dt:.3g} m/s; projected back onto it"
+        if status == Status.OK and not self._closed_form_hit and task_residual(problem, z) > 1e-6:
             status, reason = Status.SATURATED, "the bounds cut the task (best effort)"
         alpha = self.config.qp.dm_alpha if mode == Mode.DM_NULLSPACE else self.config.qp.alpha
         return self.finish(ctx, z[:N_V], xdot, status=status, reason=reason, alpha=alpha)
