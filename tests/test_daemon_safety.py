@@ -324,10 +324,14 @@ def test_after_its_own_stall_the_daemon_waits_for_the_robots_stop(robot: w.Robot
     t += 0.2  # stalled for 200 ms
     core.on_state(plant.msg(), t)  # an old state, from before the stall, arrives first
     assert core.tick(t) is None and core.stream_broken and "command stream broken" in core.last_fault
-    # the robot braked itself to rest meanwhile; its state says so
-    plant.v_arm, plant.wheels = np.zeros(7), np.zeros(4)
+    # the robot is braking itself; its state says so, but it is not at rest yet: still nothing
+    plant.v_arm, plant.wheels = 0.5 * plant.v_arm, 0.5 * plant.wheels
     core.on_state(plant.msg(stale_stop=True), t + DT)
-    cmd = core.tick(t + DT)
+    assert core.tick(t + DT) is None
+    plant.v_arm, plant.wheels = np.zeros(7), np.zeros(4)  # at rest
+    t += 2 * DT
+    core.on_state(plant.msg(stale_stop=True), t)
+    cmd = core.tick(t)
     assert cmd is not None and not core.stream_broken
     a = np.asarray(robot.arm.acceleration_max) * DT
     assert np.all(np.abs(cmd.arm_rates) <= a * (1 + 1e-9))  # from rest, inside A·dt

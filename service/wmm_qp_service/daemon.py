@@ -169,6 +169,7 @@ class ControlCore:
         self.stream_break = wd.command_hold - wd.state_age_max  # [s] the robot's command timeout
         self._last_sent_t = -math.inf
         self.stream_broken = False
+        self.stream_start = 0  # seq of the first command of the current stream
 
     # ------------------------------------------------------------------ inputs
     def on_state(self, msg: StateMsg, now: float) -> bool:
@@ -329,13 +330,14 @@ class ControlCore:
         if not self.stream_broken and math.isfinite(self._last_sent_t) and now - self._last_sent_t > self.stream_break:
             # this daemon stalled (scheduler, SIGSTOP) past the robot's command timeout: the robot
             # is braking by itself, at rates the daemon does not know. A command now would jump
-            # from them; send none until a state shows the robot's own stop, then start from it.
+            # from them; send none until a state shows the robot stopped at rest, then start there.
             self._fault(f"command stream broken ({(now - self._last_sent_t) * 1e3:.0f} ms without a "
                         f"command: the robot stops itself)")
             self.stream_broken = self.safe = True
         if self.stream_broken:
             msg = self.state_msg
-            if not (self.state_fresh and msg is not None and (msg.stale_stop or msg.protective_stop)):
+            if not (self.state_fresh and msg is not None and (msg.stale_stop or msg.protective_stop)
+                    and not any(msg.v_arm) and not any(msg.wheel_speeds)):
                 return None
             self.stream_broken = False
             self.anchor_on_command = False
@@ -366,6 +368,8 @@ class ControlCore:
         x_d, xd_d = self.smoother.step()
         self.ref = w.Reference(mode=self.mode, x_d=x_d, xd_d=xd_d, direction=self.direction)
         self.ref_valid = True
+        if not self.anchor_on_command:
+            self.stream_start = self.seq + 1  # the seq the daemon gives this tick's command
         cmd = self.ctl.step(self._anchored(), self.ref)
         self.anchor_on_command = True
         if cmd.status == w.Status.SAFE_STOP:
@@ -405,14 +409,16 @@ class ControlCore:
         next: the last command (its drives ramp towards it, and the referee judges each
         command against the previous one). The measured rates lag it by the state's age, and
         a late state would pull the bounds back and let two consecutive commands differ by
-        more than A·Δt. The measured rates are used for the first command to a sim instance
-        and whenever the robot is not following the stream (its state shows a stale or a
-        protective stop).
+        more than A·Δt. The measured rates are used for the first command of a stream (to a
+        new sim instance, or after this daemon's own stall) and when the robot stopped
+        following the stream (a state that applied one of its commands shows a stale or a
+        protective stop); a state from before the stream began does not count.
         """
         st, cmd, msg = self.state, self.cmd, self.state_msg
         assert st is not None
         if (not self.anchor_on_command or cmd is None
-                or (msg is not None and (msg.stale_stop or msg.protective_stop))):
+                or (msg is not None and (msg.stale_stop or msg.protective_stop)
+                    and msg.cmd_seq >= self.stream_start)):  # it stopped following this stream
             return st
         return w.RobotState(q_base=st.q_base, q_arm=st.q_arm, v_arm=cmd.arm_rates,
                             wheel_speeds=cmd.wheel_speeds)

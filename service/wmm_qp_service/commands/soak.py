@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -87,7 +88,10 @@ def run(args: argparse.Namespace) -> int:
                "tick_p99_us": lp.tick_p99_us, "tick_max_us": lp.tick_max_us,
                "measured_hz": lp.measured_hz, "rss_kib_start": rss0, "rss_kib_end": rss1,
                "violations": dict(st.violations) if st else final.status.sim_violations,
-               "rejected": final.status.rejected, "last_fault": final.status.last_fault}
+               "rejected": final.status.rejected, "last_fault": final.status.last_fault,
+               "faults": final.status.faults,
+               "protective_stops": st.protective_stops if st else None,
+               "load_average": list(os.getloadavg())}
     finally:
         out["exit_codes"] = stack.stop()
     out["logs"] = str(log_dir)
@@ -98,5 +102,6 @@ def run(args: argparse.Namespace) -> int:
               f"deadline misses {out['deadline_misses']}, tick p50 {out['tick_p50_us']:.0f} µs, "
               f"p99 {out['tick_p99_us']:.0f} µs, max {out['tick_max_us']:.0f} µs")
         print(f"      RSS [KiB] start {out['rss_kib_start']} end {out['rss_kib_end']}")
-        print(f"      violations {out['violations']}; exit codes {out['exit_codes']}")
+        print(f"      violations {out['violations']}; faults {out['faults'] or 'none'}; "
+              f"protective stops {out['protective_stops']}; exit codes {out['exit_codes']}")
     return 0 if sum(out["violations"].values()) == 0 else 1
