@@ -29,6 +29,7 @@ COMMANDS: dict[str, str] = {
     "experiment": "experiment",
     "bench": "bench",
     "soak": "soak",
+    "acl": "acl",
 }
 
 HELP = {
@@ -43,6 +44,7 @@ HELP = {
     "experiment": "reproduce one of the paper's experiments (circle, dm, push)",
     "bench": "measure per-tick controller time and the loop over Zenoh",
     "soak": "run sim + daemon + client for a long time and report drift in time and memory",
+    "acl": "write per-role Zenoh credentials with fresh secrets and their ACL configs (acl init DIR)",
 }
 
 

@@ -15,6 +15,7 @@ import zenoh
 
 from wmm_qp import ConfigError
 
+from .acl import apply_credentials, check_listen_endpoints, file_endpoints
 from .config import ServiceConfig
 
 ROLE_DAEMON = "daemon"
@@ -29,23 +30,30 @@ def session_config(cfg: ServiceConfig, role: str) -> zenoh.Config:
     ``sim_endpoint``; a client listens nowhere and connects to both. Peers retry their
     connects in the background, so the start order does not matter.
 
+    Endpoints listed in the config file are kept: its listen endpoints are added to the
+    role's, its connect endpoints replace the role's (``acl_daemon.json5`` reaches the sim
+    over the sim's unix socket only). Relative paths (``dictionary_file``, unix sockets,
+    ``password: "file:NAME"``) are relative to the config file; credentials are checked
+    (:mod:`.acl`).
+
     Args:
         cfg: service config (base JSON5 file and endpoints).
         role: ``daemon``, ``sim`` or ``client``.
 
     Raises:
-        ConfigError: the base file is not a valid Zenoh config.
+        ConfigError: the base file is not a valid Zenoh config, a credential file it names is
+            missing or holds a placeholder, or it listens where its ACL trusts any peer.
     """
     z = cfg.zenoh
     try:
         zc = zenoh.Config.from_file(str(z.config)) if z.config is not None else zenoh.Config()
     except Exception as e:  # zenoh.ZError: unreadable or not a Zenoh config
         raise ConfigError(z.config or "", "", f"not a valid Zenoh config: {str(e).splitlines()[0][:200]}") from None
-    if z.config is not None:  # a relative password dictionary is relative to its config file
-        d = json.loads(zc.get_json("transport/auth/usrpwd/dictionary_file"))
-        if isinstance(d, str) and not Path(d).is_absolute():
-            zc.insert_json5("transport/auth/usrpwd/dictionary_file",
-                            json.dumps(str(Path(z.config).parent / d)))
+    file_listen: list[str] = []
+    file_connect: list[str] = []
+    if z.config is not None:
+        apply_credentials(zc, Path(z.config))
+        file_listen, file_connect = file_endpoints(zc, Path(z.config))
     listen: Sequence[str]
     connect: Sequence[str]
     if role == ROLE_DAEMON:
@@ -54,6 +62,10 @@ def session_config(cfg: ServiceConfig, role: str) -> zenoh.Config:
         listen, connect = [z.sim_endpoint], []
     else:
         listen, connect = [], [z.daemon_endpoint, z.sim_endpoint]
+    listen = list(dict.fromkeys([*file_listen, *listen]))
+    connect = file_connect or connect
+    if z.config is not None:
+        check_listen_endpoints(zc, Path(z.config), listen)
     zc.insert_json5("mode", json.dumps("peer"))
     zc.insert_json5("scouting/multicast/enabled", "false")
     zc.insert_json5("listen/endpoints", json.dumps(list(listen)))
