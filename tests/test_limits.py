@@ -175,3 +175,39 @@ def test_latency_margin_keeps_a_stale_state_from_overshooting() -> None:
     assert _drive_to_limit_with_stale_state(latency=0.0, age_ticks=1) > 1e-5  # the failure it fixes
     assert _drive_to_limit_with_stale_state(latency=0.002, age_ticks=1) <= 1e-12
     assert _drive_to_limit_with_stale_state(latency=0.006, age_ticks=2) <= 1e-12
+
+
+def _drive_to_limit_with_lagging_rates(anchor_on_command: bool, age_ticks: int, latency: float) -> float:
+    """Drive joint 4 at its upper bound (13) into its limit through a drive that ramps the executed
+    rate towards each command at A (two sub-steps a tick), seeing a state (q, rate) ``age_ticks``
+    old; bounds anchored on the measured rate or on the last command. Max overshoot [rad]."""
+    dt, sub, a = 0.002, 2, ARM.acceleration_max
+    q, e, u = np.zeros(7), np.zeros(7), np.zeros(7)
+    q[3] = ARM.position_upper[3] - 0.4
+    history = [(q.copy(), e.copy())] * (age_ticks + 1)
+    worst = -np.inf
+    for _ in range(1500):
+        seen_q, seen_v = history[-1 - age_ticks]
+        anchor = u if anchor_on_command else seen_v
+        _, hi = joint_motion_bounds(
+            seen_q, anchor, ARM.position_lower, ARM.position_upper, ARM.velocity_max, a, dt, latency
+        )
+        u = hi.copy()  # the task pulls the joint into its limit
+        for _ in range(sub):
+            e = e + np.clip(u - e, -a * dt / sub, a * dt / sub)
+            q = q + e * dt / sub
+            worst = max(worst, q[3] - ARM.position_upper[3])
+        history.append((q.copy(), e.copy()))
+    return worst
+
+
+def test_bounds_anchored_on_a_lagging_measured_rate_overshoot_anchored_on_the_command_do_not() -> None:
+    """Issue 11 item 9. A measured rate lags the command: the acceleration bound (which wins) then
+    lets each command drop A·dt below an old rate only, the joint brakes at a fraction of A and
+    passes the limit by ~0.1 rad whatever the latency margin; anchored on the last command it brakes
+    at A and the margin covers the lag."""
+    for age in (1, 2, 3):
+        assert _drive_to_limit_with_lagging_rates(False, age, (age + 1) * 0.002) > 0.1
+        assert _drive_to_limit_with_lagging_rates(True, age, (age + 1) * 0.002) <= 1e-12
+    assert _drive_to_limit_with_lagging_rates(False, 2, 0.03) > 0.1  # the daemon's 30 ms do not help
+    assert _drive_to_limit_with_lagging_rates(True, 2, 0.03) <= 1e-12

@@ -16,6 +16,15 @@ point of the higher-priority interval nearest to the lower-priority one. So the 
 empty and always contains the braking command q̇_prev − clip(q̇_prev, −A·dt, A·dt): the robot
 can always brake. From a state that satisfied these bounds one tick earlier, braking never
 overshoots a position limit.
+
+That guarantee needs q̇_prev to be what the robot executes next — the previous *command*, while
+the robot follows the command stream — not a measured rate. A measured rate lags the command
+by the state's age (transport, the robot's own step, a drive that ramps towards the command):
+it is the command of r ticks ago (r ≥ 2 over a transport). Where the braking bound is active, the acceleration bound
+wins, so each command could then drop only A·dt below the command of r ticks ago: the joint
+brakes at A/r, not A, and overshoots by far more than any latency margin covers (issue 11
+item 9: joint 4 went 0.02–0.05 rad past its limit in a hold recovery; ``tests/test_limits.py``
+drives a joint into its limit both ways). The latency margin covers the lag of the *position*.
 """
 
 from __future__ import annotations
@@ -128,7 +137,15 @@ class MotionBounds:
         self.dt, self.latency = float(dt), float(latency)
 
     def __call__(self, q: FloatArray, v_prev: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """(lo, hi) for positions q [rad] and current rates v_prev [rad/s]; lo ≤ hi, finite."""
+        """(lo, hi) of eq. (13); lo ≤ hi, finite.
+
+        Args:
+            q: [rad] positions (the state's: up to ``latency`` old).
+            v_prev: [rad/s] the rates the robot executes next: the last command while the robot
+                follows the command stream (not a measured rate that lags it; see the module
+                docstring), the measured rate otherwise (a first command, a robot braking by
+                itself).
+        """
         q, v_prev = np.asarray(q, dtype=np.float64), np.asarray(v_prev, dtype=np.float64)
         if q.shape != (self.n,) or v_prev.shape != (self.n,):  # the kernel does not bounds-check
             raise ValueError(f"q and v_prev must have {self.n} entries, got {q.shape} and {v_prev.shape}")

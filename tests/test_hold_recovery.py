@@ -1,0 +1,234 @@
+"""Hold after a large displacement (issue 11, item 9): bounds (13) hold for the executed motion,
+and the recovery is smooth.
+
+The drill: the daemon in hold, the base pushed ~1 m off its target by foreign wheels-only
+commands (within the wheel limits), then the daemon's commands take over. It drove the base
+back at 0.9 m/s with the arm at its speed limits, and joint 4 went past its upper limit 2.57 rad.
+
+In process, deterministic (a fake clock in integer microseconds): a :class:`ControlCore` at
+500 Hz or 1 kHz drives a :class:`SimRobot` stepped at 1 kHz; each state reaches the daemon
+``state_delay`` after the sim step that produced it, each command reaches the sim 0.3 ms after
+its tick, and the sim takes the newest command that has arrived before each step (a ring of
+depth 1, as over Zenoh) through the drive ramp of ``SimNode.next_command`` (copied below: the
+executed rates move towards the command at the acceleration limits).
+
+Why joint 4 went past its limit: bounds (13) were anchored on the *measured* rates. A state
+is older than one control period (transport, the sim's step, the ramp), so the measured rate is
+the command of r ≥ 2 ticks ago. Where the braking-distance bound is active, the acceleration
+bound (which wins) lets the command drop by A·Δt below that old rate only, i.e. by A·Δt per r
+ticks: the joint brakes at A/r instead of A, and the braking distance grows r-fold (in a 500 Hz
+trace: joint 4 at 0.88 rad/s 0.11 rad before its limit, braked at 2.6 rad/s² instead of 5.2, stopped
+0.05 rad past it). Anchored on the last command (what the robot executes next), the commands brake
+at A and the latency margin covers the lag.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import fields, replace
+from functools import cache
+from typing import Any
+
+import numpy as np
+import pytest
+from wmm_qp_service.config import ServiceConfig
+from wmm_qp_service.daemon import ControlCore
+from wmm_qp_service.protocol import StateMsg
+from wmm_qp_sim import load_sim_config
+from wmm_qp_sim.robot import SimCommand, SimRobot
+
+import wmm_qp as w
+
+SIM_DT_US = 1000  # the sim steps at 1 kHz
+COMMAND_DELAY_US = 300
+PUSH_SPEED = 0.9  # [m/s] base speed of the push, along +x (the direction that drives joint 4 up)
+PUSH_TIME = 1.6  # [s] the push (ramp up, cruise, ramp down during its last 0.5 s): ~1 m
+RECOVERY_SPEED = 0.25  # [m/s] the saturation of K_x (x_d − x) in the proposed patch (qp.recovery_speed)
+_STATE_FIELDS = set(StateMsg.__struct_fields__)
+
+
+class DriveRamp:
+    """``SimNode.next_command`` (the drive ramp), copied: the executed rates move towards the
+    last command received at the acceleration limits, A·dt per sim step."""
+
+    def __init__(self, sim: SimRobot, robot: w.RobotConfig) -> None:
+        self.sim = sim
+        self.target: SimCommand | None = None
+        self.a_max = np.asarray(robot.arm.acceleration_max, dtype=float)
+        self.wa_max = float(robot.base.wheel_acceleration_max)
+
+    def next_command(self, new: SimCommand | None, dt: float) -> SimCommand | None:
+        if new is not None:
+            self.target = new
+        if self.target is None:
+            return None
+        s = self.sim
+        dv = self.target.arm_rates - s.v_arm
+        dw = self.target.wheel_speeds - s.wheels
+        if new is None and not (dv.any() or dw.any()):
+            self.target = None
+            return None
+        return SimCommand(
+            wheel_speeds=s.wheels + np.clip(dw, -self.wa_max * dt, self.wa_max * dt),
+            arm_rates=s.v_arm + np.clip(dv, -self.a_max * dt, self.a_max * dt),
+        )
+
+
+def _state_msg(st: Any, seq: int) -> StateMsg:
+    d: dict[str, Any] = dict(
+        robot="wmm",
+        t=st.t,
+        q_base=st.base_odom.tolist(),
+        q_arm=st.q_arm.tolist(),
+        v_arm=st.v_arm.tolist(),
+        wheel_speeds=st.wheel_speeds.tolist(),
+        base_true=st.base_true.tolist(),
+        ee_true=st.ee_true.tolist(),
+        tau=st.tau.tolist(),
+        contact_force=st.contact_force.tolist(),
+        violations=dict(st.violations),
+        stale_stop=st.stale_stop,
+    )
+    # the header and identity fields of newer protocol versions, where the schema has them
+    extra = dict(seq=seq, stamp=st.t, instance="sim-hold-recovery")
+    d.update({k: v for k, v in extra.items() if k in _STATE_FIELDS})
+    return StateMsg(**d)
+
+
+class RecoveringQp(w.QpController):
+    """The proposed controller patch, applied through the public API: in eq. (18) the error
+    term K_x (x_d − x) is saturated at ``RECOVERY_SPEED`` (feed-forward kept, then the usual cap)."""
+
+    def reference_velocity(self, ctx: Any, reference: w.Reference) -> np.ndarray:
+        xdot = self.task_velocity(ctx, reference)
+        if reference.x_d is not None and reference.mode != w.Mode.DM_CARTESIAN:
+            fb = xdot - reference.xd_d  # K_x (x_d − x), eq. (18)
+            n = math.sqrt(float(fb @ fb))
+            if n > RECOVERY_SPEED:
+                xdot = reference.xd_d + fb * (RECOVERY_SPEED / n)
+        n = math.sqrt(float(xdot @ xdot))
+        cap = self.config.qp.task_speed_max
+        return xdot * (cap / n) if n > cap else xdot
+
+
+def drill(
+    rate_hz: float,
+    state_delay_us: int,
+    after: float,
+    recovering: bool = False,
+    push_speed: float = PUSH_SPEED,
+    push_time: float = PUSH_TIME,
+) -> dict[str, Any]:
+    """Run the drill; returns the referee's counts and what the recovery looked like."""
+    robot = w.load_robot_config()
+    svc = ServiceConfig()
+    svc = replace(svc, loop=replace(svc.loop, rate_hz=rate_hz))
+    core = ControlCore(svc, w.load_controller_config(), robot)
+    if recovering:
+        core.ctl = RecoveringQp(core.model, core.cfg)
+        core.ctl.warm_up()
+    sim_cfg = load_sim_config()
+    if "firmware" in {f.name for f in fields(sim_cfg)}:  # the referee judges the daemon, not a firmware stop
+        sim_cfg = replace(sim_cfg, firmware=False)
+    sim = SimRobot(core.model, sim_cfg)
+    st = sim.reset()
+    ramp = DriveRamp(sim, robot)
+    w_push = np.linalg.lstsq(core.model.base.M, np.array([push_speed, 0.0, 0.0]), rcond=None)[0]
+    assert np.abs(w_push).max() <= robot.base.wheel_speed_max  # within the wheel limits
+    w_step = robot.base.wheel_acceleration_max * SIM_DT_US * 1e-6
+    period_us = round(1e6 / rate_hz)
+    push_end, end = round(push_time * 1e6), round((push_time + after) * 1e6)
+    states: deque[tuple[int, StateMsg]] = deque()
+    cmds: deque[tuple[int, SimCommand]] = deque()
+    tick_us, t_us, seq = 300, 0, 0
+    w_foreign = np.zeros(4)
+    hold_x = None
+    pushed = math.nan
+    v_max = np.asarray(robot.arm.velocity_max)
+    arm_at_limit, base_speed, ee_err, q_hi = 0.0, 0.0, math.inf, -math.inf
+    base_prev = st.base_true[:2].copy()
+    while t_us < end:
+        nxt = t_us + SIM_DT_US
+        while tick_us <= nxt:  # the daemon's ticks before this sim step
+            msg = None
+            while states and states[0][0] <= tick_us:
+                msg = states.popleft()[1]
+            if msg is not None:
+                core.on_state(msg, tick_us * 1e-6)
+            cmd = core.tick(tick_us * 1e-6)
+            if cmd is not None:
+                cmds.append((tick_us + COMMAND_DELAY_US, SimCommand(cmd.wheel_speeds.copy(), cmd.arm_rates.copy())))
+                if hold_x is None and core.ref.x_d is not None:
+                    hold_x = core.ref.x_d.copy()  # where hold latched
+                if tick_us >= push_end and hold_x is not None:
+                    ee_err = float(np.linalg.norm(cmd.x - hold_x))  # the daemon's own (odometry) view
+            tick_us += period_us
+        new = None
+        while cmds and cmds[0][0] <= nxt:
+            new = cmds.popleft()[1]
+        if t_us < push_end:  # the push: foreign wheels-only commands, every step, within limits
+            target = w_push if t_us < push_end - 500_000 else np.zeros(4)
+            w_foreign = w_foreign + np.clip(target - w_foreign, -w_step, w_step)
+            new = SimCommand(w_foreign.copy(), np.zeros(7))
+        st = sim.step(ramp.next_command(new, SIM_DT_US * 1e-6), SIM_DT_US * 1e-6)
+        t_us = nxt
+        seq += 1
+        states.append((t_us + state_delay_us, _state_msg(st, seq)))
+        q_hi = max(q_hi, float(st.q_arm[3]))
+        if t_us > push_end:
+            arm_at_limit += SIM_DT_US * 1e-6 * bool((np.abs(st.v_arm) >= 0.99 * v_max).any())
+            base_speed = max(base_speed, float(np.linalg.norm(st.base_true[:2] - base_prev)) / (SIM_DT_US * 1e-6))
+        base_prev = st.base_true[:2].copy()
+        if t_us == push_end:
+            pushed = float(np.linalg.norm(st.base_true[:2]))
+    assert hold_x is not None
+    return dict(
+        violations=dict(st.violations),
+        q4_max=q_hi,
+        arm_at_limit=arm_at_limit,
+        base_speed=base_speed,
+        ee_error=ee_err,
+        pushed=pushed,
+    )
+
+
+@cache
+def shipped(rate_hz: float, state_delay_us: int) -> dict[str, Any]:
+    return drill(rate_hz, state_delay_us, after=2.0)
+
+
+@pytest.mark.parametrize(("rate_hz", "state_delay_us"), [(500.0, 3000), (1000.0, 1000)])
+def test_bounds_13_hold_while_hold_recovers_a_large_error(rate_hz: float, state_delay_us: int) -> None:
+    """The daemon as shipped: no position violation, joint 4 below 2.57 rad.
+
+    Anchored on the measured rates (before the fix): 480 (500 Hz, 3 ms) and 465 (1 kHz, 1 ms) referee
+    position counts, joint 4 up to 2.598 rad, the base back at 0.84 m/s, an arm joint at its speed
+    limit for 1.5 s.
+    """
+    r = shipped(rate_hz, state_delay_us)
+    assert r["violations"]["position"] == 0, r
+    assert r["q4_max"] <= w.load_robot_config().arm.position_upper[3]
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="issue 11 item 9: needs the saturated error term of eq. (18) "
+    "(qp.recovery_speed) in QpController.reference_velocity — patch in the item's report",
+)
+def test_the_shipped_hold_recovers_a_large_error_smoothly() -> None:
+    """Without the saturation, hold drives the base back at ~1 m/s with the arm at its speed limits."""
+    r = shipped(500.0, 3000)
+    assert r["base_speed"] <= 0.3 and r["arm_at_limit"] <= 0.3, r
+
+
+def test_hold_with_the_error_term_saturated_recovers_smoothly() -> None:
+    """The patch's logic (RecoveringQp): back to the hold target at the recovery speed, the base
+    slow, the arm at a speed limit only briefly, no limit violated. (It needs bounds (13) anchored
+    on the last command too: with the measured rates, 725 position counts even at 0.25 m/s.)"""
+    r = drill(500.0, 3000, after=4.4, recovering=True)
+    assert r["pushed"] > 0.9
+    assert r["violations"]["position"] == 0 and r["violations"]["velocity"] == 0, r
+    assert r["base_speed"] <= 0.3, r  # [m/s] (shipped: 0.84 m/s, 1.05 once (13) holds)
+    assert r["arm_at_limit"] <= 0.3, r  # [s] an arm joint at ≥ 99 % of its speed limit (shipped: 1.5 s)
+    assert r["ee_error"] <= 0.01, r  # [m] back at the hold target (odometry), ~1 m at 0.25 m/s
