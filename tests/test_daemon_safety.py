@@ -13,13 +13,12 @@ import itertools
 
 import numpy as np
 import pytest
+from test_daemon_core import DT, Plant
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.daemon import ControlCore, Daemon
 from wmm_qp_service.protocol import ModeMsg, SetpointMsg, StateMsg
 
 import wmm_qp as w
-
-from test_daemon_core import DT, Plant
 
 
 @pytest.fixture(scope="module")

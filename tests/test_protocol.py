@@ -143,7 +143,8 @@ def test_box_message_round_trips_and_is_checked() -> None:
     ok = BoxMsg(robot="r1", seq=1, stamp=1.0, mass=26.0, mu=0.65, face_x=0.66, center_y=-0.02)
     assert Validator(BoxMsg, "r1", LIM).check(encode(ok)) == ok
     assert Keys.of("wmm", "r1").sim_box == "wmm/r1/sim/box"
-    assert check(BoxMsg, encode(BoxMsg(robot="r2", seq=1, stamp=1.0, mass=26.0, mu=0.65, face_x=0.66, center_y=0.0))) == Reject.ROBOT
+    other = BoxMsg(robot="r2", seq=1, stamp=1.0, mass=26.0, mu=0.65, face_x=0.66, center_y=0.0)
+    assert check(BoxMsg, encode(other)) == Reject.ROBOT
     for bad, reason in (({"mass": math.nan}, Reject.NON_FINITE), ({"mass": 0.0}, Reject.RANGE),
                         ({"mass": 1e6}, Reject.RANGE), ({"mu": -0.1}, Reject.RANGE),
                         ({"width": 0.0}, Reject.RANGE), ({"face_x": 1e9}, Reject.RANGE)):

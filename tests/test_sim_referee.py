@@ -117,7 +117,8 @@ def test_the_drive_ramp_executes_within_the_acceleration_limit(model: wmm_qp.Wmm
     sim.reset()
     prev = sim.state().v_arm
     for k in range(60):  # a 25·A·dt jump, then held, as a daemon at 500 Hz would send it
-        st = sim.step(SimCommand(np.zeros(4), a * 0.05, period=CTRL_DT, seq=k), DT) if k % 2 == 0 else sim.step(None, DT)
+        cmd = SimCommand(np.zeros(4), a * 0.05, period=CTRL_DT, seq=k) if k % 2 == 0 else None
+        st = sim.step(cmd, DT)
         assert np.all(np.abs(st.v_arm - prev) <= a * DT * (1 + 1e-12) + 1e-15)
         prev = st.v_arm
     np.testing.assert_allclose(prev, a * 0.05)
