@@ -101,6 +101,9 @@ class QpConfig:
             Lagrange multiplier, the slack is exactly 0 whenever the task is feasible.
         slack_weight: weight ρ₂ of ½ρ₂‖s‖², which shapes how the task degrades when infeasible.
         task_speed_max: [m/s] ẋ_ref is scaled down to this norm (keeps the QP well scaled).
+        recovery_speed: [m/s] the error term K_x (x_d − x) of eq. (18) is saturated at this norm:
+            a large error (the robot pushed off its hold target) is recovered at this speed,
+            not at K_x·error with the arm at its speed limits.
         singular_arm_weight: near an arm singularity the arm's cost is multiplied by
             1 + singular_arm_weight·(λ/λ_max)², so the base takes over (the QP's damping).
         closed_form_first: try the closed-form optimum (no bound active, zero slack) before the
@@ -115,6 +118,7 @@ class QpConfig:
     slack_l1: float = 1e4
     slack_weight: float = 1e4
     task_speed_max: float = 2.0
+    recovery_speed: float = 0.25
     singular_arm_weight: float = 100.0
     closed_form_first: bool = True
     eps_abs: float = 1e-9
@@ -378,6 +382,7 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
             "slack_l1",
             "slack_weight",
             "task_speed_max",
+            "recovery_speed",
             "singular_arm_weight",
             "closed_form_first",
             "eps_abs",
@@ -412,6 +417,7 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
             slack_l1=q.number("slack_l1", d.qp.slack_l1, positive=True),
             slack_weight=q.number("slack_weight", d.qp.slack_weight, positive=True),
             task_speed_max=q.number("task_speed_max", d.qp.task_speed_max, positive=True),
+            recovery_speed=q.number("recovery_speed", d.qp.recovery_speed, positive=True),
             singular_arm_weight=q.number("singular_arm_weight", d.qp.singular_arm_weight, lo=0.0),
             closed_form_first=q.boolean("closed_form_first", d.qp.closed_form_first),
             eps_abs=q.number("eps_abs", d.qp.eps_abs, positive=True),

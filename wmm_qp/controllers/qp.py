@@ -402,8 +402,21 @@ class QpController(Controller):
         return d
 
     def reference_velocity(self, ctx: TickContext, reference: Reference) -> FloatArray:
-        """ẋ_ref of the mode, scaled down to ``qp.task_speed_max``."""
+        """ẋ_ref of the mode, its error term K_x (x_d − x) (eq. (18)) saturated at
+        ``qp.recovery_speed``, then scaled down to ``qp.task_speed_max``.
+
+        The saturation leaves tracking untouched (errors of millimetres, K_x·e of mm/s) and makes
+        a large error — a robot pushed off its hold target — recover at the recovery speed
+        instead of K_x·e (10 m/s per metre), with the base at full speed and the arm at its
+        speed limits.
+        """
         xdot = self.task_velocity(ctx, reference)
+        if reference.x_d is not None and reference.mode != Mode.DM_CARTESIAN:
+            fb = xdot - reference.xd_d  # K_x (x_d − x), eq. (18)
+            e = math.sqrt(float(fb @ fb))
+            v_rec = self.config.qp.recovery_speed
+            if e > v_rec:
+                xdot = reference.xd_d + fb * (v_rec / e)
         n = math.sqrt(float(xdot @ xdot))
         cap = self.config.qp.task_speed_max
         return xdot * (cap / n) if n > cap else xdot
