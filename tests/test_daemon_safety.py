@@ -332,6 +332,7 @@ def test_after_its_own_stall_the_daemon_waits_for_the_robots_stop(robot: w.Robot
     core.on_state(plant.msg(stale_stop=True), t)
     cmd = core.tick(t)
     assert cmd is not None and not core.stream_broken
+    assert not core.late(t + 1.0)  # the new stream is not late by the old one's clock (it is published)
     a = np.asarray(robot.arm.acceleration_max) * DT
     assert np.all(np.abs(cmd.arm_rates) <= a * (1 + 1e-9))  # from rest, inside A·dt
     assert np.all(np.abs(cmd.wheel_speeds) <= robot.base.wheel_acceleration_max * DT * (1 + 1e-9))

@@ -80,8 +80,8 @@ class WatchdogConfig:
 
     state_timeout: float = 0.05
     setpoint_timeout: float = 0.25
-    command_hold: float = 0.03
-    state_age_max: float = 0.005
+    command_hold: float = 0.035
+    state_age_max: float = 0.01
     resume: str = "manual"
     operator_timeout: float = 0.5
 

@@ -217,6 +217,23 @@ class ControlCore:
         self._last_cmd_seq = cs
         return True
 
+    def late(self, now: float) -> bool:
+        """More than the robot's command timeout since the last command was published."""
+        return math.isfinite(self._last_sent_t) and now - self._last_sent_t > self.stream_break
+
+    def break_stream(self, now: float) -> None:
+        """This daemon stalled (scheduler, SIGSTOP) past the robot's command timeout.
+
+        The robot is braking by itself, at rates the daemon does not know: a command now would
+        jump from them. Until a state shows the robot at rest in its own stop, :meth:`tick` sends
+        nothing; then the stream starts again from the measured rates.
+        """
+        self._fault(f"command stream broken ({(now - self._last_sent_t) * 1e3:.0f} ms without a "
+                    f"command: the robot stops itself)")
+        self.stream_broken = self.safe = True
+        self.anchor_on_command = False
+        self._last_sent_t = -math.inf  # the next stream starts its own clock
+
     def sent(self, seq: int, now: float) -> None:
         """Command ``seq`` was published at ``now`` [s] (for the round trip and the stream)."""
         self._sent_t[seq % _SENT] = now
@@ -327,13 +344,8 @@ class ControlCore:
         self.now = now
         if self.state is None:
             return None
-        if not self.stream_broken and math.isfinite(self._last_sent_t) and now - self._last_sent_t > self.stream_break:
-            # this daemon stalled (scheduler, SIGSTOP) past the robot's command timeout: the robot
-            # is braking by itself, at rates the daemon does not know. A command now would jump
-            # from them; send none until a state shows the robot stopped at rest, then start there.
-            self._fault(f"command stream broken ({(now - self._last_sent_t) * 1e3:.0f} ms without a "
-                        f"command: the robot stops itself)")
-            self.stream_broken = self.safe = True
+        if not self.stream_broken and self.late(now):
+            self.break_stream(now)
         if self.stream_broken:
             msg = self.state_msg
             if not (self.state_fresh and msg is not None and (msg.stale_stop or msg.protective_stop)
@@ -638,6 +650,9 @@ class Daemon:
                     core.on_setpoint(sp, now)
                 # ---- control
                 cmd = core.tick(now)
+                if cmd is not None and core.late(t_pub := time.perf_counter()):
+                    core.break_stream(t_pub)  # this tick itself stalled: the command is too late
+                    cmd = None
                 if cmd is not None:
                     core.seq += 1
                     seq = core.seq
@@ -647,7 +662,7 @@ class Daemon:
                         status=cmd.status.value, lease=core.lease, instance=core.instance,
                         period=period,
                         state_seq=core.cmd_state_seq)))
-                    core.sent(seq, now)
+                    core.sent(seq, t_pub)
                     if tel_every and loop.ticks % tel_every == 0:
                         ee = core.state_msg.ee_true if core.state_msg is not None else _NAN3
                         pub_tel.put(encode(TelemetryMsg(

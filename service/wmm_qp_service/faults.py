@@ -299,11 +299,17 @@ def state_faults(p: Probe, sim_args: list[str], seconds: float = 3.0) -> dict[st
     err = [m.ee_error for m in tel if np.isfinite(m.ee_error)]
     st = p.until(lambda: p.states and p.states[-1])
     i = p.client.info()
-    return {"sim_args": sim_args, "ticks": len(tel), "safe_stop_ticks": sum(m.status == SAFE for m in tel),
-            "ee_error_max": max(err) if err else float("nan"),
-            "ee_error_p50": float(np.median(err)) if err else float("nan"),
-            "state_ok": bool(i and i.status.state_ok), "last_fault": i.status.last_fault if i else "",
-            "violations": dict(st.violations)}
+    out = {"sim_args": sim_args, "ticks": len(tel), "safe_stop_ticks": sum(m.status == SAFE for m in tel),
+           "ee_error_max": max(err) if err else float("nan"),
+           "ee_error_p50": float(np.median(err)) if err else float("nan"),
+           "state_ok": bool(i and i.status.state_ok), "last_fault": i.status.last_fault if i else "",
+           "faults": dict(i.status.faults) if i else {}, "violations": dict(st.violations)}
+    # the next scenarios need a healthy stack: a delayed state is a fault the daemon now holds on
+    p.stack.kill("sim", signal.SIGKILL)
+    p.stack.extra_sim_args = []
+    p.stack.start_sim()
+    p.ready(60.0)
+    return out
 
 
 def sigstop(p: Probe, name: str, hold_s: float = 3.0) -> dict[str, Any]:
