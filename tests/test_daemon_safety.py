@@ -133,13 +133,100 @@ def test_rising_sim_violation_counts_are_a_fault(robot: w.RobotConfig) -> None:
     assert core.faults["sim referee"] == 1
 
 
-def test_a_protective_stop_of_the_sim_is_a_fault(robot: w.RobotConfig) -> None:
+def test_a_protective_stop_of_the_sim_breaks_the_stream(robot: w.RobotConfig) -> None:
+    """The robot's firmware stopped it (e.g. a rogue command): the daemon sends nothing until
+    the robot is at rest, then starts from rest and holds until told to resume. (Before, it
+    braked from its own last command, which the robot was no longer executing: a review's
+    attack re-accelerated a robot at rest to 0.73 rad/s.)"""
     core, plant = make(robot)
-    core.on_state(plant.msg(), 0.0)
-    tick(core, plant, 0.0)
-    core.on_state(plant.msg(protective_stop=True, protective_reason="refused command: joint 4"), DT)
-    assert tick(core, plant, DT).status == w.Status.SAFE_STOP
-    assert core.last_fault.startswith("sim protective stop (refused command: joint 4")
+    x0 = core.model.ee_position(plant.q_base, plant.q_arm)
+    mode(core, "track")
+    t = 0.0
+    for _ in range(100):
+        core.on_state(plant.msg(), t)
+        core.on_setpoint(setpoint(x0 + np.array([0.2, 0.0, 0.0]), t), t)
+        tick(core, plant, t)
+        t += DT
+    plant.v_arm = 0.5 * plant.v_arm  # braking by itself
+    core.on_state(plant.msg(protective_stop=True, protective_reason="refused command: joint 4"), t)
+    assert core.tick(t) is None
+    assert core.last_fault.startswith("the robot stopped following the commands (protective stop: refused")
+    plant.v_arm, plant.wheels = np.zeros(7), np.zeros(4)
+    t += DT
+    core.on_state(plant.msg(protective_stop=True, protective_reason="refused command: joint 4"), t)
+    cmd = tick(core, plant, t)
+    a = np.asarray(robot.arm.acceleration_max) * DT
+    assert np.all(np.abs(cmd.arm_rates) <= a * (1 + 1e-9))  # from rest
+    t += DT
+    core.on_state(plant.msg(), t)  # the legal command ended the protective stop
+    tick(core, plant, t)
+    assert core.mode == w.Mode.HOLD and core.resume_needed
+
+
+def test_commands_lost_long_enough_for_the_robots_timeout_break_the_stream(robot: w.RobotConfig) -> None:
+    """Commands dropped on the way (congestion DROP) while states flow: the robot stops itself;
+    the daemon must not go on by itself when its commands get through again."""
+    core, plant = make(robot)
+    x0 = core.model.ee_position(plant.q_base, plant.q_arm)
+    mode(core, "track")
+    t = 0.0
+    for _ in range(100):
+        core.on_state(plant.msg(), t)
+        core.on_setpoint(setpoint(x0 + np.array([0.2, 0.0, 0.0]), t), t)
+        tick(core, plant, t)
+        t += DT
+    applied = plant.cmd_seq
+    for _ in range(20):  # the robot hears nothing: it brakes to rest in its stale stop
+        core.on_state(plant.msg(stale_stop=True, cmd_seq=applied), t)
+        core.on_setpoint(setpoint(x0 + np.array([0.2, 0.0, 0.0]), t), t)
+        assert core.tick(t) is None
+        t += DT
+    assert "its command timeout" in core.last_fault
+    plant.v_arm, plant.wheels = np.zeros(7), np.zeros(4)
+    for _ in range(300):
+        core.on_state(plant.msg(stale_stop=plant.cmd_seq == applied, cmd_seq=plant.cmd_seq), t)
+        core.on_setpoint(setpoint(x0 + np.array([0.2, 0.0, 0.0]), t), t)
+        tick(core, plant, t)
+        t += DT
+    assert core.mode == w.Mode.HOLD and core.resume_needed  # it did not resume by itself
+
+
+def test_a_lost_lease_sends_nothing_and_taking_it_back_needs_a_resume(robot: w.RobotConfig) -> None:
+    core, plant = make(robot)
+    mode(core, "track")
+    t = 0.0
+    for _ in range(20):
+        core.on_state(plant.msg(), t)
+        tick(core, plant, t)
+        t += DT
+    for _ in range(20):  # a partition healed: the sim applies another daemon's commands
+        core.on_state(plant.msg(lease="other-daemon"), t)
+        assert core.tick(t) is None
+        t += DT
+    assert core.last_fault.startswith("lease lost (the sim applies the commands of daemon other-daemon")
+    # the other one ends; the robot stopped in its stale stop; the lease is ours again
+    core.on_state(plant.msg(lease="core", stale_stop=True), t)
+    tick(core, plant, t)
+    assert core.mode == w.Mode.HOLD and core.resume_needed
+
+
+def test_after_a_twin_was_seen_no_other_instance_is_latched(robot: w.RobotConfig) -> None:
+    """A twin that hides the real sim (its states land just after the real one's): the real
+    one falls silent for the daemon, but the twin is never latched as "a restarted sim"."""
+    core, plant = make(robot)
+    twin = Plant(core.model)
+    twin.instance = "sim-B"
+    t = 0.0
+    core.on_state(plant.msg(), t)
+    tick(core, plant, t)
+    core.on_state(twin.msg(), t)  # seen once
+    for _ in range(200):  # then only the twin, for 0.4 s
+        t += DT
+        assert not core.on_state(twin.msg(), t)
+        if core.tick(t) is not None:
+            core.seq += 1
+            core.sent(core.seq, t)
+    assert core.instance == "sim-A" and core.safe and core.faults["second state source"] >= 1
 
 
 # ---------------------------------------------------------------- 5. one operator per stream
@@ -227,6 +314,26 @@ def test_a_constant_state_delay_is_a_fault(robot: w.RobotConfig) -> None:
     assert core.safe and core.last_fault.startswith("state too old")
 
 
+def test_one_fast_state_in_many_does_not_hide_a_delay(robot: w.RobotConfig) -> None:
+    """A path that reorders: the states 20 ms old, one in 50 overtaking them fresh. The smallest
+    round trip (the old check) saw 2 ms; the median of the per-state bounds sees the delay."""
+    core, plant = make(robot)
+    hist: collections.deque[StateMsg] = collections.deque(maxlen=11)
+    t = 0.0
+    for k in range(400):
+        hist.append(plant.msg())
+        old, fresh = hist[0], hist[-1]
+        core.on_state(fresh if k % 50 == 0 else old, t)
+        tick(core, plant, t)
+        t += DT
+    assert core.safe and core.last_fault.startswith("state too old")
+
+
+def test_a_rate_too_slow_for_the_state_age_check_is_a_config_error(robot: w.RobotConfig) -> None:
+    with pytest.raises(w.ConfigError, match=r"loop\.rate_hz"):
+        ControlCore(ServiceConfig().with_(loop={"rate_hz": 100.0}), w.load_controller_config(), robot)
+
+
 def test_a_prompt_state_is_no_fault(robot: w.RobotConfig) -> None:
     core, plant = make(robot)
     t = 0.0
@@ -276,6 +383,44 @@ def test_resume_after_a_safe_stop(robot: w.RobotConfig, resume: str) -> None:
     else:
         assert core.mode == w.Mode.TRACK and not core.resume_needed
     assert np.linalg.norm(x - target) < 5e-3
+
+
+# ---------------------------------------------------------------- fault lines off the loop
+def test_fault_lines_never_block_or_raise_in_the_control_thread(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A review's attack: 1,000 setpoints with new source names wrote 1,998 lines from the control
+    thread; with stderr a closed pipe, on_setpoint raised BrokenPipeError."""
+    import sys
+    import threading
+
+    from wmm_qp_service.daemon import FaultLog, _say
+
+    class Broken:
+        def write(self, s: str) -> int:
+            raise BrokenPipeError
+
+        def flush(self) -> None:
+            raise BrokenPipeError
+
+    class Stuck:  # a paused terminal (Ctrl-S): write blocks until released
+        release = threading.Event()
+
+        def write(self, s: str) -> int:
+            self.release.wait()
+            return len(s)
+
+        def flush(self) -> None:
+            pass
+
+    monkeypatch.setattr(sys, "stderr", Broken())
+    _say("nothing happens")  # does not raise
+    stuck = Stuck()
+    monkeypatch.setattr(sys, "stderr", stuck)
+    log = FaultLog(depth=8)
+    for k in range(1000):
+        log(f"line {k}")  # returns at once although the writer is stuck on its first line
+    assert 1000 - 8 - 1 <= log.dropped <= 1000 - 8  # at most 8 wait (+1 being written), the rest counted
+    stuck.release.set()
+    log.close()
 
 
 # ---------------------------------------------------------------- 13. queries bounded per tick

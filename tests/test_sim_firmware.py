@@ -128,3 +128,32 @@ def test_the_sim_applies_commands_only_from_the_lease_holder_for_its_instance() 
 def test_two_sim_nodes_have_different_instances() -> None:
     svc, c, r = ServiceConfig(), cfg(), wmm_qp.load_robot_config()
     assert SimNode(svc, c, r).instance != SimNode(svc, c, r).instance
+
+
+# ---------------------------------------------------------------- the referee cannot be talked round
+def test_a_claimed_period_cannot_widen_the_window_beyond_the_real_time(model: wmm_qp.WmmModel) -> None:
+    """A review's attack: flipping a joint by 0.5 rad/s every 1 ms with period = 0.1 s was
+    counted 0 times; with seq jumps of 10^6, 2.6 rad/s flips were counted once in 400."""
+    for period, seq_step in ((0.1, 1), (0.002, 10**6)):
+        sim = SimRobot(model, cfg(firmware=False))
+        sim.reset()
+        arm = np.zeros(7)
+        for k in range(400):
+            arm[0] = 0.5 if k % 2 else -0.5
+            sim.step(SimCommand(np.zeros(4), arm.copy(), period=period, seq=k * seq_step,
+                                received=k * DT), DT)
+        assert sim.state().violations["acceleration"] >= 399, (period, seq_step)
+
+
+def test_the_sim_refuses_an_old_seq_and_a_new_holder_starts_a_new_stream() -> None:
+    node = SimNode(ServiceConfig(), cfg(), wmm_qp.load_robot_config())
+    node.on_lease("d1", True)
+    assert node.accept(command(node, "d1", seq=5)) is not None
+    assert node.accept(command(node, "d1", seq=5)) is None and node.refused["seq"] == 1  # replayed
+    assert node.accept(command(node, "d1", seq=4)) is None and node.refused["seq"] == 2
+    assert node.accept(command(node, "d1", seq=6)) is not None
+    node.sim.referee._prev = (np.zeros(7), np.zeros(4), 0.0, 6, 0.0)
+    node.on_lease("d1", False)
+    node.on_lease("d2", True)
+    assert node.accept(command(node, "d2", seq=1)) is not None  # its own seq count
+    assert node.sim.referee._prev is None  # judged against what the robot executes

@@ -49,8 +49,58 @@ from .validation import Validator
 
 _NAN3 = [math.nan] * 3
 ROUND_TRIPS = 50
-"""Round trips (command → a state that applied it) in the state-age window."""
+"""States in the state-age window (each bounded by the time since the command it applied)."""
+SEQ_JUMP_MAX = 100_000
+"""A state seq further ahead of the last one than this is refused (a sim steps at ~1 kHz)."""
 _SENT = 1024  # publication times kept per command seq (a ring)
+
+
+def _say(line: str) -> None:
+    """Write a line to stderr; never raises (a closed pipe, a full terminal)."""
+    with contextlib.suppress(Exception):
+        print(line, file=sys.stderr, flush=True)
+
+
+class FaultLog:
+    """Fault lines written by a thread of their own, so that a slow or closed stderr can neither
+    block nor stop the control thread; at most ``depth`` lines wait, the rest are counted.
+
+    Args:
+        depth: lines kept while the writer is behind.
+    """
+
+    def __init__(self, depth: int = 256) -> None:
+        self._q: deque[str] = deque()
+        self._depth = depth
+        self.dropped = 0
+        self._wake = threading.Event()
+        self._stop = False
+        self._thread = threading.Thread(target=self._run, name="fault-log", daemon=True)
+        self._thread.start()
+
+    def __call__(self, line: str) -> None:
+        if len(self._q) >= self._depth:
+            self.dropped += 1
+            return
+        self._q.append(line)
+        self._wake.set()
+
+    def _run(self) -> None:
+        while True:
+            self._wake.wait(0.5)
+            self._wake.clear()
+            while self._q:
+                _say(self._q.popleft())
+            if self._stop:
+                return
+
+    def close(self) -> None:
+        """Write what is left and end the thread."""
+        self._stop = True
+        self._wake.set()
+        self._thread.join(timeout=2.0)
+        if self.dropped:
+            _say(f"wmm-qp serve: {self.dropped} fault lines dropped (stderr was too slow)")
 
 
 class LeaseHeld(Exception):
@@ -115,6 +165,11 @@ class ControlCore:
         self.ctl = w.make_controller(self.kind, self.model, self.cfg)
         self.ctl.warm_up()  # the compiled kernels are loaded before the loop, not in its first tick
         self.dt = self.cfg.dt
+        if 2.0 * self.dt > svc.watchdog.state_age_max:
+            raise w.ConfigError("<service config>", "loop.rate_hz",
+                                f"{svc.loop.rate_hz:g} Hz is too slow for watchdog.state_age_max "
+                                f"({svc.watchdog.state_age_max * 1e3:g} ms): a state is up to two periods "
+                                f"old when it is used; raise the rate or state_age_max (and command_hold)")
         sm = svc.smoothing
         self.smoother = SetpointSmoother(self.dt, sm.v_max, sm.a_max, sm.j_max)
         self.estimator = VelocityEstimator(v_max=sm.v_max)
@@ -136,12 +191,15 @@ class ControlCore:
         self.now = 0.0
         self.t0 = 0.0  # [s] clock value at the loop's start (fault messages say time since)
         self.state_fresh = False
+        self.say: Any = _say  # where fault lines go (the Daemon hands them to a FaultLog)
         self.lease = "core"  # this daemon's control lease id (the Daemon sets its Zenoh id)
+        self.lease_lost = False  # the sim applies another holder's commands
         self.lease_holder = ""  # the holder the sim reports
         # one robot: the sim instance latched from the first state, and a second source
         self.instance = ""
         self.foreign = ""
         self.foreign_time = -math.inf
+        self.twin_seen = False  # a second instance was seen: never latch another one by itself
         self.last_state_seq = -1
         # the sim's own referee and firmware
         self.sim_violations_seen = -1  # total count of the latched instance (-1: no state yet)
@@ -152,8 +210,8 @@ class ControlCore:
         self.seq = 0
         self._sent_t = np.full(_SENT, -math.inf)
         self._sent_seq = np.full(_SENT, -1, dtype=np.int64)
-        self._rtt: deque[float] = deque(maxlen=ROUND_TRIPS)
-        self._last_cmd_seq = -1
+        self._age = np.full(ROUND_TRIPS, math.nan)  # per-state upper bounds of the age [s]
+        self._n_age = 0
         self.round_trip = math.nan
         # one operator per setpoint stream
         self.operator = ""
@@ -166,7 +224,9 @@ class ControlCore:
         self.cmd_state_seq = -1  # seq of the state this tick's command comes from (-1: predicted)
         # the daemon's own stall: past the robot's command timeout the robot stops by itself
         wd = svc.watchdog
-        self.stream_break = wd.command_hold - wd.state_age_max  # [s] the robot's command timeout
+        # [s] a gap in the commands this long counts as a break: well inside the robot's command
+        # timeout (command_hold − state_age_max), so transport jitter cannot hide one
+        self.stream_break = 0.6 * (wd.command_hold - wd.state_age_max)
         self._last_sent_t = -math.inf
         self.stream_broken = False
         self.stream_start = 0  # seq of the first command of the current stream
@@ -182,19 +242,23 @@ class ControlCore:
         whose seq does not increase (a replay, or reordering) is refused.
         """
         if msg.instance != self.instance:
-            if self.instance and now - self.state_time <= self.svc.watchdog.state_timeout:
+            if self.instance and (self.twin_seen or now - self.state_time <= self.svc.watchdog.state_timeout):
                 self.refused["instance"] += 1
                 self.foreign, self.foreign_time = msg.instance, now
+                self.twin_seen = True
                 return False
             if self.instance:
                 self._fault(f"sim instance changed ({self.instance} -> {msg.instance}: a restarted sim)")
             self.instance = msg.instance
             self.anchor_on_command = False  # a new robot: its rates are what it executes
+            self.cmd = None  # and the last command was another robot's
             self.last_state_seq = -1
             self.sim_violations_seen = -1
-            self._rtt.clear()
-        if msg.seq <= self.last_state_seq:
-            self.refused["state_seq"] += 1
+            self._age[:] = math.nan
+            self._n_age = 0
+        if msg.seq <= self.last_state_seq or (self.last_state_seq >= 0
+                                              and msg.seq > self.last_state_seq + SEQ_JUMP_MAX):
+            self.refused["state_seq"] += 1  # old (replayed, reordered), or a forged jump ahead
             return False
         self.last_state_seq = msg.seq
         self.state_msg = msg
@@ -211,26 +275,33 @@ class ControlCore:
         self.sim_violations_seen = total
         self.protective = msg.protective_reason if msg.protective_stop else ""
         cs = msg.cmd_seq
-        if cs != self._last_cmd_seq and cs >= 0 and self._sent_seq[cs % _SENT] == cs:
-            self._rtt.append(now - float(self._sent_t[cs % _SENT]))  # ≥ the state's age
-            self.round_trip = min(self._rtt)
-        self._last_cmd_seq = cs
+        if cs >= 0 and self._sent_seq[cs % _SENT] == cs:
+            # this state applied command cs: it is younger than the time since cs was published
+            self._age[self._n_age % ROUND_TRIPS] = now - float(self._sent_t[cs % _SENT])
+            self._n_age += 1
+            if self._n_age >= ROUND_TRIPS and self._n_age % 8 == 0:
+                self.round_trip = float(np.median(self._age))
         return True
 
     def late(self, now: float) -> bool:
         """More than the robot's command timeout since the last command was published."""
         return math.isfinite(self._last_sent_t) and now - self._last_sent_t > self.stream_break
 
-    def break_stream(self, now: float) -> None:
-        """This daemon stalled (scheduler, SIGSTOP) past the robot's command timeout.
+    def break_stream(self, why: str) -> None:
+        """The robot no longer follows this daemon's commands: this daemon stalled past the
+        robot's command timeout, the robot stopped itself (its timeout, a protective stop),
+        or another daemon holds the lease.
 
         The robot is braking by itself, at rates the daemon does not know: a command now would
         jump from them. Until a state shows the robot at rest in its own stop, :meth:`tick` sends
-        nothing; then the stream starts again from the measured rates.
+        nothing; then the stream starts again from the measured rates, in hold until a mode
+        message resumes (``resume = "manual"``).
         """
-        self._fault(f"command stream broken ({(now - self._last_sent_t) * 1e3:.0f} ms without a "
-                    f"command: the robot stops itself)")
+        self._fault(why)
         self.stream_broken = self.safe = True
+        self._age[:] = math.nan  # silent meanwhile: the states' ages say nothing about the link
+        self._n_age = 0
+        self.round_trip = math.nan
         self.anchor_on_command = False
         self._last_sent_t = -math.inf  # the next stream starts its own clock
 
@@ -321,7 +392,7 @@ class ControlCore:
             where = (f" [t={self.now - self.t0:.3f} s, mode {self.mode.value}, q_base "
                      f"{np.round(st.q_base, 4).tolist()}, q_arm {np.round(st.q_arm, 4).tolist()}]"
                      if st is not None else "")
-            print(f"wmm-qp serve: fault: {what}{where}", file=sys.stderr, flush=True)
+            self.say(f"wmm-qp serve: fault: {what}{where}")
         self.last_fault = what
         self.faults[kind or what.split(" (")[0]] += 1
 
@@ -345,7 +416,19 @@ class ControlCore:
         if self.state is None:
             return None
         if not self.stream_broken and self.late(now):
-            self.break_stream(now)
+            self.break_stream(f"command stream broken ({(now - self._last_sent_t) * 1e3:.0f} ms without a "
+                              f"command: the robot stops itself)")
+        msg = self.state_msg
+        if (not self.stream_broken and self.state_fresh and msg is not None
+                and (msg.stale_stop or msg.protective_stop) and 0 < self.stream_start <= msg.cmd_seq):
+            cause = f"protective stop: {msg.protective_reason}" if msg.protective_stop else "its command timeout"
+            self.break_stream(f"the robot stopped following the commands ({cause})")
+        if self.lease_holder and self.lease_holder != self.lease:
+            if not self.lease_lost:
+                self.break_stream(f"lease lost (the sim applies the commands of daemon {self.lease_holder})")
+                self.lease_lost = True
+            return None  # another daemon commands the robot: send nothing
+        self.lease_lost = False
         if self.stream_broken:
             msg = self.state_msg
             if not (self.state_fresh and msg is not None and (msg.stale_stop or msg.protective_stop)
@@ -406,9 +489,9 @@ class ControlCore:
                     f"{self.instance}: two robots under one id)")
         if self.protective:
             return f"sim protective stop ({self.protective})"
-        if len(self._rtt) == ROUND_TRIPS and self.round_trip > wd.state_age_max:
-            return (f"state too old (round trip >= {self.round_trip * 1e3:.1f} ms over {ROUND_TRIPS} "
-                    f"commands; bounds (13) allow {wd.state_age_max * 1e3:.1f} ms)")
+        if self.round_trip > wd.state_age_max:
+            return (f"state too old (median age bound {self.round_trip * 1e3:.1f} ms over {ROUND_TRIPS} "
+                    f"states; bounds (13) allow {wd.state_age_max * 1e3:.1f} ms)")
         if now < self.event_until:
             return self.event_fault
         return None
@@ -449,13 +532,14 @@ class ControlCore:
                                   v_arm=cmd.arm_rates.copy(), wheel_speeds=cmd.wheel_speeds.copy())
 
     def _safe_stop(self, why: str) -> w.Command:
-        """Brake from the last command at the acceleration limits (the state is not trusted)."""
+        """Brake at the acceleration limits from the last command while the robot follows the
+        stream (the state is not trusted), else from the measured rates."""
         if not self.safe:
             if why != self.last_fault:  # an event fault is recorded where it happened
                 self._fault(why)
             self.safe = True
         assert self.state is not None
-        last = self.cmd
+        last = self.cmd if self.anchor_on_command else None  # else the robot does not execute it
         base = w.RobotState(
             q_base=self.state.q_base, q_arm=self.state.q_arm,
             v_arm=last.arm_rates if last is not None else self.state.v_arm,
@@ -622,6 +706,7 @@ class Daemon:
         tel_every = svc.loop.telemetry_every
         queries_per_tick = svc.loop.queries_per_tick
         period = 1.0 / svc.loop.rate_hz
+        core.say = fault_log = FaultLog()
         gc.collect()
         gc.freeze()
         loop = self.loop
@@ -650,8 +735,9 @@ class Daemon:
                     core.on_setpoint(sp, now)
                 # ---- control
                 cmd = core.tick(now)
-                if cmd is not None and core.late(t_pub := time.perf_counter()):
-                    core.break_stream(t_pub)  # this tick itself stalled: the command is too late
+                if cmd is not None and core.late(t_pub := time.perf_counter()):  # this tick itself stalled
+                    core.break_stream(f"command stream broken (the tick took "
+                                      f"{(t_pub - now) * 1e3:.0f} ms: its command is too late)")
                     cmd = None
                 if cmd is not None:
                     core.seq += 1
@@ -678,6 +764,8 @@ class Daemon:
                 self.answer_queries(queryable, queries_per_tick)
                 now = loop.wait()
         finally:
+            fault_log.close()
+            core.say = _say
             gc.unfreeze()
             final = core.status(loop, self.rejected(), self.accepted())
             for ent in (token, lease_token, sub_state, sub_setpoint, sub_mode, queryable, alive_sub,

@@ -14,11 +14,16 @@ what one count means:
 - ``velocity``: a (received command, joint) pair with |q̇_cmd| above velocity_max.
 - ``acceleration``: a (received command, joint) pair with |q̇_cmd,k − q̇_cmd,k−1| above
   acceleration_max·Δt. Δt is the command's own period times the number of periods since the
-  previous command (``SimCommand.period`` × seq gap: a lost command widens the window), or,
-  when the command gives no period (in-process experiments), the time since the previous
-  command. After a break in the stream (the first command, or the first after a stale or
-  protective stop) the baseline is the executed rate and Δt one period: the command must
-  start from what the robot is doing.
+  previous command (``SimCommand.period`` × seq gap: a lost command widens the window), with
+  the period taken as at most ``period_max`` (the robot's command timeout: a longer one is no
+  stream at all) and the window never more than the time that really passed between the two
+  receipts plus one period and one sim step (``SimCommand.received``, the adapter's monotonic
+  clock; the period absorbs the transport's jitter), so a sender cannot widen the window by
+  claiming a long period or skipping seq numbers; when the command gives no period
+  (in-process experiments), the time since the previous command. After a break in the stream
+  (the first command, the first after a stale or protective stop, or the first of a new lease
+  holder) the baseline is the executed rate and Δt one period: the command must start from
+  what the robot is doing.
 - ``wheel_speed`` / ``wheel_acceleration``: the same for the wheels.
 """
 
@@ -39,9 +44,11 @@ class Referee:
     Args:
         robot: the robot config (its limits are the referee's rules).
         config: tolerances.
+        period_max: [s] the longest command period the referee accepts as a window.
     """
 
-    def __init__(self, robot: RobotConfig, config: RefereeConfig) -> None:
+    def __init__(self, robot: RobotConfig, config: RefereeConfig, period_max: float = float("inf")) -> None:
+        self.period_max = period_max
         a, b = robot.arm, robot.base
         self.q_lo = np.array(a.position_lower, dtype=float)
         self.q_hi = np.array(a.position_upper, dtype=float)
@@ -51,7 +58,8 @@ class Referee:
         self.wa_max = float(b.wheel_acceleration_max)
         self.rtol, self.atol = config.rtol, config.atol
         self.counts: dict[str, int] = dict.fromkeys(VIOLATION_KINDS, 0)
-        self._prev: tuple[FloatArray, FloatArray, float, int | None] | None = None
+        self.last_event = ""  # what the last counted violation was (for the sim's log)
+        self._prev: tuple[FloatArray, FloatArray, float, int | None, float | None] | None = None
 
     def reset(self) -> None:
         """Zero every count and forget the previous command."""
@@ -85,6 +93,8 @@ class Referee:
         w_exec: FloatArray,
         period: float | None = None,
         seq: int | None = None,
+        received: float | None = None,
+        step: float = 0.0,
     ) -> None:
         """Judge a command as received at sim time t [s].
 
@@ -95,20 +105,34 @@ class Referee:
                 after a break in the stream).
             period: [s] the command's own period (the Δt its sender's bounds assume), or None.
             seq: the command's sequence number (with ``period``: lost commands widen Δt).
+            received: [s] monotonic time of receipt (caps Δt at the real time between receipts).
+            step: [s] the sim's step (added to that cap: receipts are quantised to steps).
         """
         self.counts["velocity"] += self._exceeds(v_cmd, self.v_max)
         self.counts["wheel_speed"] += self._exceeds(w_cmd, self.w_max)
         prev = self._prev
         if prev is None:  # a new stream: it must start from what the robot executes
-            base_v, base_w, held = v_exec, w_exec, period
+            base_v, base_w = v_exec, w_exec
+            held = None if period is None else min(period, self.period_max)
         else:
-            base_v, base_w, t_prev, seq_prev = prev
+            base_v, base_w, t_prev, seq_prev, rx_prev = prev
             if period is not None:
+                period = min(period, self.period_max)
                 gap = seq - seq_prev if (seq is not None and seq_prev is not None) else 1
                 held = period * max(gap, 1)
+                if received is not None and rx_prev is not None:
+                    held = min(held, received - rx_prev + period + step)
             else:
                 held = t - t_prev
         if held is not None and held > 0.0:
-            self.counts["acceleration"] += self._exceeds(v_cmd - base_v, self.a_max * held)
-            self.counts["wheel_acceleration"] += self._exceeds(w_cmd - base_w, self.wa_max * held)
-        self._prev = (v_cmd.copy(), w_cmd.copy(), t, seq)
+            na = self._exceeds(v_cmd - base_v, self.a_max * held)
+            nw = self._exceeds(w_cmd - base_w, self.wa_max * held)
+            self.counts["acceleration"] += na
+            self.counts["wheel_acceleration"] += nw
+            if na or nw:
+                ratio = max(float(np.max(np.abs(v_cmd - base_v) / (self.a_max * held))),
+                            float(np.max(np.abs(w_cmd - base_w) / (self.wa_max * held))))
+                since = "the executed rates (a new stream)" if prev is None else f"command seq {prev[3]}"
+                self.last_event = (f"acceleration: command seq {seq} changed by {ratio:.2f} A·Δt "
+                                   f"over Δt = {held * 1e3:.2f} ms from {since}")
+        self._prev = (v_cmd.copy(), w_cmd.copy(), t, seq, received)

@@ -39,12 +39,15 @@ class SimCommand:
             judges the change from the previous command over it. None: over the time since the
             previous command.
         seq: the sender's sequence number (a gap widens the referee's window), or None.
+        received: [s] monotonic time the command was received (caps the referee's window at
+            the time that really passed), or None.
     """
 
     wheel_speeds: FloatArray
     arm_rates: FloatArray
     period: float | None = None
     seq: int | None = None
+    received: float | None = None
 
     def __post_init__(self) -> None:
         self.wheel_speeds = np.asarray(self.wheel_speeds, dtype=float).reshape(-1)
@@ -128,7 +131,7 @@ class SimRobot:
         self.seed = config.seed if seed is None else seed
         self.rng = np.random.default_rng(self.seed)
         self.slip = SlipModel(config.slip, model.base.M, self.rng)
-        self.referee = Referee(model.config, config.referee)
+        self.referee = Referee(model.config, config.referee, period_max=config.stale_timeout)
         self.torque_limit = np.array(model.config.arm.torque_limit, dtype=float)
         self.a_max = np.array(model.config.arm.acceleration_max, dtype=float)
         self.wa_max = float(model.config.base.wheel_acceleration_max)
@@ -141,6 +144,7 @@ class SimRobot:
         self._v_tol = self.v_max * (1.0 + tol.rtol) + tol.atol
         self._w_tol = self.w_max * (1.0 + tol.rtol) + tol.atol
         self.ramp = ramp
+        self.step_dt = config.dt
         self.reset()
 
     def reset(
@@ -193,6 +197,7 @@ class SimRobot:
 
         Never raises; a malformed command is ignored and counted.
         """
+        self.step_dt = dt
         if command is not None and not command.is_valid():
             self.rejected += 1
             command = None
@@ -222,8 +227,8 @@ class SimRobot:
     def _receive(self, command: SimCommand) -> None:
         """A valid command arrived: the referee judges it as received, then the firmware."""
         arm, wheels = command.arm_rates, command.wheel_speeds
-        self.referee.on_command(self.t, arm, wheels, self.v_arm, self.wheels,
-                                period=command.period, seq=command.seq)
+        self.referee.on_command(self.t, arm, wheels, self.v_arm, self.wheels, period=command.period,
+                                seq=command.seq, received=command.received, step=self.step_dt)
         self.n_commands += 1
         self.t_last_command = self.t
         self.stale = False

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import contextlib
 import secrets
+import sys
 import threading
 import time
 from collections import Counter, deque
@@ -80,6 +81,8 @@ class SimNode:
         self.cmd_seq = -1
         self.instance = secrets.token_hex(8)
         self.leases: dict[str, None] = {}  # alive lease holders, in the order they appeared
+        self._holder = ""  # the holder whose commands were applied last
+        self._holder_seq = -1  # the last seq applied from it
         self.refused: Counter[str] = Counter()
         if not (0.0 <= state_loss < 1.0 and 0.0 <= state_delay < 10.0):
             raise ValueError("state_loss must be in [0, 1) and state_delay in [0, 10) s")
@@ -116,9 +119,16 @@ class SimNode:
         if msg.instance != self.instance:
             self.refused["instance"] += 1
             return None
+        if msg.lease != self._holder:  # a new holder: its stream starts from the robot's rates
+            self._holder, self._holder_seq = msg.lease, -1
+            self.sim.referee.break_stream()
+        elif msg.seq <= self._holder_seq:
+            self.refused["seq"] += 1  # old or replayed: the holder's seq only increases
+            return None
+        self._holder_seq = msg.seq
         self.cmd_seq = msg.seq
         return SimCommand(wheel_speeds=np.array(msg.wheel_speeds), arm_rates=np.array(msg.arm_rates),
-                          period=msg.period, seq=msg.seq)
+                          period=msg.period, seq=msg.seq, received=time.monotonic())
 
     def place_box(self, data: bytes) -> bool:
         """Validate a box request and put the box in the scene (False: rejected, counted)."""
@@ -176,6 +186,7 @@ class SimNode:
                                                                 history=True)
             dt = self.cfg.dt
             st = self.sim.state()
+            counted, said = 0, 0
             self.loop.start()
             try:
                 while not stop.is_set() and (max_ticks is None or self.loop.ticks < max_ticks):
@@ -186,6 +197,11 @@ class SimNode:
                     s = sub.try_recv()
                     new = self.accept(s.payload.to_bytes()) if s is not None else None
                     st = self.sim.step(new, dt)
+                    if (total := sum(st.violations.values())) != counted and said < 50:
+                        counted, said = total, said + 1  # the first 50 events, for the log
+                        print(f"wmm-qp sim: referee: {st.violations} at t = {st.t:.3f} s; last: "
+                              f"{self.sim.referee.last_event}; stale {st.stale_stop}, protective "
+                              f"{st.protective_stop}", file=sys.stderr, flush=True)
                     for payload in self.outgoing(encode(self.state_msg(st, self.loop.ticks)),
                                                  time.monotonic()):
                         pub.put(payload)
