@@ -120,7 +120,7 @@ def test_a_client_publishing_cmd_meets_the_robots_own_protection(service_stack: 
             seq += 1
             c.put_raw("cmd", encode(CommandMsg(robot=stack.svc.robot, seq=seq, stamp=time.time(),
                                                wheel_speeds=[100.0] * 4, arm_rates=arm, lease=st.lease,
-                                               instance=st.instance, period=0.0005)))
+                                               instance=st.instance, period=0.0005, stream=1)))
             time.sleep(0.0005)
         after: StateMsg = until(lambda: c.wait_state(2.0))
         assert after.protective_stops >= 1 and "refused command" in after.protective_reason

@@ -40,7 +40,7 @@ def sp(**kw: object) -> SetpointMsg:
 
 def cmd(**kw: object) -> CommandMsg:
     d: dict[str, object] = dict(robot="r1", seq=1, stamp=1.0, wheel_speeds=[0.0] * 4, arm_rates=[0.1] * 7,
-                                lease="daemon-1", instance="sim-1", period=0.002)
+                                lease="daemon-1", instance="sim-1", period=0.002, stream=1)
     d.update(kw)
     return CommandMsg(**d)  # type: ignore[arg-type]
 
@@ -163,7 +163,7 @@ def test_a_setpoint_missing_a_required_field_is_rejected(field: str) -> None:
     assert check(SetpointMsg, msgspec.msgpack.encode(data)) == Reject.SCHEMA
 
 
-@pytest.mark.parametrize("field", ["type", "v", "seq", "stamp", "lease", "instance", "period"])
+@pytest.mark.parametrize("field", ["type", "v", "seq", "stamp", "lease", "instance", "period", "stream"])
 def test_a_command_missing_a_required_field_is_rejected(field: str) -> None:
     data = msgspec.to_builtins(cmd())
     del data[field]

@@ -108,7 +108,7 @@ def test_one_command_then_silence_stops_after_the_stale_timeout(model: wmm_qp.Wm
 def command(node: SimNode, lease: str, instance: str | None = None, seq: int = 1) -> bytes:
     return encode(CommandMsg(robot=node.svc.robot, seq=seq, stamp=0.0, wheel_speeds=[0.0] * 4,
                              arm_rates=[0.01] * 7, lease=lease,
-                             instance=node.instance if instance is None else instance, period=0.002))
+                             instance=node.instance if instance is None else instance, period=0.002, stream=1))
 
 
 def test_the_sim_applies_commands_only_from_the_lease_holder_for_its_instance() -> None:

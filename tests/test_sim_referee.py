@@ -135,3 +135,30 @@ def test_a_lost_command_widens_the_window(model: wmm_qp.WmmModel) -> None:
     assert sim.state().violations["acceleration"] == 0
     sim.step(SimCommand(z, a * CTRL_DT * 5, period=CTRL_DT, seq=4), DT)  # 2 A·dt in one period
     assert sim.state().violations["acceleration"] == 7
+
+
+def test_a_stream_late_on_the_way_is_judged_against_itself_a_new_stream_against_the_robot(
+    model: wmm_qp.WmmModel,
+) -> None:
+    """Commands delayed past the robot's timeout (the sim braked meanwhile) are still one legal
+    stream; a command of a new stream must start from what the robot executes."""
+    a = np.array(model.config.arm.acceleration_max)
+    sim = SimRobot(model, bare())
+    sim.reset()
+    z = np.zeros(4)
+    v = np.zeros(7)
+    for k in range(100):  # accelerating at A: legal
+        v = v + a * CTRL_DT
+        sim.step(SimCommand(z, v.copy(), period=CTRL_DT, seq=k, stream=0), DT)
+        sim.step(None, DT)
+    for _ in range(40):  # nothing arrives: the robot brakes in its stale stop
+        st = sim.step(None, DT)
+    assert st.stale_stop and np.all(st.v_arm < v)
+    v = v + a * CTRL_DT  # the next command of the same stream arrives late
+    sim.step(SimCommand(z, v.copy(), period=CTRL_DT, seq=100, stream=0), DT)
+    assert sim.state().violations["acceleration"] == 0
+    for _ in range(40):
+        st = sim.step(None, DT)
+    # a new stream that ignores the braked rates is counted
+    sim.step(SimCommand(z, v.copy(), period=CTRL_DT, seq=101, stream=101), DT)
+    assert sim.state().violations["acceleration"] == 7

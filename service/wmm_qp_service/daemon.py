@@ -746,8 +746,7 @@ class Daemon:
                         robot=svc.robot, seq=seq, stamp=time.time(),
                         wheel_speeds=cmd.wheel_speeds.tolist(), arm_rates=cmd.arm_rates.tolist(),
                         status=cmd.status.value, lease=core.lease, instance=core.instance,
-                        period=period,
-                        state_seq=core.cmd_state_seq)))
+                        period=period, state_seq=core.cmd_state_seq, stream=core.stream_start)))
                     core.sent(seq, t_pub)
                     if tel_every and loop.ticks % tel_every == 0:
                         ee = core.state_msg.ee_true if core.state_msg is not None else _NAN3

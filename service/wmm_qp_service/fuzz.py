@@ -49,7 +49,7 @@ def templates(robot: str) -> dict[str, dict[str, Any]]:
                                 xd=[0.0, 0.01, 0.0], source="fuzz"),
         "mode": ModeMsg(robot=robot, seq=1, stamp=time.time(), mode="hold", direction=[1.0, 0.0, 0.0]),
         "cmd": CommandMsg(robot=robot, seq=1, stamp=time.time(), wheel_speeds=[0.0] * 4,
-                          arm_rates=[0.0] * 7, lease="fuzz", instance="fuzz-sim", period=0.002),
+                          arm_rates=[0.0] * 7, lease="fuzz", instance="fuzz-sim", period=0.002, stream=1),
     }
     out = {k: msgspec.to_builtins(m) for k, m in msgs.items()}
     out["info"] = {"query": "status"}

@@ -102,6 +102,9 @@ class CommandMsg(_Msg, tag="cmd", kw_only=True):
         period: [s] the control period Δt the command's bounds (13) assume; the sim's referee
             judges the change from the previous command over it.
         state_seq: seq of the state the command was computed from (-1: a predicted state).
+        stream: the seq of the first command of the stream this one continues: a new value
+            says the sender started again from the robot's measured rates (the referee then
+            judges it against what the robot executes, else against the previous command).
     """
 
     wheel_speeds: list[float]
@@ -111,6 +114,7 @@ class CommandMsg(_Msg, tag="cmd", kw_only=True):
     instance: str
     period: float
     state_seq: int = -1
+    stream: int
 
 
 class BoxMsg(_Msg, tag="box"):

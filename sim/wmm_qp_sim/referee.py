@@ -17,13 +17,16 @@ what one count means:
   previous command (``SimCommand.period`` × seq gap: a lost command widens the window), with
   the period taken as at most ``period_max`` (the robot's command timeout: a longer one is no
   stream at all) and the window never more than the time that really passed between the two
-  receipts plus one period and one sim step (``SimCommand.received``, the adapter's monotonic
-  clock; the period absorbs the transport's jitter), so a sender cannot widen the window by
-  claiming a long period or skipping seq numbers; when the command gives no period
-  (in-process experiments), the time since the previous command. After a break in the stream
-  (the first command, the first after a stale or protective stop, or the first of a new lease
-  holder) the baseline is the executed rate and Δt one period: the command must start from
-  what the robot is doing.
+  receipts plus ``period_max`` and one sim step (``SimCommand.received``, the adapter's
+  monotonic clock; ``period_max`` absorbs the transport's batching and jitter), so a sender
+  cannot widen the window much by claiming a long period or skipping seq numbers; when the
+  command gives no period (in-process experiments), the time since the previous command.
+  A new stream — the first command, the first of a new ``SimCommand.stream`` id (the sender
+  started again from the robot's measured rates), the first of a new lease holder, or, for
+  commands without a stream id, the first after a stale or protective stop — is judged against
+  the executed rates over one period: it must start from what the robot is doing. A stream
+  that goes on after a stale stop (its commands were late on the way) is judged against its
+  own previous command: the jump from the braked rates is the robot's to ramp.
 - ``wheel_speed`` / ``wheel_acceleration``: the same for the wheels.
 """
 
@@ -59,17 +62,28 @@ class Referee:
         self.rtol, self.atol = config.rtol, config.atol
         self.counts: dict[str, int] = dict.fromkeys(VIOLATION_KINDS, 0)
         self.last_event = ""  # what the last counted violation was (for the sim's log)
+        self._soft_break = False
+        self._stream: int | None = None
         self._prev: tuple[FloatArray, FloatArray, float, int | None, float | None] | None = None
 
     def reset(self) -> None:
         """Zero every count and forget the previous command."""
         self.counts = dict.fromkeys(VIOLATION_KINDS, 0)
         self._prev = None
+        self._soft_break = False
+        self._stream = None
 
-    def break_stream(self) -> None:
-        """The robot stopped following the command stream (stale or protective stop): the next
-        command is judged against the executed rates."""
-        self._prev = None
+    def break_stream(self, hard: bool = True) -> None:
+        """The robot stopped following the command stream.
+
+        Args:
+            hard: the next command is judged against the executed rates (a new lease holder);
+                False (a stale or protective stop): only if it carries no stream id.
+        """
+        if hard:
+            self._prev = None
+        else:
+            self._soft_break = True
 
     def _exceeds(self, value: FloatArray, limit: FloatArray | float) -> int:
         return int(
@@ -95,6 +109,7 @@ class Referee:
         seq: int | None = None,
         received: float | None = None,
         step: float = 0.0,
+        stream: int | None = None,
     ) -> None:
         """Judge a command as received at sim time t [s].
 
@@ -107,10 +122,15 @@ class Referee:
             seq: the command's sequence number (with ``period``: lost commands widen Δt).
             received: [s] monotonic time of receipt (caps Δt at the real time between receipts).
             step: [s] the sim's step (added to that cap: receipts are quantised to steps).
+            stream: the sender's stream id (see the module docstring), or None.
         """
         self.counts["velocity"] += self._exceeds(v_cmd, self.v_max)
         self.counts["wheel_speed"] += self._exceeds(w_cmd, self.w_max)
         prev = self._prev
+        if prev is not None and (stream != self._stream if stream is not None else self._soft_break):
+            prev = None
+        self._soft_break = False
+        self._stream = stream
         if prev is None:  # a new stream: it must start from what the robot executes
             base_v, base_w = v_exec, w_exec
             held = None if period is None else min(period, self.period_max)
@@ -121,7 +141,7 @@ class Referee:
                 gap = seq - seq_prev if (seq is not None and seq_prev is not None) else 1
                 held = period * max(gap, 1)
                 if received is not None and rx_prev is not None:
-                    held = min(held, received - rx_prev + period + step)
+                    held = min(held, received - rx_prev + self.period_max + step)
             else:
                 held = t - t_prev
         if held is not None and held > 0.0:

@@ -41,6 +41,8 @@ class SimCommand:
         seq: the sender's sequence number (a gap widens the referee's window), or None.
         received: [s] monotonic time the command was received (caps the referee's window at
             the time that really passed), or None.
+        stream: the sender's stream id (a new one is judged against the executed rates), or
+            None (then a stale or protective stop starts a new stream).
     """
 
     wheel_speeds: FloatArray
@@ -48,6 +50,7 @@ class SimCommand:
     period: float | None = None
     seq: int | None = None
     received: float | None = None
+    stream: int | None = None
 
     def __post_init__(self) -> None:
         self.wheel_speeds = np.asarray(self.wheel_speeds, dtype=float).reshape(-1)
@@ -205,7 +208,7 @@ class SimRobot:
             self._receive(command)
         elif self.t - self.t_last_command >= self.config.stale_timeout - 1e-12 and not self.stale:
             self.stale = True
-            self.referee.break_stream()
+            self.referee.break_stream(hard=False)
         if self.stale or self.protective:
             v, w = self._braked(dt)
         elif self.ramp:
@@ -228,7 +231,8 @@ class SimRobot:
         """A valid command arrived: the referee judges it as received, then the firmware."""
         arm, wheels = command.arm_rates, command.wheel_speeds
         self.referee.on_command(self.t, arm, wheels, self.v_arm, self.wheels, period=command.period,
-                                seq=command.seq, received=command.received, step=self.step_dt)
+                                seq=command.seq, received=command.received, step=self.step_dt,
+                                stream=command.stream)
         self.n_commands += 1
         self.t_last_command = self.t
         self.stale = False
@@ -247,7 +251,7 @@ class SimRobot:
                     self.refused += 1  # still braking: commands wait until the robot is at rest
                     return
                 self.protective = False  # at rest, and a legal command: resume
-                self.referee.break_stream()
+                self.referee.break_stream(hard=False)
         self.target_arm, self.target_wheels = arm.copy(), wheels.copy()
 
     def _protective_stop(self, why: str) -> None:
@@ -255,7 +259,7 @@ class SimRobot:
             self.protective_stops += 1
         self.protective = True
         self.protective_reason = why
-        self.referee.break_stream()
+        self.referee.break_stream(hard=False)
 
     def _braked(self, dt: float) -> tuple[FloatArray, FloatArray]:
         """One braking step toward rest at the acceleration limits; the targets become rest."""

@@ -128,7 +128,7 @@ class SimNode:
         self._holder_seq = msg.seq
         self.cmd_seq = msg.seq
         return SimCommand(wheel_speeds=np.array(msg.wheel_speeds), arm_rates=np.array(msg.arm_rates),
-                          period=msg.period, seq=msg.seq, received=time.monotonic())
+                          period=msg.period, seq=msg.seq, received=time.monotonic(), stream=msg.stream)
 
     def place_box(self, data: bytes) -> bool:
         """Validate a box request and put the box in the scene (False: rejected, counted)."""
