@@ -9,11 +9,10 @@ bounded queries. No transport, no timing.
 from __future__ import annotations
 
 import collections
-import itertools
 
 import numpy as np
 import pytest
-from test_daemon_core import DT, Plant
+from test_daemon_core import DT, Plant, max_step_ratio
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.daemon import ControlCore, Daemon
 from wmm_qp_service.protocol import ModeMsg, SetpointMsg, StateMsg
@@ -50,15 +49,14 @@ def tick(core: ControlCore, plant: Plant, t: float) -> w.Command:
     return cmd
 
 
-def steps_over(robot: w.RobotConfig, cmds: list[w.Command]) -> float:
-    """The largest |Δ command| between consecutive commands, in units of A·dt."""
-    a = np.asarray(robot.arm.acceleration_max) * DT
-    wa = robot.base.wheel_acceleration_max * DT
-    worst = 0.0
-    for p, q in itertools.pairwise(cmds):
-        worst = max(worst, float(np.max(np.abs(q.arm_rates - p.arm_rates) / a)),
-                    float(np.max(np.abs(q.wheel_speeds - p.wheel_speeds) / wa)))
-    return worst
+def track(core: ControlCore, plant: Plant, t: float, n: int, target: np.ndarray) -> float:
+    """n ticks streaming a fixed target, states fresh; returns the time after them."""
+    for _ in range(n):
+        core.on_state(plant.msg(), t)
+        core.on_setpoint(setpoint(target, t), t)
+        tick(core, plant, t)
+        t += DT
+    return t
 
 
 # ---------------------------------------------------------------- 1. two robots under one id
@@ -141,12 +139,7 @@ def test_a_protective_stop_of_the_sim_breaks_the_stream(robot: w.RobotConfig) ->
     core, plant = make(robot)
     x0 = core.model.ee_position(plant.q_base, plant.q_arm)
     mode(core, "track")
-    t = 0.0
-    for _ in range(100):
-        core.on_state(plant.msg(), t)
-        core.on_setpoint(setpoint(x0 + np.array([0.2, 0.0, 0.0]), t), t)
-        tick(core, plant, t)
-        t += DT
+    t = track(core, plant, 0.0, 100, x0 + np.array([0.2, 0.0, 0.0]))
     plant.v_arm = 0.5 * plant.v_arm  # braking by itself
     core.on_state(plant.msg(protective_stop=True, protective_reason="refused command: joint 4"), t)
     assert core.tick(t) is None
@@ -169,12 +162,7 @@ def test_commands_lost_long_enough_for_the_robots_timeout_break_the_stream(robot
     core, plant = make(robot)
     x0 = core.model.ee_position(plant.q_base, plant.q_arm)
     mode(core, "track")
-    t = 0.0
-    for _ in range(100):
-        core.on_state(plant.msg(), t)
-        core.on_setpoint(setpoint(x0 + np.array([0.2, 0.0, 0.0]), t), t)
-        tick(core, plant, t)
-        t += DT
+    t = track(core, plant, 0.0, 100, x0 + np.array([0.2, 0.0, 0.0]))
     applied = plant.cmd_seq
     for _ in range(20):  # the robot hears nothing: it brakes to rest in its stale stop
         core.on_state(plant.msg(stale_stop=True, cmd_seq=applied), t)
@@ -296,7 +284,7 @@ def test_consecutive_commands_stay_inside_the_acceleration_bound_with_stale_stat
     commands differed by up to 2 A·dt; anchored on the last command they stay inside A·dt."""
     cmds = run_with_stale_states(robot, every=4, age=4, n=2000)
     assert max(np.abs(c.v).max() for c in cmds) > 0.05  # it does move
-    assert steps_over(robot, cmds) <= 1.0 + 1e-9
+    assert max_step_ratio(robot, cmds) <= 1.0 + 1e-9
 
 
 # ---------------------------------------------------------------- 10. a constant delay
@@ -457,14 +445,8 @@ def test_after_its_own_stall_the_daemon_waits_for_the_robots_stop(robot: w.Robot
     core, plant = make(robot)
     x0 = core.model.ee_position(plant.q_base, plant.q_arm)
     mode(core, "track")
-    t = 0.0
-    last = None
-    for _ in range(200):
-        core.on_state(plant.msg(), t)
-        core.on_setpoint(setpoint(x0 + np.array([0.2, 0.0, 0.0]), t), t)
-        last = tick(core, plant, t)
-        t += DT
-    assert last is not None and np.abs(last.v).max() > 0.05  # moving
+    t = track(core, plant, 0.0, 200, x0 + np.array([0.2, 0.0, 0.0]))
+    assert core.cmd is not None and np.abs(core.cmd.v).max() > 0.05  # moving
     t += 0.2  # stalled for 200 ms
     core.on_state(plant.msg(), t)  # an old state, from before the stall, arrives first
     assert core.tick(t) is None and core.stream_broken and "command stream broken" in core.last_fault

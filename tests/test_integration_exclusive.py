@@ -10,11 +10,11 @@ from __future__ import annotations
 import subprocess
 import sys
 import time
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 import pytest
+from test_integration_service import TIMEOUT, until
 from wmm_qp_service.client import Client
 from wmm_qp_service.processes import Stack, _service_args, free_port
 from wmm_qp_service.protocol import CommandMsg, StateMsg, encode
@@ -22,19 +22,6 @@ from wmm_qp_service.protocol import CommandMsg, StateMsg, encode
 import wmm_qp as w
 
 pytestmark = pytest.mark.integration
-
-TIMEOUT = 30.0
-
-
-def until(pred: Callable[[], Any], timeout: float = TIMEOUT, period: float = 0.05) -> Any:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        v = pred()
-        if v:
-            return v
-        time.sleep(period)
-    raise AssertionError(f"condition not met within {timeout} s")
-
 
 def ready(c: Client) -> Any:
     assert c.wait_for_daemon(TIMEOUT) is not None, "daemon did not answer"
