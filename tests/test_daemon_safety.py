@@ -147,7 +147,9 @@ def test_a_protective_stop_of_the_sim_breaks_the_stream(robot: w.RobotConfig) ->
     plant.v_arm, plant.wheels = np.zeros(7), np.zeros(4)
     t += DT
     core.on_state(plant.msg(protective_stop=True, protective_reason="refused command: joint 4"), t)
+    before = core.stream_start
     cmd = tick(core, plant, t)
+    assert core.stream_start == core.seq > before  # a new stream: judged against the robot's rates
     a = np.asarray(robot.arm.acceleration_max) * DT
     assert np.all(np.abs(cmd.arm_rates) <= a * (1 + 1e-9))  # from rest
     t += DT

@@ -224,9 +224,10 @@ class ControlCore:
         self.cmd_state_seq = -1  # seq of the state this tick's command comes from (-1: predicted)
         # the daemon's own stall: past the robot's command timeout the robot stops by itself
         wd = svc.watchdog
-        # [s] a gap in the commands this long counts as a break: well inside the robot's command
-        # timeout (command_hold − state_age_max), so transport jitter cannot hide one
-        self.stream_break = 0.6 * (wd.command_hold - wd.state_age_max)
+        # [s] a gap in the commands this long counts as a break: inside the robot's command
+        # timeout (command_hold − state_age_max). A stop the robot makes on its own (a gap that
+        # jitter stretched past its timeout) shows in its state and breaks the stream too.
+        self.stream_break = 0.8 * (wd.command_hold - wd.state_age_max)
         self._last_sent_t = -math.inf
         self.stream_broken = False
         self.stream_start = 0  # seq of the first command of the current stream
@@ -436,6 +437,8 @@ class ControlCore:
                 return None
             self.stream_broken = False
             self.anchor_on_command = False
+        if not self.anchor_on_command:  # this tick's command starts a stream (the referee's baseline)
+            self.stream_start = self.seq + 1  # the seq the daemon gives it
         if (why := self.hazard(now)) is not None:
             return self._safe_stop(why)
         if self.safe:  # the fault cleared: re-latch from the measured state
@@ -463,8 +466,6 @@ class ControlCore:
         x_d, xd_d = self.smoother.step()
         self.ref = w.Reference(mode=self.mode, x_d=x_d, xd_d=xd_d, direction=self.direction)
         self.ref_valid = True
-        if not self.anchor_on_command:
-            self.stream_start = self.seq + 1  # the seq the daemon gives this tick's command
         cmd = self.ctl.step(self._anchored(), self.ref)
         self.anchor_on_command = True
         if cmd.status == w.Status.SAFE_STOP:
