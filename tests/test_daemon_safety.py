@@ -462,6 +462,12 @@ def test_after_its_own_stall_the_daemon_waits_for_the_robots_stop(robot: w.Robot
     cmd = core.tick(t)
     assert cmd is not None and not core.stream_broken
     assert not core.late(t + 1.0)  # the new stream is not late by the old one's clock (it is published)
+    old_seq = plant.cmd_seq - 1  # states that still show the old stream's last command
+    for _ in range(60):
+        t += DT
+        core.on_state(plant.msg(cmd_seq=old_seq), t)
+        core.tick(t)
+    assert "state too old" not in core.faults  # their age bound says nothing about this stream
     a = np.asarray(robot.arm.acceleration_max) * DT
     assert np.all(np.abs(cmd.arm_rates) <= a * (1 + 1e-9))  # from rest, inside A·dt
     assert np.all(np.abs(cmd.wheel_speeds) <= robot.base.wheel_acceleration_max * DT * (1 + 1e-9))

@@ -276,7 +276,7 @@ class ControlCore:
         self.sim_violations_seen = total
         self.protective = msg.protective_reason if msg.protective_stop else ""
         cs = msg.cmd_seq
-        if cs >= 0 and self._sent_seq[cs % _SENT] == cs:
+        if cs >= max(0, self.stream_start) and self._sent_seq[cs % _SENT] == cs:  # this stream's only
             # this state applied command cs: it is younger than the time since cs was published
             self._age[self._n_age % ROUND_TRIPS] = now - float(self._sent_t[cs % _SENT])
             self._n_age += 1
