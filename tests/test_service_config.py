@@ -12,7 +12,12 @@ from wmm_qp.exceptions import ConfigError
 
 def test_shipped_service_config_loads() -> None:
     c = load_service_config()
-    assert c.loop.rate_hz == 500.0 and c.watchdog.command_hold == 0.03 and c.zenoh.config.is_file()
+    assert c.loop.rate_hz == 500.0 and c.watchdog.command_hold == 0.035 and c.zenoh.config.is_file()
+    # command_hold is the robot's command timeout plus the state age the daemon checks
+    from wmm_qp_sim import load_sim_config
+
+    assert c.watchdog.command_hold - c.watchdog.state_age_max == pytest.approx(load_sim_config().stale_timeout)
+    assert c.watchdog.resume == "manual" and c.loop.queries_per_tick == 1
 
 
 @pytest.mark.parametrize("text, key", [
