@@ -222,6 +222,7 @@ class ControlCore:
         self.resume_needed = False
         self.anchor_on_command = False  # bounds (13) start from the last command (see _anchored)
         self.cmd_state_seq = -1  # seq of the state this tick's command comes from (-1: predicted)
+        self._anchor: w.RobotState | None = None  # the anchored state handed to the controller
         # the daemon's own stall: past the robot's command timeout the robot stops by itself
         wd = svc.watchdog
         # [s] a gap in the commands this long counts as a break: inside the robot's command
@@ -516,8 +517,11 @@ class ControlCore:
                 or (msg is not None and (msg.stale_stop or msg.protective_stop)
                     and msg.cmd_seq >= self.stream_start)):  # it stopped following this stream
             return st
-        return w.RobotState(q_base=st.q_base, q_arm=st.q_arm, v_arm=cmd.arm_rates,
-                            wheel_speeds=cmd.wheel_speeds)
+        a = self._anchor  # one object, refilled: a new RobotState re-validates its arrays (~10 µs)
+        if a is None:
+            a = self._anchor = w.RobotState(q_base=st.q_base, q_arm=st.q_arm)
+        a.q_base, a.q_arm, a.v_arm, a.wheel_speeds = st.q_base, st.q_arm, cmd.arm_rates, cmd.wheel_speeds
+        return a
 
     def _predict_state(self) -> None:
         """No new state this tick: assume the last command executed for one period.
