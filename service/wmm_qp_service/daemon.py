@@ -256,8 +256,7 @@ class ControlCore:
             self.cmd = None  # and the last command was another robot's
             self.last_state_seq = -1
             self.sim_violations_seen = -1
-            self._age[:] = math.nan
-            self._n_age = 0
+            self._reset_age()
         if msg.seq <= self.last_state_seq or (self.last_state_seq >= 0
                                               and msg.seq > self.last_state_seq + SEQ_JUMP_MAX):
             self.refused["state_seq"] += 1  # old (replayed, reordered), or a forged jump ahead
@@ -285,6 +284,22 @@ class ControlCore:
                 self.round_trip = float(np.median(self._age))
         return True
 
+    def _reset_age(self) -> None:
+        """Empty the state-age window (a new robot, or a new stream)."""
+        self._age[:] = math.nan
+        self._n_age = 0
+        self.round_trip = math.nan
+
+    @property
+    def lease_taken(self) -> bool:
+        """The sim applies the commands of another lease holder."""
+        return bool(self.lease_holder) and self.lease_holder != self.lease
+
+    def _left_stream(self, msg: StateMsg) -> bool:
+        """The state applied a command of the current stream and shows the robot's own stale or
+        protective stop: the robot stopped following this stream."""
+        return (msg.stale_stop or msg.protective_stop) and 0 < self.stream_start <= msg.cmd_seq
+
     def late(self, now: float) -> bool:
         """More than the robot's command timeout since the last command was published."""
         return math.isfinite(self._last_sent_t) and now - self._last_sent_t > self.stream_break
@@ -301,9 +316,7 @@ class ControlCore:
         """
         self._fault(why)
         self.stream_broken = self.safe = True
-        self._age[:] = math.nan  # silent meanwhile: the states' ages say nothing about the link
-        self._n_age = 0
-        self.round_trip = math.nan
+        self._reset_age()  # silent meanwhile: the states' ages say nothing about the link
         self.anchor_on_command = False
         self._last_sent_t = -math.inf  # the next stream starts its own clock
 
@@ -421,18 +434,16 @@ class ControlCore:
             self.break_stream(f"command stream broken ({(now - self._last_sent_t) * 1e3:.0f} ms without a "
                               f"command: the robot stops itself)")
         msg = self.state_msg
-        if (not self.stream_broken and self.state_fresh and msg is not None
-                and (msg.stale_stop or msg.protective_stop) and 0 < self.stream_start <= msg.cmd_seq):
+        if not self.stream_broken and self.state_fresh and msg is not None and self._left_stream(msg):
             cause = f"protective stop: {msg.protective_reason}" if msg.protective_stop else "its command timeout"
             self.break_stream(f"the robot stopped following the commands ({cause})")
-        if self.lease_holder and self.lease_holder != self.lease:
+        if self.lease_taken:
             if not self.lease_lost:
                 self.break_stream(f"lease lost (the sim applies the commands of daemon {self.lease_holder})")
                 self.lease_lost = True
             return None  # another daemon commands the robot: send nothing
         self.lease_lost = False
-        if self.stream_broken:
-            msg = self.state_msg
+        if self.stream_broken:  # wait for a state of the robot at rest in its own stop
             if not (self.state_fresh and msg is not None and (msg.stale_stop or msg.protective_stop)
                     and not any(msg.v_arm) and not any(msg.wheel_speeds)):
                 return None
@@ -513,9 +524,7 @@ class ControlCore:
         """
         st, cmd, msg = self.state, self.cmd, self.state_msg
         assert st is not None
-        if (not self.anchor_on_command or cmd is None
-                or (msg is not None and (msg.stale_stop or msg.protective_stop)
-                    and msg.cmd_seq >= self.stream_start)):  # it stopped following this stream
+        if not self.anchor_on_command or cmd is None or (msg is not None and self._left_stream(msg)):
             return st
         a = self._anchor  # one object, refilled: a new RobotState re-validates its arrays (~10 µs)
         if a is None:
@@ -725,7 +734,7 @@ class Daemon:
                 s = sub_state.try_recv()
                 if s is not None and (m := self.v_state(s.payload.to_bytes())) is not None:
                     core.on_state(m, now)
-                    if core.lease_holder and core.lease_holder != core.lease:
+                    if core.lease_taken:
                         lost_since = min(lost_since, now)
                         if now - lost_since > self.LEASE_GRACE and not self.wait_lease:
                             lost = core.lease_holder  # a start-up race, lost: leave the loop

@@ -147,7 +147,6 @@ class SimRobot:
         self._v_tol = self.v_max * (1.0 + tol.rtol) + tol.atol
         self._w_tol = self.w_max * (1.0 + tol.rtol) + tol.atol
         self.ramp = ramp
-        self.step_dt = config.dt
         self.reset()
 
     def reset(
@@ -200,12 +199,11 @@ class SimRobot:
 
         Never raises; a malformed command is ignored and counted.
         """
-        self.step_dt = dt
         if command is not None and not command.is_valid():
             self.rejected += 1
             command = None
         if command is not None:
-            self._receive(command)
+            self._receive(command, dt)
         elif self.t - self.t_last_command >= self.config.stale_timeout - 1e-12 and not self.stale:
             self.stale = True
             self.referee.break_stream(hard=False)
@@ -227,11 +225,11 @@ class SimRobot:
         self.referee.check_positions(self.q_arm)
         return self.state()
 
-    def _receive(self, command: SimCommand) -> None:
+    def _receive(self, command: SimCommand, dt: float) -> None:
         """A valid command arrived: the referee judges it as received, then the firmware."""
         arm, wheels = command.arm_rates, command.wheel_speeds
         self.referee.on_command(self.t, arm, wheels, self.v_arm, self.wheels, period=command.period,
-                                seq=command.seq, received=command.received, step=self.step_dt,
+                                seq=command.seq, received=command.received, step=dt,
                                 stream=command.stream)
         self.n_commands += 1
         self.t_last_command = self.t
