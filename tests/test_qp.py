@@ -300,7 +300,10 @@ def test_strict_priority_whenever_the_task_is_feasible(
     ref = w.Reference("dm_nullspace", x_d=ctx.kin.x, xd_d=J @ v_star, direction=u)
     xdot_ref = with_dm.reference_velocity(with_dm.context(state, ref, True), ref)
     np.testing.assert_allclose(xdot_ref, J @ v_star, atol=1e-12, rtol=0)  # the task is J v = J v*
-    tol = 2e-6 if solver == "osqp" else 1e-7  # OSQP (ADMM) works to 1e-6
+    # the controller's own exactness contract: a stage whose max |J v − ẋ_ref| exceeds 1e-6 m/s
+    # is re-solved exactly (qp.py); OSQP (ADMM) works to its 1e-6 on top. (1e-7 failed for DAQP
+    # next to a singularity: 2e-7, inside the contract.)
+    tol = 2e-6 if solver == "osqp" else 1e-6
     a, b = with_dm.step(state, ref), without.step(state, ref)
     for cmd in (a, b):
         assert cmd.status in (w.Status.OK, w.Status.DAMPED), (cmd.status, cmd.reason)  # feasible: met
