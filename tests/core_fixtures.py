@@ -31,4 +31,4 @@ def random_arm_q(rng: np.random.Generator) -> np.ndarray:
     return rng.uniform(lo, hi)
 
 
-Q0 = np.array(w.PAPER_START_Q_ARM)
+Q0 = np.array(w.load_robot_config().arm.start)

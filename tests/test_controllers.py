@@ -15,15 +15,15 @@ from wmm_qp.verify import check_command
 def test_weighted_pseudoinverse_is_a_right_inverse(alpha: float) -> None:
     rng = np.random.default_rng(1)
     kin = model().kinematics(np.array([0.1, 0.2, 0.3]), random_arm_q(rng))
-    Jp = weighted_pinv(kin.J, weight_matrix_diag(alpha))  # eq. (11)
+    Jp = weighted_pinv(kin.J, weight_matrix_diag(alpha, 4, 7))  # eq. (11)
     np.testing.assert_allclose(kin.J @ Jp, np.eye(3), atol=1e-10)
 
 
 def test_alpha_zero_moves_no_wheel_and_alpha_one_moves_no_joint() -> None:
     kin = model().kinematics(np.zeros(3), Q0)
     xdot = np.array([0.05, -0.02, 0.01])
-    v0 = weighted_pinv(kin.J, weight_matrix_diag(0.0)) @ xdot
-    v1 = weighted_pinv(kin.J, weight_matrix_diag(1.0)) @ xdot
+    v0 = weighted_pinv(kin.J, weight_matrix_diag(0.0, 4, 7)) @ xdot
+    v1 = weighted_pinv(kin.J, weight_matrix_diag(1.0, 4, 7)) @ xdot
     assert np.abs(v0[:4]).max() == 0.0
     assert np.abs(v1[4:]).max() == 0.0
     # α = 1: the base cannot move the EE vertically, so only x, y are realised
@@ -139,7 +139,7 @@ def test_paper_controller_switches_to_damped_least_squares_below_the_threshold()
         xdot = np.array([0.0, 0.0, 1e-3])
         cmd = ctl.step(w.RobotState(np.zeros(3), qk), w.Reference("track", x_d=kin.x, xd_d=xdot))
         lam = damping_factor(sigma_min(kin.J_m), c.sigma_threshold, c.damping_max)
-        expected = weighted_pinv(kin.J, weight_matrix_diag(cmd.alpha), lam) @ xdot
+        expected = weighted_pinv(kin.J, weight_matrix_diag(cmd.alpha, 4, 7), lam) @ xdot
         np.testing.assert_allclose(cmd.v, expected, atol=1e-12)
         assert (lam > 0) == (key == "below")
         assert (cmd.status == w.Status.DAMPED) == (key == "below")

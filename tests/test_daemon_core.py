@@ -22,7 +22,7 @@ class Plant:
     def __init__(self, model: w.WmmModel) -> None:
         self.model = model
         self.q_base = np.zeros(3)
-        self.q_arm = np.array(w.PAPER_START_Q_ARM)
+        self.q_arm = np.array(w.load_robot_config().arm.start)
         self.v_arm = np.zeros(7)
         self.wheels = np.zeros(4)
         self.seq = 0

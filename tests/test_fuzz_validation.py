@@ -100,7 +100,7 @@ def test_mutation_fuzz_through_the_validators_and_the_controller() -> None:
     vals = validators()
     mut = Mutator(ROBOT, seed=7)
     dt = core.dt
-    q_arm = np.array(w.PAPER_START_Q_ARM)
+    q_arm = np.array(w.load_robot_config().arm.start)
     v_arm, wheels, q_base = np.zeros(7), np.zeros(4), np.zeros(3)
     vmax = np.asarray(robot.arm.velocity_max)
     rejected = 0

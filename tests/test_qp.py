@@ -40,7 +40,7 @@ def test_bounds_inactive_qp_equals_weighted_pseudoinverse(
     qb = np.array([*rng.normal(size=2), rng.uniform(-np.pi, np.pi)])
     kin = model().kinematics(qb, qa)
     xdot = rng.normal(scale=0.02, size=3)
-    expected = weighted_pinv(kin.J, weight_matrix_diag(alpha)) @ xdot  # eq. (11)
+    expected = weighted_pinv(kin.J, weight_matrix_diag(alpha, 4, 7)) @ xdot  # eq. (11)
     # the robot already moves at that command: acceleration bounds centred on it, inactive
     state = w.RobotState(qb, qa, v_arm=expected[4:], wheel_speeds=expected[:4])
     ctl = qp(solver, alpha=alpha, arm_first=False, closed_form_first=closed_form)

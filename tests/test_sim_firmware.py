@@ -47,7 +47,7 @@ def test_rates_beyond_the_limits_are_refused_with_a_protective_stop(model: wmm_q
     assert "refused command: joint 4 rate 100" in st.protective_reason
     assert st.refused_commands == 3000
     assert not st.v_arm.any() and not st.wheel_speeds.any()  # it never moved
-    np.testing.assert_allclose(st.q_arm, wmm_qp.PAPER_START_Q_ARM)
+    np.testing.assert_allclose(st.q_arm, wmm_qp.load_robot_config().arm.start)
     assert np.abs(st.base_true).max() == 0.0
     # the referee still counts what was commanded
     assert st.violations["velocity"] == 3000 and st.violations["wheel_speed"] == 4 * 3000

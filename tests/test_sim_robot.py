@@ -63,7 +63,7 @@ def test_odometry_equals_truth_without_slip(model: wmm_qp.WmmModel) -> None:
     st = sim.state()
     np.testing.assert_array_equal(st.base_odom, st.base_true)
     np.testing.assert_allclose(st.ee_true, model.ee_position(st.base_odom, st.q_arm), atol=1e-12)
-    np.testing.assert_allclose(st.q_arm, np.array(wmm_qp.PAPER_START_Q_ARM) + 0.1, atol=1e-9)
+    np.testing.assert_allclose(st.q_arm, np.array(wmm_qp.load_robot_config().arm.start) + 0.1, atol=1e-9)
 
 
 def test_slip_makes_odometry_drift_reproducibly(model: wmm_qp.WmmModel) -> None:

@@ -7,7 +7,9 @@ Pure computation: no I/O, no transport, no threads. One entry point for every co
 from .config import (
     ControllerConfig,
     RobotConfig,
+    TaskConfig,
     default_config_dir,
+    default_robot_file,
     load_controller_config,
     load_robot_config,
 )
@@ -16,13 +18,10 @@ from .exceptions import ConfigError, InvalidInput, SolverFailed, SolverNotFound,
 from .model import Kinematics, WmmModel
 from .types import Command, Mode, Reference, RobotState, Status
 
-PAPER_START_Q_ARM = (0.0, 0.5235987755982988, 0.0, 1.5707963267948966, 0.0, -0.5235987755982988, 0.0)
-"""q_m of every paper experiment: [0, π/6, 0, π/2, 0, −π/6, 0] (the print lost the minus on joint 6)."""
 
 __version__ = "0.1.0"
 
 __all__ = [
-    "PAPER_START_Q_ARM",
     "Command",
     "ConfigError",
     "Controller",
@@ -35,6 +34,7 @@ __all__ = [
     "Reference",
     "RobotConfig",
     "RobotState",
+    "TaskConfig",
     "SolverFailed",
     "SolverNotFound",
     "Status",
@@ -42,6 +42,7 @@ __all__ = [
     "WmmModel",
     "WmmQpError",
     "default_config_dir",
+    "default_robot_file",
     "load_controller_config",
     "load_robot_config",
     "make_controller",

@@ -19,9 +19,6 @@ from numpy.typing import NDArray
 
 from .exceptions import ConfigError
 
-N_ARM = 7
-N_WHEELS = 4
-
 FloatArray = NDArray[np.float64]
 
 
@@ -31,56 +28,143 @@ def _ro(a: Any) -> FloatArray:
     return out
 
 
+BASE_KINDS = ("mecanum", "omni", "diff_drive", "fixed")
+TASK_KINDS = ("position", "pose")
+
+
 @dataclass(frozen=True)
 class ArmConfig:
-    """The manipulator: URDF, EE frame and limits (joint order joint_1..joint_7).
+    """The manipulator, resolved against its URDF (every vector has one entry per joint).
 
     Attributes:
         urdf: path of the arm's URDF.
-        ee_frame: name of the end-effector frame (the tool flange).
-        mount_offset: [m] arm base origin in the mobile-base frame (eq. (2): p_mount).
-        position_lower, position_upper: [rad] position limits, ±inf for continuous joints.
-        velocity_max: [rad/s] symmetric velocity limits.
-        acceleration_max: [rad/s²] symmetric acceleration limits.
-        torque_limit: [N·m] torque limits used by W (eq. (8)) and the push experiment.
+        ee_frame: name of the end-effector frame.
+        joints: the controlled joints, in order (from the URDF's root towards ``ee_frame``).
+        joint_types: "revolute", "continuous" or "prismatic", per joint.
+        locked: every other joint of the URDF and the value it is locked at [rad or m].
+        mount_xyz: [m] the arm's URDF root in the base frame (eq. (2): p_mount).
+        mount_rpy: [rad] its orientation (roll, pitch, yaw; R_mount of DESIGN.md §7).
+        position_lower, position_upper: [rad or m] position limits, ±inf for continuous joints.
+        velocity_max: [rad/s or m/s] symmetric velocity limits.
+        acceleration_max: [rad/s² or m/s²] symmetric acceleration limits.
+        torque_limit: [N·m or N] effort limits (W of eq. (8), the push experiment).
+        torque_weight: W of eq. (8) the robot's file gives, or None (then τ_ref/τ_lim,i).
+        start: [rad or m] where the sim and the experiments start.
     """
 
     urdf: Path
     ee_frame: str
-    mount_offset: FloatArray
+    joints: tuple[str, ...]
+    joint_types: tuple[str, ...]
+    locked: tuple[tuple[str, float], ...]
+    mount_xyz: FloatArray
+    mount_rpy: FloatArray
     position_lower: FloatArray
     position_upper: FloatArray
     velocity_max: FloatArray
     acceleration_max: FloatArray
     torque_limit: FloatArray
+    torque_weight: FloatArray | None
+    start: FloatArray
+
+    @property
+    def n(self) -> int:
+        """Number of controlled joints."""
+        return len(self.joints)
+
+    def default_W(self) -> FloatArray:
+        """W of eq. (8): the robot file's ``torque_weight``, else diag(τ_ref/τ_lim,i), τ_ref = max τ_lim."""
+        if self.torque_weight is not None:
+            return self.torque_weight
+        return _ro(float(np.max(self.torque_limit)) / self.torque_limit)
 
 
 @dataclass(frozen=True)
 class BaseConfig:
-    """The four-wheel Mecanum base (wheels FL, FR, RL, RR).
+    """The mobile base (DESIGN.md §7; docs/robots.md for the wheel order of each kind).
 
     Attributes:
-        wheel_radius: [m] R.
-        l1: [m] half the distance between the front and rear axles.
-        l2: [m] half the track width (between left and right wheels).
-        wheel_speed_max: [rad/s] symmetric wheel speed limit.
-        wheel_acceleration_max: [rad/s²] symmetric wheel acceleration limit.
+        kind: "mecanum" (wheels FL, FR, RL, RR), "omni" (three omni wheels at 90°, 210°, 330°),
+            "diff_drive" (wheels left, right) or "fixed" (no base, no wheels).
+        wheel_radius: [m] R (0 for fixed).
+        l1: [m] mecanum: half the distance between the front and rear axles.
+        l2: [m] mecanum: half the track width.
+        base_radius: [m] omni: distance of each wheel from the centre.
+        track_width: [m] diff_drive: distance between the two wheels.
+        wheel_speed_max: [rad/s] symmetric wheel speed limit, per wheel.
+        wheel_acceleration_max: [rad/s²] symmetric wheel acceleration limit, per wheel.
     """
 
-    wheel_radius: float
-    l1: float
-    l2: float
-    wheel_speed_max: float
-    wheel_acceleration_max: float
+    kind: str
+    wheel_radius: float = 0.0
+    l1: float = 0.0
+    l2: float = 0.0
+    base_radius: float = 0.0
+    track_width: float = 0.0
+    wheel_speed_max: FloatArray = field(default_factory=lambda: _ro([]))
+    wheel_acceleration_max: FloatArray = field(default_factory=lambda: _ro([]))
+
+    @property
+    def n_wheels(self) -> int:
+        return int(self.wheel_speed_max.shape[0])
 
 
 @dataclass(frozen=True)
 class RobotConfig:
-    """The whole wheeled mobile manipulator."""
+    """The whole wheeled mobile manipulator (one robot file, resolved against its URDF).
+
+    Attributes:
+        arm: the arm.
+        base: the base.
+        name: the robot's name (its Zenoh key segment).
+        path: the robot file it was read from (None: built in code).
+    """
 
     arm: ArmConfig
     base: BaseConfig
     name: str = "wmm"
+    path: Path | None = None
+
+    @property
+    def n_arm(self) -> int:
+        return self.arm.n
+
+    @property
+    def n_wheels(self) -> int:
+        return self.base.n_wheels
+
+    @property
+    def n_v(self) -> int:
+        """Length of v = [v_b; v_m]."""
+        return self.base.n_wheels + self.arm.n
+
+
+@dataclass(frozen=True)
+class TaskConfig:
+    """The task of eq. (5) (DESIGN.md §7).
+
+    Attributes:
+        kind: "position" (r = 3, the paper's) or "pose" (r = 6: position and orientation of the
+            EE frame).
+        K_R: [1/s] orientation-error gain (pose): ω_ref = ω_d + K_R·log(R_d Rᵀ).
+        orientation_weight: [m/rad] the angular rows of the pose task are scaled by this in the
+            QP, so where the bounds cannot meet the whole task, 1 rad/s of orientation error
+            costs as much as this many m/s of position error. While the task is feasible it is
+            met exactly (both parts are hard), so the weight only shapes the best effort.
+        angular_speed_max: [rad/s] the angular part of the task velocity is capped at this norm.
+        angular_recovery_speed: [rad/s] K_R·e_R is saturated at this norm (like qp.recovery_speed).
+    """
+
+    kind: str = "position"
+    K_R: float = 10.0
+    orientation_weight: float = 0.2
+    angular_speed_max: float = 2.0
+    angular_recovery_speed: float = 0.5
+
+    @property
+    def r(self) -> int:
+        """Dimension of the task space."""
+        return 6 if self.kind == "pose" else 3
 
 
 @dataclass(frozen=True)
@@ -135,7 +219,7 @@ class ControllerConfig:
         alpha: the α used by the paper's switch, eq. (14), when the arm saturates.
         k_C: Cartesian DM gain, eq. (17).
         k_N: null-space DM gain, eq. (19).
-        W: diagonal of the torque scaling W of eq. (8).
+        W: diagonal of the torque scaling W of eq. (8); None = the robot's (ArmConfig.default_W).
         direction: default DM direction u, in the base (yaw-compensated) frame.
         ee_box_lower, ee_box_upper: [m] the EE box of eq. (17) (world frame), ±inf = free.
         state_latency: [s] age of the state when the command starts to act; the bounds (13)
@@ -143,6 +227,8 @@ class ControllerConfig:
         sigma_threshold: σ_min(J_m) below which damped least squares replaces J#.
         damping_max: [-] the DLS damping λ reached at σ_min = 0.
         qp: the QP controller's settings.
+        task: the task kind and its orientation settings.
+        path: the file it was read from (for errors that name it), or None.
     """
 
     rate_hz: float = 500.0
@@ -151,7 +237,7 @@ class ControllerConfig:
     alpha: float = 0.2
     k_C: float = 0.01
     k_N: float = 0.2
-    W: FloatArray = field(default_factory=lambda: _ro([1, 1, 1, 1, 2.5, 2.5, 2.5]))
+    W: FloatArray | None = None
     direction: FloatArray = field(default_factory=lambda: _ro([1.0, 0.0, 0.0]))
     ee_box_lower: FloatArray = field(default_factory=lambda: _ro([-np.inf, -np.inf, 0.36]))
     ee_box_upper: FloatArray = field(default_factory=lambda: _ro([np.inf, np.inf, 0.56]))
@@ -159,6 +245,8 @@ class ControllerConfig:
     sigma_threshold: float = 0.08
     damping_max: float = 0.05
     qp: QpConfig = field(default_factory=QpConfig)
+    task: TaskConfig = field(default_factory=TaskConfig)
+    path: Path | None = field(default=None, compare=False)
 
     @property
     def dt(self) -> float:
@@ -166,10 +254,27 @@ class ControllerConfig:
         return 1.0 / self.rate_hz
 
     def with_(self, **changes: Any) -> ControllerConfig:
-        """A copy with some fields changed (``qp`` may be given as a dict of its fields)."""
+        """A copy with some fields changed (``qp`` and ``task`` may be given as dicts of their fields)."""
         if isinstance(changes.get("qp"), dict):
             changes["qp"] = replace(self.qp, **changes["qp"])
+        if isinstance(changes.get("task"), dict):
+            changes["task"] = replace(self.task, **changes["task"])
         return replace(self, **changes)
+
+    def weights_for(self, robot: RobotConfig) -> FloatArray:
+        """W of eq. (8) for this robot: ``dm.W`` if the file sets it, else the robot's.
+
+        Raises:
+            ConfigError: ``dm.W`` has another length than the robot's number of joints.
+        """
+        if self.W is None:
+            return robot.arm.default_W()
+        if self.W.shape != (robot.n_arm,):
+            where = self.path if self.path is not None else "controller config"
+            raise ConfigError(
+                where, "dm.W", f"has {self.W.shape[0]} entries, the robot {robot.name!r} has {robot.n_arm} joints"
+            )
+        return self.W
 
 
 CONTROLLER_KINDS = ("qp", "paper", "traditional")
@@ -179,7 +284,7 @@ CONTROLLER_KINDS = ("qp", "paper", "traditional")
 
 
 def default_config_dir() -> Path:
-    """The folder holding robot.toml and controller.toml.
+    """The folder holding controller.toml and robots/ (the shipped robot files).
 
     Looked up in order: ``$WMM_QP_CONFIG_DIR``; ``./configs``; the source tree's
     ``configs/`` (editable installs); ``<prefix>/share/wmm-qp/configs`` (wheel installs).
@@ -195,9 +300,18 @@ def default_config_dir() -> Path:
         Path(sys.prefix) / "share" / "wmm-qp" / "configs",
     ]
     for c in candidates:
-        if (c / "robot.toml").is_file():
+        if (c / "controller.toml").is_file():
             return c
-    raise ConfigError(candidates[0], "", "no robot.toml found in any of: " + ", ".join(map(str, candidates)))
+    raise ConfigError(candidates[0], "", "no controller.toml found in any of: " + ", ".join(map(str, candidates)))
+
+
+DEFAULT_ROBOT = "gen3_mecanum.toml"
+"""The paper's robot, the default of every command (``configs/robots/``)."""
+
+
+def default_robot_file() -> Path:
+    """``<default_config_dir()>/robots/gen3_mecanum.toml``."""
+    return default_config_dir() / "robots" / DEFAULT_ROBOT
 
 
 class TomlTable:
@@ -266,6 +380,15 @@ class TomlTable:
             raise ConfigError(self.path, self._key(k), f"every entry must be > 0, got {v!r}")
         return _ro(a)
 
+    def per_joint(self, k: str, n: int, default: Any = ..., *, positive: bool = False) -> FloatArray:
+        """One number (the same for all n entries) or a list of n numbers."""
+        v = self.get(k, default)
+        if isinstance(v, int | float) and not isinstance(v, bool):
+            v = [v] * n
+        elif not isinstance(v, list | tuple | np.ndarray) or len(v) != n:
+            raise ConfigError(self.path, self._key(k), f"must be one number or a list of {n} numbers, got {v!r}")
+        return TomlTable(self.path, {k: list(v)}, self.prefix).vector(k, n, positive=positive)
+
     def string(self, k: str, default: Any = ..., choices: tuple[str, ...] | None = None) -> str:
         v = self.get(k, default)
         if not isinstance(v, str):
@@ -300,15 +423,17 @@ def read_toml(path: Path) -> dict[str, Any]:
 
 
 def load_robot_config(path: Path | str | None = None) -> RobotConfig:
-    """Load and validate ``robot.toml``.
+    """Load a robot file (``configs/robots/*.toml``, docs/robots.md) and resolve it against its URDF.
 
     Args:
-        path: the file; default ``<default_config_dir()>/robot.toml``.
+        path: the file; default ``configs/robots/gen3_mecanum.toml`` (the paper's robot).
 
     Raises:
         ConfigError: naming the file and key of the first problem found.
     """
-    path = Path(path) if path is not None else default_config_dir() / "robot.toml"
+    from .model import urdf as U
+
+    path = Path(path) if path is not None else default_robot_file()
     r = TomlTable(path, read_toml(path))
     r.unknown({"name", "arm", "base"})
     a = r.table("arm")
@@ -316,42 +441,102 @@ def load_robot_config(path: Path | str | None = None) -> RobotConfig:
         {
             "urdf",
             "ee_frame",
-            "mount_offset",
+            "joints",
+            "locked",
+            "mount_xyz",
+            "mount_rpy",
             "position_lower",
             "position_upper",
             "velocity_max",
             "acceleration_max",
             "torque_limit",
+            "torque_weight",
+            "start",
         }
     )
-    urdf = (path.parent / a.string("urdf")).resolve()
-    if not urdf.is_file():
-        raise ConfigError(path, "arm.urdf", f"file not found: {urdf}")
-    lower = a.vector("position_lower", N_ARM, finite=False)
-    upper = a.vector("position_upper", N_ARM, finite=False)
+    urdf = U.resolve_urdf(path, a.string("urdf"))
+    full = U.load_full_model(path, urdf)
+    joints = a.get("joints", None)
+    if joints is not None and (not isinstance(joints, list) or not all(isinstance(j, str) for j in joints)):
+        raise ConfigError(path, "arm.joints", f"must be a list of joint names, got {joints!r}")
+    ee_frame = a.string("ee_frame")
+    chain = U.read_chain(path, full, ee_frame, joints)
+    n = len(chain.joints)
+    locked_t = a.table("locked", required=False)
+    locked: dict[str, float] = {}
+    for name in locked_t.data:
+        if name in chain.joints:
+            raise ConfigError(path, f"arm.locked.{name}", "is a controlled joint (listed in arm.joints)")
+        if name not in chain.others:
+            raise ConfigError(path, f"arm.locked.{name}", "the URDF has no other actuated joint of that name")
+        locked[name] = locked_t.number(name)
+    lower = a.vector("position_lower", n, chain.lower, finite=False)
+    upper = a.vector("position_upper", n, chain.upper, finite=False)
     bad = np.flatnonzero(~(lower < upper))
     if bad.size:
-        raise ConfigError(path, "arm.position_lower", f"must be < position_upper (joint {bad[0] + 1})")
+        raise ConfigError(path, "arm.position_lower", f"must be < position_upper (joint {chain.joints[bad[0]]!r})")
+    vel = a.vector("velocity_max", n, chain.velocity, finite=False)
+    if not (vel > 0).all() or not np.isfinite(vel).all():
+        j = chain.joints[int(np.flatnonzero(~((vel > 0) & np.isfinite(vel)))[0])]
+        raise ConfigError(path, "arm.velocity_max", f"the URDF gives joint {j!r} no velocity limit: set it here")
+    tau = a.vector("torque_limit", n, chain.effort, finite=False)
+    if not (tau > 0).all() or not np.isfinite(tau).all():
+        j = chain.joints[int(np.flatnonzero(~((tau > 0) & np.isfinite(tau)))[0])]
+        raise ConfigError(path, "arm.torque_limit", f"the URDF gives joint {j!r} no effort limit: set it here")
+    if not a.has("acceleration_max"):
+        raise ConfigError(path, "arm.acceleration_max", "missing: URDFs have no acceleration limits; give one "
+                          "number or one per joint")
+    both = np.isfinite(lower) & np.isfinite(upper)
+    finite_mid = np.where(both, 0.5 * (np.where(both, lower, 0.0) + np.where(both, upper, 0.0)), 0.0)
+    start = a.vector("start", n, np.clip(finite_mid, lower, upper))
+    outside = np.flatnonzero((start < lower) | (start > upper))
+    if outside.size:
+        j = int(outside[0])
+        raise ConfigError(
+            path, "arm.start", f"joint {chain.joints[j]!r} at {start[j]} is outside [{lower[j]}, {upper[j]}]"
+        )
+    weight = a.vector("torque_weight", n, positive=True) if a.has("torque_weight") else None
     arm = ArmConfig(
         urdf=urdf,
-        ee_frame=a.string("ee_frame", "end_effector_link"),
-        mount_offset=a.vector("mount_offset", 3, [0.0, 0.0, 0.0]),
+        ee_frame=ee_frame,
+        joints=chain.joints,
+        joint_types=chain.types,
+        locked=tuple(sorted(locked.items())),
+        mount_xyz=a.vector("mount_xyz", 3, [0.0, 0.0, 0.0]),
+        mount_rpy=a.vector("mount_rpy", 3, [0.0, 0.0, 0.0]),
         position_lower=lower,
         position_upper=upper,
-        velocity_max=a.vector("velocity_max", N_ARM, positive=True),
-        acceleration_max=a.vector("acceleration_max", N_ARM, positive=True),
-        torque_limit=a.vector("torque_limit", N_ARM, positive=True),
+        velocity_max=_ro(vel),
+        acceleration_max=a.per_joint("acceleration_max", n, positive=True),
+        torque_limit=_ro(tau),
+        torque_weight=weight,
+        start=start,
     )
-    b = r.table("base")
-    b.unknown({"wheel_radius", "l1", "l2", "wheel_speed_max", "wheel_acceleration_max"})
-    base = BaseConfig(
-        wheel_radius=b.number("wheel_radius", positive=True),
-        l1=b.number("l1", positive=True),
-        l2=b.number("l2", positive=True),
-        wheel_speed_max=b.number("wheel_speed_max", positive=True),
-        wheel_acceleration_max=b.number("wheel_acceleration_max", positive=True),
+    return RobotConfig(arm=arm, base=_load_base(r.table("base")), name=r.string("name", "wmm"), path=path)
+
+
+_BASE_KEYS = {
+    "mecanum": ("wheel_radius", "l1", "l2"),
+    "omni": ("wheel_radius", "base_radius"),
+    "diff_drive": ("wheel_radius", "track_width"),
+    "fixed": (),
+}
+_N_WHEELS = {"mecanum": 4, "omni": 3, "diff_drive": 2, "fixed": 0}
+
+
+def _load_base(b: TomlTable) -> BaseConfig:
+    kind = b.string("kind", "mecanum", BASE_KINDS)
+    geometry = _BASE_KEYS[kind]
+    limits = ("wheel_speed_max", "wheel_acceleration_max") if kind != "fixed" else ()
+    b.unknown({"kind", *geometry, *limits})
+    n = _N_WHEELS[kind]
+    values = {k: b.number(k, positive=True) for k in geometry}
+    return BaseConfig(
+        kind=kind,
+        **values,
+        wheel_speed_max=b.per_joint("wheel_speed_max", n, positive=True) if n else _ro([]),
+        wheel_acceleration_max=b.per_joint("wheel_acceleration_max", n, positive=True) if n else _ro([]),
     )
-    return RobotConfig(arm=arm, base=base, name=r.string("name", "wmm"))
 
 
 def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
@@ -364,7 +549,7 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
 
     path = Path(path) if path is not None else default_config_dir() / "controller.toml"
     r = TomlTable(path, read_toml(path))
-    r.unknown({"rate_hz", "controller", "state_latency", "gains", "dm", "singularity", "qp"})
+    r.unknown({"rate_hz", "controller", "state_latency", "gains", "dm", "singularity", "qp", "task"})
     d = ControllerConfig()
     g = r.table("gains", required=False)
     g.unknown({"K_x", "alpha", "k_C", "k_N"})
@@ -388,6 +573,13 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
             "eps_abs",
         }
     )
+    t = r.table("task", required=False)
+    t.unknown({"kind", "K_R", "orientation_weight", "angular_speed_max", "angular_recovery_speed"})
+    W = dm.get("W", None)
+    if W is not None:
+        if not isinstance(W, list):
+            raise ConfigError(path, "dm.W", f"must be a list of numbers (one per joint of the robot), got {W!r}")
+        W = dm.vector("W", len(W), positive=True)
     direction = dm.vector("direction", 3, d.direction)
     if np.linalg.norm(direction) < 1e-9:
         raise ConfigError(path, "dm.direction", "must not be the zero vector")
@@ -403,7 +595,7 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
         alpha=g.number("alpha", d.alpha, lo=0.0, hi=1.0),
         k_C=g.number("k_C", d.k_C, lo=0.0),
         k_N=g.number("k_N", d.k_N, lo=0.0),
-        W=dm.vector("W", N_ARM, d.W, positive=True),
+        W=W,
         direction=_ro(direction / np.linalg.norm(direction)),
         ee_box_lower=lo,
         ee_box_upper=hi,
@@ -422,4 +614,12 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
             closed_form_first=q.boolean("closed_form_first", d.qp.closed_form_first),
             eps_abs=q.number("eps_abs", d.qp.eps_abs, positive=True),
         ),
+        task=TaskConfig(
+            kind=t.string("kind", d.task.kind, TASK_KINDS),
+            K_R=t.number("K_R", d.task.K_R, lo=0.0),
+            orientation_weight=t.number("orientation_weight", d.task.orientation_weight, positive=True),
+            angular_speed_max=t.number("angular_speed_max", d.task.angular_speed_max, positive=True),
+            angular_recovery_speed=t.number("angular_recovery_speed", d.task.angular_recovery_speed, positive=True),
+        ),
+        path=path,
     )

@@ -1,6 +1,11 @@
-"""Compiled 3×3 linear algebra shared by the hot path's kernels (task space is R³)."""
+"""Compiled small linear algebra shared by the hot path's kernels: 3×3 in closed form (the
+position task, r = 3), r×r by Cholesky (the pose task, r = 6)."""
 
 from __future__ import annotations
+
+import math
+
+import numpy as np
 
 from ._jit import jit
 from .config import FloatArray
@@ -36,3 +41,33 @@ def solve_sym3(
         (A1 * r0 + B1 * r1 + B2 * r2) / det,
         (A2 * r0 + B2 * r1 + C2 * r2) / det,
     )
+
+
+@jit
+def solve_spd(G: FloatArray, r: FloatArray, y: FloatArray) -> bool:
+    """y = G⁻¹ r for a symmetric positive definite G (m×m) by Cholesky; False (y undefined) when
+    G is not numerically positive definite (a pivot ≤ 1e-300 or NaN)."""
+    m = G.shape[0]
+    L = np.zeros((m, m))
+    for i in range(m):
+        for j in range(i + 1):
+            acc = G[i, j]
+            for k in range(j):
+                acc -= L[i, k] * L[j, k]
+            if i == j:
+                if not acc > 1e-300:
+                    return False
+                L[i, i] = math.sqrt(acc)
+            else:
+                L[i, j] = acc / L[j, j]
+    for i in range(m):  # L w = r
+        acc = r[i]
+        for k in range(i):
+            acc -= L[i, k] * y[k]
+        y[i] = acc / L[i, i]
+    for i in range(m - 1, -1, -1):  # Lᵀ y = w
+        acc = y[i]
+        for k in range(i + 1, m):
+            acc -= L[k, i] * y[k]
+        y[i] = acc / L[i, i]
+    return True

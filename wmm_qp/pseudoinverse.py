@@ -1,6 +1,6 @@
 """Pseudoinverses of the whole-robot Jacobian: weighted, eq. (11), and damped.
 
-J# = W_x Jᵀ (J W_x Jᵀ)⁻¹,  W_x = diag(α·I_4, (1−α)·I_7)        eqs. (11), (12)
+J# = W_x Jᵀ (J W_x Jᵀ)⁻¹,  W_x = diag(α·I_wheels, (1−α)·I_joints)        eqs. (11), (12)
 
 The print shows I_b in the base block; the text (α = 0: arm only, α = 1: base only)
 needs α·I_b. Near singularities (σ_min(J_m) below a threshold) the inverse is damped:
@@ -14,13 +14,13 @@ import math
 import numpy as np
 
 from ._jit import jit
-from .config import N_ARM, N_WHEELS, FloatArray
+from .config import FloatArray
 from .linalg3 import gram3
 
 
-def weight_matrix_diag(alpha: float) -> FloatArray:
-    """Diagonal of W_x, eq. (12)."""
-    return np.concatenate([np.full(N_WHEELS, alpha), np.full(N_ARM, 1.0 - alpha)])
+def weight_matrix_diag(alpha: float, n_wheels: int, n_arm: int) -> FloatArray:
+    """Diagonal of W_x, eq. (12): α for each wheel, 1 − α for each joint."""
+    return np.concatenate([np.full(n_wheels, alpha), np.full(n_arm, 1.0 - alpha)])
 
 
 def weighted_pinv(J: FloatArray, w: FloatArray, damping: float = 0.0) -> FloatArray:

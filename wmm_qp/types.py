@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._jit import all_finite
-from .config import N_ARM, N_WHEELS, FloatArray
+from .config import FloatArray
 
 
 class Mode(enum.StrEnum):
@@ -26,48 +26,60 @@ class Mode(enum.StrEnum):
     DM_NULLSPACE = "dm_nullspace"
 
 
-def _vec(a: object, n: int, name: str) -> FloatArray:
+def _vec(a: object, n: int | None, name: str) -> FloatArray:
     v = np.array(a, dtype=np.float64).reshape(-1)  # an own, writable, contiguous copy
-    if v.shape != (n,):
+    if n is not None and v.shape != (n,):
         raise ValueError(f"{name} must have {n} entries, got {v.shape[0]}")
     return v
 
 
+def _is_vec(a: object, n: int) -> bool:
+    return isinstance(a, np.ndarray) and a.dtype == np.float64 and a.shape == (n,)
+
+
 def _is_vec3(a: object) -> bool:
-    return isinstance(a, np.ndarray) and a.dtype == np.float64 and a.shape == (3,)
+    return _is_vec(a, 3)
 
 
 @dataclass(slots=True)
 class RobotState:
     """What the robot reports (the controller's input).
 
+    The sizes are the robot's (its description's joints and wheels): a controller checks them
+    (:meth:`has_shapes`) before it uses a state.
+
     Attributes:
         q_base: [m, m, rad] base pose (x_b, y_b, ψ) — odometry on a real robot.
-        q_arm: [rad] joint angles q_m.
-        v_arm: [rad/s] joint rates now (bounds (13) start from them).
-        wheel_speeds: [rad/s] wheel speeds now (FL, FR, RL, RR).
+        q_arm: [rad or m] joint values q_m, in the robot description's joint order.
+        v_arm: [rad/s or m/s] joint rates now (bounds (13) start from them); None = at rest.
+        wheel_speeds: [rad/s] wheel speeds now, in the base kind's wheel order; None = at rest.
     """
 
     q_base: FloatArray
     q_arm: FloatArray
-    v_arm: FloatArray = field(default_factory=lambda: np.zeros(N_ARM))
-    wheel_speeds: FloatArray = field(default_factory=lambda: np.zeros(N_WHEELS))
+    v_arm: FloatArray = None  # type: ignore[assignment]  # None → zeros, in __post_init__
+    wheel_speeds: FloatArray | None = None
 
     def __post_init__(self) -> None:
         self.q_base = _vec(self.q_base, 3, "q_base")
-        self.q_arm = _vec(self.q_arm, N_ARM, "q_arm")
-        self.v_arm = _vec(self.v_arm, N_ARM, "v_arm")
-        self.wheel_speeds = _vec(self.wheel_speeds, N_WHEELS, "wheel_speeds")
+        self.q_arm = _vec(self.q_arm, None, "q_arm")
+        self.v_arm = np.zeros(self.q_arm.shape[0]) if self.v_arm is None else _vec(self.v_arm, None, "v_arm")
+        if self.wheel_speeds is not None:
+            self.wheel_speeds = _vec(self.wheel_speeds, None, "wheel_speeds")
 
-    def has_shapes(self) -> bool:
+    def has_shapes(self, n_arm: int, n_wheels: int) -> bool:
         """Every field a float vector of its length (the fields may be replaced after construction)."""
-        return all(
-            isinstance(a, np.ndarray) and a.dtype == np.float64 and a.shape == (n,)
-            for a, n in ((self.q_base, 3), (self.q_arm, N_ARM), (self.v_arm, N_ARM), (self.wheel_speeds, N_WHEELS))
+        w = self.wheel_speeds
+        return (
+            _is_vec(self.q_base, 3)
+            and _is_vec(self.q_arm, n_arm)
+            and _is_vec(self.v_arm, n_arm)
+            and (w is None or _is_vec(w, n_wheels))
         )
 
     def is_finite(self) -> bool:
-        return all(all_finite(a) for a in (self.q_base, self.q_arm, self.v_arm, self.wheel_speeds))
+        w = self.wheel_speeds
+        return all(all_finite(a) for a in (self.q_base, self.q_arm, self.v_arm)) and (w is None or all_finite(w))
 
 
 @dataclass(slots=True)
@@ -80,12 +92,17 @@ class Reference:
             the EE is now (so ``Reference("hold")`` holds still, never drives to the origin).
         xd_d: [m/s] its feed-forward velocity.
         direction: DM direction u in the base (yaw-compensated) frame; None = the config's.
+        quat_d: desired EE orientation (world), a quaternion [x, y, z, w] (pose task only; the
+            controller normalises it); None = no orientation target (the EE turns at ω_d only).
+        omega_d: [rad/s] its feed-forward angular velocity (world, pose task only).
     """
 
     mode: Mode
     x_d: FloatArray | None = None
     xd_d: FloatArray = field(default_factory=lambda: np.zeros(3))
     direction: FloatArray | None = None
+    quat_d: FloatArray | None = None
+    omega_d: FloatArray = field(default_factory=lambda: np.zeros(3))
 
     def __post_init__(self) -> None:
         self.mode = Mode(self.mode)
@@ -94,23 +111,30 @@ class Reference:
         self.xd_d = _vec(self.xd_d, 3, "xd_d")
         if self.direction is not None:
             self.direction = _vec(self.direction, 3, "direction")
+        if self.quat_d is not None:
+            self.quat_d = _vec(self.quat_d, 4, "quat_d")
+        self.omega_d = _vec(self.omega_d, 3, "omega_d")
 
     def has_shapes(self) -> bool:
-        """The mode a :class:`Mode` and every array a float vector of 3 (or None where allowed):
-        the fields may be replaced after construction, and the kernels do not bounds-check."""
+        """The mode a :class:`Mode` and every array a float vector of its size (or None where
+        allowed): the fields may be replaced after construction, and the kernels do not bounds-check."""
         return (
             isinstance(self.mode, Mode)
             and _is_vec3(self.xd_d)
             and (self.x_d is None or _is_vec3(self.x_d))
             and (self.direction is None or _is_vec3(self.direction))
+            and (self.quat_d is None or _is_vec(self.quat_d, 4))
+            and _is_vec3(self.omega_d)
         )
 
     def is_finite(self) -> bool:
-        d = self.direction
+        d, qd = self.direction, self.quat_d
         return (
             (self.x_d is None or all_finite(self.x_d))
             and all_finite(self.xd_d)
             and (d is None or (all_finite(d) and float(np.linalg.norm(d)) > 1e-9))
+            and (qd is None or (all_finite(qd) and float(np.linalg.norm(qd)) > 1e-9))
+            and all_finite(self.omega_d)
         )
 
 
@@ -128,12 +152,13 @@ class Command:
     """The controller's output for one tick.
 
     Attributes:
-        wheel_speeds: [rad/s] wheel speed command v_b (FL, FR, RL, RR).
-        arm_rates: [rad/s] joint rate command v_m.
+        wheel_speeds: [rad/s] wheel speed command v_b (the base kind's wheel order).
+        arm_rates: [rad/s or m/s] joint rate command v_m.
         status: see :class:`Status`.
         reason: why, when status is not OK ("" otherwise).
         alpha: the α actually used (paper controller) or configured (QP).
-        task_error: [m/s] ‖J v − ẋ_ref‖ of this command (0 when the task is met).
+        task_error: [m/s] ‖J v − ẋ_ref‖ of this command (0 when the task is met; the pose task's
+            angular rows enter scaled by ``task.orientation_weight``).
         x: [m] EE position the command was computed at (model, world frame).
         dm: directional manipulability H2 at this state along the active direction.
         sigma_min: σ_min(J_m) at this state.
@@ -151,5 +176,5 @@ class Command:
 
     @property
     def v(self) -> FloatArray:
-        """[v_b; v_m] ∈ R¹¹."""
+        """[v_b; v_m] ∈ R^(n_wheels + n_arm)."""
         return np.concatenate([self.wheel_speeds, self.arm_rates])

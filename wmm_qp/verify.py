@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .config import N_ARM, N_WHEELS, FloatArray, RobotConfig
+from .config import FloatArray, RobotConfig
 from .model.wmm import WmmModel
 from .types import Command, Mode, Reference, RobotState
 
@@ -69,7 +69,8 @@ def check_command(
         overrun_hi = stop_cmd > np.maximum(arm.position_upper, stop_now) + tol * dt
         overrun_lo = stop_cmd < np.minimum(arm.position_lower, stop_now) - tol * dt
     out["position"] = int(np.sum(~finite | too_high | too_low | overrun_hi | overrun_lo))
-    w, w0 = np.asarray(cmd.wheel_speeds), state.wheel_speeds
+    w = np.asarray(cmd.wheel_speeds)
+    w0 = np.zeros(base.n_wheels) if state.wheel_speeds is None else state.wheel_speeds
     aw = base.wheel_acceleration_max * dt
     bad_w = (
         ~np.isfinite(w)
@@ -97,7 +98,8 @@ def check_ee_box(
     lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
     kin = model.kinematics(state.q_base, state.q_arm)  # eqs. (2), (5)
     a, aw = arm.acceleration_max * dt, base.wheel_acceleration_max * dt
-    v0, w0 = state.v_arm, state.wheel_speeds
+    v0 = state.v_arm
+    w0 = np.zeros(base.n_wheels) if state.wheel_speeds is None else state.wheel_speeds
     brake = np.concatenate([w0 - np.clip(w0, -aw, aw), v0 - np.clip(v0, -a, a)])  # full braking at A
     v = np.concatenate([np.asarray(cmd.wheel_speeds, dtype=float), np.asarray(cmd.arm_rates, dtype=float)])
     p, p_brake = kin.x + dt * (kin.J @ v), kin.x + dt * (kin.J @ brake)
@@ -126,19 +128,25 @@ class Sample:
     case: str
 
 
-def sample_states(model: WmmModel, n: int, seed: int, modes: tuple[Mode, ...] = tuple(Mode)) -> Iterator[Sample]:
+def sample_states(
+    model: WmmModel, n: int, seed: int, modes: tuple[Mode, ...] = tuple(Mode), pose: bool = False
+) -> Iterator[Sample]:
     """Random states and references covering the corners the bounds must survive.
 
     States: inside the limits, exactly at and just beyond a position limit, at and beyond
     the velocity limits, at the acceleration limits (large previous rates), near and at
-    arm singularities (joints 2, 4, 6 near 0: the arm stretched straight). References: small,
-    huge, discontinuous (a random jump each sample), in every mode.
+    arm singularities (every second joint — 2, 4, 6, … — at or near 0, clipped to its range: the
+    Gen3 stretched straight, and the same family on any arm). References: small, huge,
+    discontinuous (a random jump each sample), in every mode; with ``pose`` also a target
+    orientation (a random rotation of up to ~π about a random axis) and angular feed-forward.
     """
     rng = np.random.default_rng(seed)
     arm, base = model.config.arm, model.config.base
     lo = np.where(np.isfinite(arm.position_lower), arm.position_lower, -np.pi)
     hi = np.where(np.isfinite(arm.position_upper), arm.position_upper, np.pi)
     vmax, wmax = arm.velocity_max, base.wheel_speed_max
+    n_a, n_w = arm.n, base.n_wheels
+    bending = np.arange(1, n_a, 2)
     cases = (
         "inside",
         "at_limit",
@@ -151,8 +159,8 @@ def sample_states(model: WmmModel, n: int, seed: int, modes: tuple[Mode, ...] = 
     for i in range(n):
         case = cases[i % len(cases)]
         q = rng.uniform(lo, hi)
-        v = rng.uniform(-1, 1, N_ARM) * vmax * rng.uniform(0, 1)
-        w = rng.uniform(-1, 1, N_WHEELS) * wmax * rng.uniform(0, 1)
+        v = rng.uniform(-1, 1, n_a) * vmax * rng.uniform(0, 1)
+        w = rng.uniform(-1, 1, n_w) * wmax * rng.uniform(0, 1)
         limited = np.flatnonzero(np.isfinite(arm.position_upper))
         j = rng.choice(limited)
         side = rng.choice([-1.0, 1.0])
@@ -164,14 +172,14 @@ def sample_states(model: WmmModel, n: int, seed: int, modes: tuple[Mode, ...] = 
             q[j] = edge + side * rng.uniform(1e-6, 0.05)
             v[j] = side * rng.uniform(0, vmax[j])
         elif case == "at_velocity_limit":
-            v = rng.choice([-1.0, 1.0], N_ARM) * vmax
-            w = rng.choice([-1.0, 1.0], N_WHEELS) * wmax
+            v = rng.choice([-1.0, 1.0], n_a) * vmax
+            w = rng.choice([-1.0, 1.0], n_w) * wmax
         elif case == "beyond_velocity_limit":
-            v = rng.choice([-1.0, 1.0], N_ARM) * vmax * rng.uniform(1.0, 1.5, N_ARM)
-            w = rng.choice([-1.0, 1.0], N_WHEELS) * wmax * rng.uniform(1.0, 1.5, N_WHEELS)
+            v = rng.choice([-1.0, 1.0], n_a) * vmax * rng.uniform(1.0, 1.5, n_a)
+            w = rng.choice([-1.0, 1.0], n_w) * wmax * rng.uniform(1.0, 1.5, n_w)
         elif case in ("near_singular", "singular"):
             eps = 0.0 if case == "singular" else 0.05
-            q[[1, 3, 5]] = rng.uniform(-eps, eps, 3)
+            q[bending] = np.clip(rng.uniform(-eps, eps, bending.size), lo[bending], hi[bending])
         q_base = np.array([*rng.uniform(-2, 2, 2), rng.uniform(-np.pi, np.pi)])
         state = RobotState(q_base=q_base, q_arm=q, v_arm=v, wheel_speeds=w)
         x = model.ee_position(q_base, q)
@@ -179,8 +187,13 @@ def sample_states(model: WmmModel, n: int, seed: int, modes: tuple[Mode, ...] = 
         x_d = x + rng.normal(size=3) * scale
         xd_d = rng.normal(size=3) * rng.choice([0.0, 0.05, 5.0])
         direction = rng.normal(size=3)
+        quat_d, omega_d = None, np.zeros(3)
+        if pose:
+            quat_d = rng.normal(size=4)
+            omega_d = rng.normal(size=3) * rng.choice([0.0, 0.1, 3.0])
         for mode in modes:
-            yield Sample(state, Reference(mode, x_d=x_d, xd_d=xd_d, direction=direction), case)
+            ref = Reference(mode, x_d=x_d, xd_d=xd_d, direction=direction, quat_d=quat_d, omega_d=omega_d)
+            yield Sample(state, ref, case)
 
 
 @dataclass
@@ -223,7 +236,9 @@ def verify_controller(
         if hasattr(cfg, "ee_box_lower") and hasattr(cfg, "ee_box_upper"):
             ee_box = (cfg.ee_box_lower, cfg.ee_box_upper)  # type: ignore[union-attr]
     modes = tuple(Mode)
-    for k, s in enumerate(sample_states(model, n, seed, modes)):
+    task = getattr(getattr(controller, "config", None), "task", None)
+    pose = getattr(task, "kind", "position") == "pose"
+    for k, s in enumerate(sample_states(model, n, seed, modes, pose=pose)):
         cmd = controller.step(s.state, s.reference)  # type: ignore[attr-defined]
         rep.steps += 1
         rep.statuses[cmd.status.value] = rep.statuses.get(cmd.status.value, 0) + 1

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wmm_qp.config import N_ARM, FloatArray
+from wmm_qp.config import FloatArray
 
 from .config import BoxConfig
 
@@ -75,7 +75,7 @@ class Box:
         Does not move the box: call :meth:`slide_to` when the motion is accepted.
         """
         if not (ee[0] > self.face_x and self.in_face(ee)):
-            return ContactResult(False, False, np.zeros(3), np.zeros(N_ARM), None)
+            return ContactResult(False, False, np.zeros(3), np.zeros(J_m.shape[1]), None)
         F = self.config.friction_force * PUSH_AXIS
         tau = J_m.T @ F  # τ = J_mᵀ F
         if np.all(np.abs(tau) <= torque_limit):

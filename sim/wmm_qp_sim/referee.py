@@ -57,8 +57,8 @@ class Referee:
         self.q_hi = np.array(a.position_upper, dtype=float)
         self.v_max = np.array(a.velocity_max, dtype=float)
         self.a_max = np.array(a.acceleration_max, dtype=float)
-        self.w_max = float(b.wheel_speed_max)
-        self.wa_max = float(b.wheel_acceleration_max)
+        self.w_max = np.array(b.wheel_speed_max, dtype=float)
+        self.wa_max = np.array(b.wheel_acceleration_max, dtype=float)
         self.rtol, self.atol = config.rtol, config.atol
         self.counts: dict[str, int] = dict.fromkeys(VIOLATION_KINDS, 0)
         self.last_event = ""  # what the last counted violation was (for the sim's log)

@@ -2,7 +2,7 @@
 
 :meth:`SimRobot.step` executes the commanded wheel speeds and joint rates as they are (a
 kinematic robot: the referee, not the sim, judges whether they were legal), integrates the
-arm, the odometry (nominal Mecanum model) and the true base (with slip and drift, see
+arm, the odometry (the base kind's nominal model, eq. (3)) and the true base (with slip and drift, see
 :mod:`.slip`), pushes the box if there is one (:mod:`.contact`), and counts every limit
 violation (:mod:`.referee`). It never raises from ``step``: a malformed command is ignored
 (counted in ``SimState.rejected_commands``) and the held command goes on.
@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 import wmm_qp
-from wmm_qp.config import N_ARM, N_WHEELS, FloatArray
+from wmm_qp.config import FloatArray
 
 from .config import BoxConfig, SimConfig
 from .contact import Box
@@ -33,8 +33,8 @@ class SimCommand:
     """A command to the robot, held until the next one.
 
     Attributes:
-        wheel_speeds: [rad/s] wheel speeds (FL, FR, RL, RR).
-        arm_rates: [rad/s] joint rates.
+        wheel_speeds: [rad/s] wheel speeds (the base kind's wheel order).
+        arm_rates: [rad/s or m/s] joint rates (the robot description's joint order).
         period: [s] the command's own period (the Δt of its sender's bounds (13)); the referee
             judges the change from the previous command over it. None: over the time since the
             previous command.
@@ -56,11 +56,11 @@ class SimCommand:
         self.wheel_speeds = np.asarray(self.wheel_speeds, dtype=float).reshape(-1)
         self.arm_rates = np.asarray(self.arm_rates, dtype=float).reshape(-1)
 
-    def is_valid(self) -> bool:
-        """Right sizes and finite values."""
+    def is_valid(self, n_wheels: int, n_arm: int) -> bool:
+        """The robot's sizes and finite values."""
         return bool(
-            self.wheel_speeds.shape == (N_WHEELS,)
-            and self.arm_rates.shape == (N_ARM,)
+            self.wheel_speeds.shape == (n_wheels,)
+            and self.arm_rates.shape == (n_arm,)
             and np.isfinite(self.wheel_speeds).all()
             and np.isfinite(self.arm_rates).all()
         )
@@ -137,12 +137,13 @@ class SimRobot:
         self.referee = Referee(model.config, config.referee, period_max=config.stale_timeout)
         self.torque_limit = np.array(model.config.arm.torque_limit, dtype=float)
         self.a_max = np.array(model.config.arm.acceleration_max, dtype=float)
-        self.wa_max = float(model.config.base.wheel_acceleration_max)
+        self.wa_max = np.array(model.config.base.wheel_acceleration_max, dtype=float)
+        self.n_arm, self.n_wheels = model.n_arm, model.n_wheels
         arm = model.config.arm
         self.q_lo = np.array(arm.position_lower, dtype=float)
         self.q_hi = np.array(arm.position_upper, dtype=float)
         self.v_max = np.array(arm.velocity_max, dtype=float)
-        self.w_max = float(model.config.base.wheel_speed_max)
+        self.w_max = np.array(model.config.base.wheel_speed_max, dtype=float)
         tol = config.referee
         self._v_tol = self.v_max * (1.0 + tol.rtol) + tol.atol
         self._w_tol = self.w_max * (1.0 + tol.rtol) + tol.atol
@@ -152,14 +153,14 @@ class SimRobot:
     def reset(
         self,
         q_base: Sequence[float] | FloatArray = (0.0, 0.0, 0.0),
-        q_arm: Sequence[float] | FloatArray = wmm_qp.PAPER_START_Q_ARM,
+        q_arm: Sequence[float] | FloatArray | None = None,
         box: BoxConfig | None = None,
     ) -> SimState:
         """Put the robot at rest at (q_base, q_arm); odometry = truth; counts zeroed.
 
         Args:
             q_base: [m, m, rad] base pose (x, y, ψ).
-            q_arm: [rad] joint angles.
+            q_arm: [rad] joint values; None = the robot description's ``arm.start``.
             box: the box to push; None = ``config.box`` (which may itself be None).
         """
         self.rng = np.random.default_rng(self.seed)
@@ -167,9 +168,10 @@ class SimRobot:
         self.slip.reset()
         self.referee.reset()
         self.t = 0.0
-        self.q_arm = np.array(q_arm, dtype=float).reshape(N_ARM)
-        self.v_arm = np.zeros(N_ARM)
-        self.wheels = np.zeros(N_WHEELS)
+        start = self.model.config.arm.start if q_arm is None else q_arm
+        self.q_arm = np.array(start, dtype=float).reshape(self.n_arm)
+        self.v_arm = np.zeros(self.n_arm)
+        self.wheels = np.zeros(self.n_wheels)
         self.base_odom = np.array(q_base, dtype=float).reshape(3)
         self.base_true = self.base_odom.copy()
         box_cfg = box if box is not None else self.config.box
@@ -178,13 +180,13 @@ class SimRobot:
         self.stale = False
         self.rejected = 0
         self.n_commands = 0
-        self.target_arm = np.zeros(N_ARM)  # the command the drives follow
-        self.target_wheels = np.zeros(N_WHEELS)
+        self.target_arm = np.zeros(self.n_arm)  # the command the drives follow
+        self.target_wheels = np.zeros(self.n_wheels)
         self.protective = False
         self.protective_stops = 0
         self.protective_reason = ""
         self.refused = 0
-        self.tau = np.zeros(N_ARM)
+        self.tau = np.zeros(self.n_arm)
         self.force = np.zeros(3)
         self.stalled_joint: int | None = None
         return self.state()
@@ -199,7 +201,7 @@ class SimRobot:
 
         Never raises; a malformed command is ignored and counted.
         """
-        if command is not None and not command.is_valid():
+        if command is not None and not command.is_valid(self.n_wheels, self.n_arm):
             self.rejected += 1
             command = None
         if command is not None:
@@ -241,7 +243,7 @@ class SimRobot:
                 self.refused += 1
                 what = (f"joint {bad_v[0] + 1} rate {arm[bad_v[0]]:.3g} rad/s beyond {self.v_max[bad_v[0]]:.3g}"
                         if bad_v.size else
-                        f"wheel {bad_w[0] + 1} speed {wheels[bad_w[0]]:.3g} rad/s beyond {self.w_max:.3g}")
+                        f"wheel {bad_w[0] + 1} speed {wheels[bad_w[0]]:.3g} rad/s beyond {self.w_max[bad_w[0]]:.3g}")
                 self._protective_stop(f"refused command: {what}")
                 return
             if self.protective:
@@ -261,8 +263,8 @@ class SimRobot:
 
     def _braked(self, dt: float) -> tuple[FloatArray, FloatArray]:
         """One braking step toward rest at the acceleration limits; the targets become rest."""
-        self.target_arm = np.zeros(N_ARM)
-        self.target_wheels = np.zeros(N_WHEELS)
+        self.target_arm = np.zeros(self.n_arm)
+        self.target_wheels = np.zeros(self.n_wheels)
         dv = np.clip(-self.v_arm, -self.a_max * dt, self.a_max * dt)
         dw = np.clip(-self.wheels, -self.wa_max * dt, self.wa_max * dt)
         return self.v_arm + dv, self.wheels + dw
@@ -281,7 +283,7 @@ class SimRobot:
         q_new = self.q_arm + self.v_arm * dt
         self.base_odom = integrate_pose(self.base_odom, self.model.base.body_twist(self.wheels), dt)
         base_new = integrate_pose(self.base_true, self.slip.true_body_twist(self.wheels, dt), dt)
-        self.tau = np.zeros(N_ARM)
+        self.tau = np.zeros(self.n_arm)
         self.force = np.zeros(3)
         self.stalled_joint = None
         if self.box is not None:

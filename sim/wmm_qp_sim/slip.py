@@ -1,4 +1,4 @@
-"""Base slip and drift: the true base motion departs from the nominal Mecanum model.
+"""Base slip and drift: the true base motion departs from the base kind's nominal model.
 
 Noise model (seeded, see ``configs/sim.toml``):
 
@@ -9,13 +9,16 @@ b_i ~ N(0, wheel_scale_std²) is drawn once per reset (a systematic scale error 
 roller); n_i(t) is an Ornstein–Uhlenbeck process with stationary std wheel_noise_std and
 correlation time wheel_noise_tau (roller slip on an uneven floor), updated exactly each step:
 n ← a·n + σ·sqrt(1 − a²)·ξ, a = exp(−dt/τ), ξ ~ N(0, 1). Odometry uses M · w.
+
+M is the base kind's (eq. (3)): every slip acts through it, so a differential drive (M's v_y row
+zero) never slides sideways, with or without slip — the drift term turns it, it does not push it.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from wmm_qp.config import N_WHEELS, FloatArray
+from wmm_qp.config import FloatArray
 
 from .config import SlipConfig
 
@@ -25,7 +28,7 @@ class SlipModel:
 
     Args:
         config: the slip parameters.
-        M: 3×4 Mecanum matrix, wheel speeds → body twist [v_x, v_y, ω].
+        M: 3 × n_wheels base matrix (eq. (3)), wheel speeds → body twist [v_x, v_y, ω].
         rng: the random generator (owned by the sim, seeded).
     """
 
@@ -33,17 +36,18 @@ class SlipModel:
         self.config = config
         self.M = M
         self.rng = rng
-        self.bias = np.zeros(N_WHEELS)
-        self.noise = np.zeros(N_WHEELS)
+        self.n = int(M.shape[1])
+        self.bias = np.zeros(self.n)
+        self.noise = np.zeros(self.n)
 
     def reset(self) -> None:
         """Draw a new systematic scale error b and start n(t) from its stationary law."""
         c = self.config
         self.bias = (
-            self.rng.normal(0.0, c.wheel_scale_std, N_WHEELS) if c.enabled else np.zeros(N_WHEELS)
+            self.rng.normal(0.0, c.wheel_scale_std, self.n) if c.enabled else np.zeros(self.n)
         )
         self.noise = (
-            self.rng.normal(0.0, c.wheel_noise_std, N_WHEELS) if c.enabled else np.zeros(N_WHEELS)
+            self.rng.normal(0.0, c.wheel_noise_std, self.n) if c.enabled else np.zeros(self.n)
         )
 
     def true_body_twist(self, wheel_speeds: FloatArray, dt: float) -> FloatArray:
@@ -57,7 +61,7 @@ class SlipModel:
         a = float(np.exp(-dt / c.wheel_noise_tau))
         self.noise = a * self.noise + c.wheel_noise_std * np.sqrt(
             1.0 - a * a
-        ) * self.rng.standard_normal(N_WHEELS)
+        ) * self.rng.standard_normal(self.n)
         twist = self.M @ (wheel_speeds * (1.0 + self.bias + self.noise))
         twist[2] += c.yaw_drift_per_meter * float(np.hypot(twist[0], twist[1]))
         return twist

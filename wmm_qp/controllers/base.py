@@ -14,11 +14,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._jit import all_finite, jit
-from ..config import N_WHEELS, ControllerConfig, FloatArray, RobotConfig
+from ..config import ControllerConfig, FloatArray, RobotConfig
 from ..limits import MotionBounds, braking_command, wheel_braking_command
 from ..manipulability import directional_manipulability, dm_cartesian_gradient, dm_gradient
 from ..model.wmm import Kinematics, WmmModel
 from ..pseudoinverse import damping_factor, sigma_min
+from ..tasks import orientation_error, quat_to_matrix
 from ..types import Command, Mode, Reference, RobotState, Status
 
 
@@ -34,22 +35,23 @@ class TickContext:
     damping: float
     lo: FloatArray  # bounds on v = [v_b; v_m]: wheel bounds, then eq. (13)
     hi: FloatArray
+    n_wheels: int
 
     @property
     def wheel_lo(self) -> FloatArray:
-        return self.lo[:N_WHEELS]
+        return self.lo[: self.n_wheels]
 
     @property
     def wheel_hi(self) -> FloatArray:
-        return self.hi[:N_WHEELS]
+        return self.hi[: self.n_wheels]
 
     @property
     def arm_lo(self) -> FloatArray:
-        return self.lo[N_WHEELS:]
+        return self.lo[self.n_wheels :]
 
     @property
     def arm_hi(self) -> FloatArray:
-        return self.hi[N_WHEELS:]
+        return self.hi[self.n_wheels :]
 
 
 @jit
@@ -80,11 +82,14 @@ def _describe(a: object) -> str:
 
 
 class Controller(ABC):
-    """A kinematic controller of the WMM.
+    """A kinematic controller of the WMM (any arm, any base kind, position or pose task).
 
     Args:
         model: the robot's kinematic model.
         config: gains and settings; ``config.dt`` is the control period.
+
+    Raises:
+        ConfigError: the config's per-joint values (``dm.W``) do not fit this robot.
     """
 
     name = "controller"
@@ -95,19 +100,25 @@ class Controller(ABC):
         self.config = config
         self.dt = config.dt
         arm, base = self.robot.arm, self.robot.base
-        free = np.full(N_WHEELS, np.inf)  # wheels: speed and acceleration bounds only
+        # the robot's own sizes (from its description; the safe stop must not trust the state's)
+        self.n_wheels = int(model.base.M.shape[1])
+        self.n_arm = int(arm.acceleration_max.shape[0])
+        self.n_v = self.n_wheels + self.n_arm
+        free = np.full(self.n_wheels, np.inf)  # wheels: speed and acceleration bounds only
         self.bounds = MotionBounds(
             np.concatenate([-free, arm.position_lower]),
             np.concatenate([free, arm.position_upper]),
-            np.concatenate([np.full(N_WHEELS, base.wheel_speed_max), arm.velocity_max]),
-            np.concatenate([np.full(N_WHEELS, base.wheel_acceleration_max), arm.acceleration_max]),
+            np.concatenate([base.wheel_speed_max, arm.velocity_max]),
+            np.concatenate([base.wheel_acceleration_max, arm.acceleration_max]),
             config.dt,
             config.state_latency,
         )  # eq. (13) for the arm; for the wheels (no position limit) it reduces to the wheel bounds
-        self._no_wheel_q = np.zeros(N_WHEELS)
-        # the robot's own sizes, for the safe stop (which must not trust the state's arrays)
-        self.n_wheels = int(model.base.M.shape[1])
-        self.n_arm = int(arm.acceleration_max.shape[0])
+        self._no_wheel_q = np.zeros(self.n_wheels)
+        self._rest_wheels = np.zeros(self.n_wheels)
+        self.W = config.weights_for(self.robot)  # eq. (8)
+        self.pose = config.task.kind == "pose"
+        self.r = config.task.r
+        self._w_R = config.task.orientation_weight  # the pose task's angular rows are scaled by it
         boxed = np.isfinite(config.ee_box_lower) | np.isfinite(config.ee_box_upper)
         self._boxed_axes = np.flatnonzero(boxed).astype(np.int64)  # the EE box's axes, eq. (17)
         self._u = config.direction / math.sqrt(float(config.direction @ config.direction))  # unit DM direction
@@ -119,7 +130,7 @@ class Controller(ABC):
     def step(self, state: RobotState, reference: Reference) -> Command:
         """One control tick. Never raises: failures become a safe stop with a reason."""
         try:
-            if not state.has_shapes():  # RobotState is mutable: fields may have been replaced
+            if not state.has_shapes(self.n_arm, self.n_wheels):  # RobotState is mutable: fields may be replaced
                 return self.safe_stop(state, "state arrays have the wrong shapes")
             if not reference.has_shapes():  # so is Reference (the kernels do not bounds-check)
                 return self.safe_stop(state, "reference arrays have the wrong shapes or the mode is unknown")
@@ -173,10 +184,14 @@ class Controller(ABC):
         array: the state is malformed) is treated as unknown, and its part of the command is the
         braking step from zero, i.e. zero — the stop command, as the robot's own stale-command
         stop would apply; the reason says so. Non-finite entries of an otherwise usable vector (a
-        NaN state) are taken as 0 as well.
+        NaN state) are taken as 0 as well. A :class:`RobotState` whose ``wheel_speeds`` is None
+        (documented as: at rest) brakes its wheels from rest.
         """
         try:
-            w = _usable_rates(getattr(state, "wheel_speeds", None), self.n_wheels)
+            w_raw = getattr(state, "wheel_speeds", None)
+            if w_raw is None and isinstance(state, RobotState):
+                w_raw = self._rest_wheels
+            w = _usable_rates(w_raw, self.n_wheels)
             v_arm = _usable_rates(getattr(state, "v_arm", None), self.n_arm)
             for name, rates in (("wheel_speeds", w), ("v_arm", v_arm)):
                 if rates is None:
@@ -197,20 +212,29 @@ class Controller(ABC):
             )
 
     def context(self, state: RobotState, reference: Reference, need_gradient: bool) -> TickContext:
-        """Kinematics, DM (and its gradient when needed), σ_min, damping and bounds (13)."""
-        kin = self.model.kinematics(state.q_base, state.q_arm, hessian=need_gradient)
+        """Kinematics, DM (and its gradient when needed), σ_min, damping and bounds (13).
+
+        With the pose task the angular rows of ``kin.J`` (and so of ``kin.J_m``) are scaled by
+        ``task.orientation_weight`` here, once: every consumer (the QP's task rows, the closed form,
+        the pseudoinverses, σ_min, ``task_error``) then sees the weighted task, and
+        :meth:`task_velocity` scales the angular reference alike.
+        """
+        kin = self.model.kinematics(state.q_base, state.q_arm, hessian=need_gradient, pose=self.pose)
+        if self.pose:
+            kin.J[3:] *= self._w_R
         d = reference.direction
         u = self._u if d is None else d / math.sqrt(float(d @ d))
-        W = self.config.W
+        W = self.W
         if need_gradient:
             assert kin.dJ_arm is not None
             dm, grad_q = dm_gradient(kin.J_arm, kin.dJ_arm, u, W)  # eqs. (8), (9)
         else:
             dm, grad_q = directional_manipulability(kin.J_arm, u, W), None  # eq. (8)
         sig = sigma_min(kin.J_m)
+        wheels = self._rest_wheels if state.wheel_speeds is None else state.wheel_speeds
         lo, hi = self.bounds(
             np.concatenate((self._no_wheel_q, state.q_arm)),
-            np.concatenate((state.wheel_speeds, state.v_arm)),
+            np.concatenate((wheels, state.v_arm)),
         )  # eq. (13) and the wheel bounds
         return TickContext(
             kin=kin,
@@ -221,10 +245,19 @@ class Controller(ABC):
             damping=damping_factor(sig, self.config.sigma_threshold, self.config.damping_max),
             lo=lo,
             hi=hi,
+            n_wheels=self.n_wheels,
         )
 
     def task_velocity(self, ctx: TickContext, reference: Reference) -> FloatArray:
-        """ẋ_ref of the mode: ẋ_d + K_x (x_d − x) (eq. (18)) or v_c (eq. (17))."""
+        """ẋ_ref of the mode: ẋ_d + K_x (x_d − x) (eq. (18)) or v_c (eq. (17)); with the pose
+        task followed by the weighted angular part (:meth:`angular_velocity`)."""
+        lin = self.linear_velocity(ctx, reference)
+        if not self.pose:
+            return lin
+        return np.concatenate((lin, self._w_R * self.angular_velocity(ctx, reference)))
+
+    def linear_velocity(self, ctx: TickContext, reference: Reference) -> FloatArray:
+        """The position part of ẋ_ref: ẋ_d + K_x (x_d − x) (eq. (18)) or v_c (eq. (17))."""
         if reference.mode == Mode.DM_CARTESIAN:
             assert ctx.grad_q is not None
             return self.cartesian_dm_velocity(ctx)
@@ -232,10 +265,19 @@ class Controller(ABC):
             return reference.xd_d.copy()
         return reference.xd_d + self.config.K_x * (reference.x_d - ctx.kin.x)  # eq. (18)
 
+    def angular_velocity(self, ctx: TickContext, reference: Reference) -> FloatArray:
+        """The pose task's angular part [rad/s], unweighted: ω_d + K_R log(R_d Rᵀ) (DESIGN.md §7),
+        ω_d alone without an orientation target."""
+        if reference.quat_d is None or ctx.kin.R_ee is None:
+            return reference.omega_d.copy()
+        e_R = orientation_error(quat_to_matrix(reference.quat_d), ctx.kin.R_ee)
+        return reference.omega_d + self.config.task.K_R * e_R
+
     def cartesian_dm_velocity(self, ctx: TickContext) -> FloatArray:
         """v_c of eq. (17): k_C ∇_x H2 on the axes whose box is active and holds x, else 0."""
         assert ctx.grad_q is not None
-        grad_x = dm_cartesian_gradient(ctx.grad_q, ctx.kin.J_m, ctx.sigma)  # eq. (10)
+        J_m = ctx.kin.J_m[:3] if self.pose else ctx.kin.J_m  # eq. (10) uses the translational rows
+        grad_x = dm_cartesian_gradient(ctx.grad_q, J_m, ctx.sigma)  # eq. (10)
         lo, hi, x = self.config.ee_box_lower, self.config.ee_box_upper, ctx.kin.x
         v_c = np.zeros(3)
         for i in self._boxed_axes.tolist():  # eq. (17)
@@ -261,8 +303,8 @@ class Controller(ABC):
             status, reason = Status.DAMPED, reason or f"sigma_min {ctx.sigma:.3g} below threshold"
         v = np.array(v, dtype=np.float64)  # the command owns its numbers
         return Command(
-            wheel_speeds=v[:N_WHEELS],
-            arm_rates=v[N_WHEELS:],
+            wheel_speeds=v[: self.n_wheels],
+            arm_rates=v[self.n_wheels :],
             status=status,
             reason=reason,
             alpha=alpha,

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config import N_ARM, N_WHEELS, FloatArray
+from ..config import FloatArray
 from ..pseudoinverse import weight_matrix_diag, weighted_pinv
 from ..types import Command, Mode, Reference, RobotState
 from .base import Controller, TickContext
@@ -32,13 +32,13 @@ class PaperController(Controller):
         """α of eq. (14) (our reading, see the module docstring)."""
         if (ctx.arm_hi - ctx.arm_lo <= 1e-12).all():
             return 1.0
-        v0 = weighted_pinv(ctx.kin.J, weight_matrix_diag(0.0), ctx.damping) @ xdot  # α = 0: arm only
-        inside = (ctx.arm_lo - 1e-12 <= v0[N_WHEELS:]).all() and (v0[N_WHEELS:] <= ctx.arm_hi + 1e-12).all()
+        v0 = weighted_pinv(ctx.kin.J, weight_matrix_diag(0.0, self.n_wheels, self.n_arm), ctx.damping) @ xdot  # α = 0: arm only
+        inside = (ctx.arm_lo - 1e-12 <= v0[self.n_wheels :]).all() and (v0[self.n_wheels :] <= ctx.arm_hi + 1e-12).all()
         return 0.0 if inside else self.config.alpha
 
     def pinv(self, ctx: TickContext, alpha: float) -> FloatArray:
         """J# of eq. (11) with W_x of eq. (12); damped near singularities."""
-        return weighted_pinv(ctx.kin.J, weight_matrix_diag(alpha), ctx.damping)
+        return weighted_pinv(ctx.kin.J, weight_matrix_diag(alpha, self.n_wheels, self.n_arm), ctx.damping)
 
     def _step(self, state: RobotState, reference: Reference) -> Command:
         mode = reference.mode
@@ -48,8 +48,8 @@ class PaperController(Controller):
             alpha = self.config.alpha
             Jp = self.pinv(ctx, alpha)
             assert ctx.grad_q is not None
-            v_n = self.config.k_N * np.concatenate([np.zeros(N_WHEELS), ctx.grad_q])  # eq. (19)
-            v = Jp @ xdot + (np.eye(N_WHEELS + N_ARM) - Jp @ ctx.kin.J) @ v_n  # eq. (18)
+            v_n = self.config.k_N * np.concatenate([np.zeros(self.n_wheels), ctx.grad_q])  # eq. (19)
+            v = Jp @ xdot + (np.eye(self.n_v) - Jp @ ctx.kin.J) @ v_n  # eq. (18)
         else:
             alpha = self.alpha_switch(ctx, xdot)  # eq. (14)
             v = self.pinv(ctx, alpha) @ xdot  # eqs. (15), (16)

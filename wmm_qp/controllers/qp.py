@@ -1,6 +1,8 @@
 """The product's controller: the weighted pseudoinverse and the α switch recast as a QP.
 
-Decision variable z = [v_b; v_m; s⁺; s⁻] (wheel speeds, joint rates, task slack s = s⁺ − s⁻).
+Decision variable z = [v_b; v_m; s⁺; s⁻] (wheel speeds, joint rates, task slack s = s⁺ − s⁻ ∈ Rʳ;
+r = 3 for the position task, 6 for the pose task, whose angular rows the base controller scales
+by ``task.orientation_weight``). Every size comes from the robot description.
 Every tick:
 
     minimize    ½ vᵀ W_x⁻¹ v − (W_x⁻¹ v_n)ᵀ v + ρ₁ 1ᵀ(s⁺ + s⁻) + ½ ρ₂ (‖s⁺‖² + ‖s⁻‖²)
@@ -9,7 +11,7 @@ Every tick:
                 wheel speed and acceleration bounds, s± ≥ 0
                 x_min ≤ x + Δt·J v ≤ x_max                   EE box (DM_CARTESIAN, eq. (17))
 
-W_x = diag(α I₄, (1−α) I₇) is eq. (12) (α = ``qp.alpha`` small: the base is expensive; in
+W_x = diag(α I_wheels, (1−α) I_joints) is eq. (12) (α = ``qp.alpha`` small: the base is expensive; in
 DM_NULLSPACE α = ``qp.dm_alpha``, close to 1, so the base serves the DM objective) and
 v_n = k_N [0; ∇H2ᵀ] is eq. (19), in DM_NULLSPACE only. With s ≡ 0 and no bound active,
 ½(v − v_n)ᵀW_x⁻¹(v − v_n) subject to J v = ẋ_ref is solved by J# ẋ_ref + (I − J#J) v_n:
@@ -68,8 +70,8 @@ import math
 import numpy as np
 
 from .._jit import jit
-from ..config import N_ARM, N_WHEELS, ControllerConfig, FloatArray
-from ..linalg3 import solve_sym3
+from ..config import ControllerConfig, FloatArray
+from ..linalg3 import solve_spd, solve_sym3
 from ..model.arm import IntArray
 from ..model.wmm import WmmModel
 from ..pseudoinverse import weight_matrix_diag
@@ -77,14 +79,11 @@ from ..solvers import INF, QPBackend, QPProblem, available_solvers, make_backend
 from ..types import Command, Mode, Reference, RobotState, Status
 from .base import Controller, TickContext
 
-N_V = N_WHEELS + N_ARM
-N_S = 6  # s⁺, s⁻ ∈ R³
 SLACK_ACCEPT = 1e-7  # [m/s] slack below this counts as "the task is met"
 RETURN_TIME = 0.05  # [s] a joint past a position limit is pulled back in over about this long
-_NO_ROWS, _NO_BOUNDS = np.zeros((0, N_V)), np.zeros(0)  # no EE box rows (read only)
-_NO_ROWS.setflags(write=False)
-_NO_HOLD = np.zeros(0)  # stage 2 holds no column
+_NO_BOUNDS = np.zeros(0)  # no EE box rows (read only)
 _NO_BOUNDS.setflags(write=False)
+_NO_HOLD = np.zeros(0)  # stage 2 holds no column
 EE_BOX_TOL = 1e-14  # [m] over one tick: an EE box row violated by less is roundoff (the referee allows 1e-9·Δt)
 RETURN_WEIGHT = 1e3  # outweighs minimal-motion costs (the base's too), stays below the task's ρ₁
 
@@ -92,7 +91,7 @@ RETURN_WEIGHT = 1e3  # outweighs minimal-motion costs (the base's too), stays be
 def task_residual(problem: QPProblem, z: FloatArray) -> float:
     """max |J v − ẋ_ref| of a solution [m/s]: judged on v itself, never on the slack entries (a
     solver may leave a slack a hair below its bound 0, which clipping would then hide)."""
-    n = problem.n - N_S
+    n = problem.n - 2 * problem.A.shape[0]  # z = [v; s⁺; s⁻], s± ∈ Rʳ
     return float(np.max(np.abs(problem.A[:, :n] @ z[:n] - problem.b)))
 
 
@@ -110,34 +109,43 @@ def _closed_form(
     z: FloatArray,
 ) -> bool:
     """:meth:`QpController.closed_form` compiled: z ← the optimum, True iff every KKT condition holds."""
-    n = z.shape[0] - N_S
-    # G = J D⁻¹ Jᵀ (3×3) and r = b + J D⁻¹ g, J = A[:, :n], D = diag(H)[:n]
-    G = np.zeros((3, 3))
+    m = A.shape[0]  # r, the task's rows
+    n = z.shape[0] - 2 * m
+    # G = J D⁻¹ Jᵀ (r×r) and r = b + J D⁻¹ g, J = A[:, :n], D = diag(H)[:n]
+    G = np.zeros((m, m))
     r = b.copy()
     for i in range(n):
         d_inv = 1.0 / H[i, i]
-        for a in range(3):
+        for a in range(m):
             jd = A[a, i] * d_inv
             r[a] += jd * g[i]
-            for c in range(3):
+            for c in range(m):
                 G[a, c] += jd * A[c, i]
     # λ = G⁻¹ r (G symmetric)
-    det, l0, l1, l2 = solve_sym3(G[0, 0], G[0, 1], G[0, 2], G[1, 1], G[1, 2], G[2, 2], r[0], r[1], r[2])
-    if not abs(det) > 1e-300:
-        return False
-    lam = np.array((l0, l1, l2))
+    if m == 3:
+        det, l0, l1, l2 = solve_sym3(G[0, 0], G[0, 1], G[0, 2], G[1, 1], G[1, 2], G[2, 2], r[0], r[1], r[2])
+        if not abs(det) > 1e-300:
+            return False
+        lam = np.array((l0, l1, l2))
+    else:
+        lam = np.empty(m)
+        if not solve_spd(G, r, lam):
+            return False
     rho1 = g[n]
-    for a in range(3):  # the exact penalty's subgradient condition (NaN fails it)
+    for a in range(m):  # the exact penalty's subgradient condition (NaN fails it)
         if not abs(lam[a]) <= rho1:
             return False
     z[:] = 0.0
     for i in range(n):  # v = D⁻¹(Jᵀλ − g) inside its bounds
-        vi = (A[0, i] * lam[0] + A[1, i] * lam[1] + A[2, i] * lam[2] - g[i]) / H[i, i]
+        jl = 0.0
+        for a in range(m):
+            jl += A[a, i] * lam[a]
+        vi = (jl - g[i]) / H[i, i]
         if not (lb[i] <= vi <= ub[i]):
             return False
         z[i] = vi
     res = 0.0  # a near-singular G is not exact: let the solver work
-    for a in range(3):
+    for a in range(m):
         e = -b[a]
         for i in range(n):
             e += A[a, i] * z[i]
@@ -173,7 +181,7 @@ def _fill_stage(
     first, n = w_hold.shape[0], cost.shape[0]
     for j in range(first):
         w_hold[j] = min(max(lo[j], 0.0), hi[j])
-    for a in range(3):
+    for a in range(J.shape[0]):
         r = xdot[a]
         for j in range(first):
             r -= J[a, j] * w_hold[j]
@@ -326,10 +334,13 @@ class QpController(Controller):
         self.task_without_objective = 0  # ... of which only with the DM/return terms dropped
         self.ee_box_corrections = 0  # commands the EE box re-check had to pull back into the box
         self._templates: dict[tuple[int, int], QPProblem] = {}
-        self._w_inv = 1.0 / weight_matrix_diag(qp.alpha)  # W_x⁻¹, eq. (12)
-        self._w_inv_dm = 1.0 / weight_matrix_diag(qp.dm_alpha)  # W_x⁻¹ in DM_NULLSPACE
+        self._w_inv = 1.0 / weight_matrix_diag(qp.alpha, self.n_wheels, self.n_arm)  # W_x⁻¹, eq. (12)
+        self._w_inv_dm = 1.0 / weight_matrix_diag(qp.dm_alpha, self.n_wheels, self.n_arm)  # in DM_NULLSPACE
+        self._n_s = 2 * self.r  # s⁺, s⁻ ∈ Rʳ
+        self._no_rows = np.zeros((0, self.n_v))  # no EE box rows (read only)
+        self._no_rows.setflags(write=False)
         self._v_n_max = 10.0 * self.robot.arm.velocity_max
-        self._return_gain = RETURN_WEIGHT * self._w_inv[N_WHEELS:] / RETURN_TIME  # see return_term
+        self._return_gain = RETURN_WEIGHT * self._w_inv[self.n_wheels :] / RETURN_TIME  # see return_term
         self._last_problem: QPProblem | None = None
         self.last_stage = ""
 
@@ -364,15 +375,15 @@ class QpController(Controller):
         nearest zero inside the box bounds (so the QP is always feasible).
         """
         if mode != Mode.DM_CARTESIAN:
-            return _NO_ROWS, _NO_BOUNDS, _NO_BOUNDS
+            return self._no_rows, _NO_BOUNDS, _NO_BOUNDS
         k = self._boxed_axes.shape[0]
-        C, l, u = np.empty((k, N_V)), np.empty(k), np.empty(k)
+        C, l, u = np.empty((k, self.n_v)), np.empty(k), np.empty(k)
         box_lo, box_hi = self.config.ee_box_lower, self.config.ee_box_upper
         _ee_box(ctx.kin.J, ctx.kin.x, box_lo, box_hi, self._boxed_axes, lb, ub, self.dt, C, l, u)
         return C, l, u
 
     def return_term(self, q: FloatArray) -> FloatArray:
-        """Linear cost −dᵢ·v_ret,i that pulls a joint beyond a position limit back in (7,).
+        """Linear cost −dᵢ·v_ret,i that pulls a joint beyond a position limit back in (n_arm,).
 
         Bounds (13) only forbid moving further out (and always admit braking); a joint pushed
         past a limit (latency, a stalled controller) would otherwise stay there while the task
@@ -381,7 +392,7 @@ class QpController(Controller):
         the task's exact penalty ρ₁ so the task still comes first; it acts in the
         task's null space. (The stages' builders add it in their compiled fill.)
         """
-        out = np.zeros(N_ARM)
+        out = np.zeros(self.n_arm)
         arm = self.robot.arm
         _add_return_term(q, arm.position_lower, arm.position_upper, self._return_gain, out)
         return out
@@ -398,7 +409,7 @@ class QpController(Controller):
             return w_inv
         scale = 1.0 + self.config.qp.singular_arm_weight * (ctx.damping / self.config.damping_max) ** 2
         d = w_inv.copy()
-        d[N_WHEELS:] *= scale
+        d[self.n_wheels :] *= scale
         return d
 
     def reference_velocity(self, ctx: TickContext, reference: Reference) -> FloatArray:
@@ -431,12 +442,13 @@ class QpController(Controller):
         p = self._templates.get(key)
         if p is None:
             rho1, rho2 = self.slack_weights()
-            m = n + N_S
+            r = self.r
+            m = n + self._n_s
             H = np.zeros((m, m))
-            H[n:, n:] = rho2 * np.eye(N_S)
-            A = np.zeros((3, m))
-            A[:, n : n + 3] = np.eye(3)
-            A[:, n + 3 :] = -np.eye(3)
+            H[n:, n:] = rho2 * np.eye(self._n_s)
+            A = np.zeros((r, m))
+            A[:, n : n + r] = np.eye(r)
+            A[:, n + r :] = -np.eye(r)
             g = np.zeros(m)
             g[n:] = rho1
             ub = np.full(m, INF)
@@ -444,7 +456,7 @@ class QpController(Controller):
                 H=H,
                 g=g,
                 A=A,
-                b=np.zeros(3),
+                b=np.zeros(self.r),
                 C=np.zeros((n_in, m)),
                 l=np.zeros(n_in),
                 u=np.zeros(n_in),
@@ -456,28 +468,28 @@ class QpController(Controller):
 
     def build_arm_first(self, ctx: TickContext, xdot: FloatArray) -> tuple[QPProblem, FloatArray]:
         """Stage 1: the arm alone, wheels held at the admissible speed nearest 0."""
-        p = self._template(N_ARM, 0)
-        w_hold = np.empty(N_WHEELS)
+        p = self._template(self.n_arm, 0)
+        w_hold = np.empty(self.n_wheels)
         arm = self.robot.arm
-        _fill_stage(ctx.kin.J, xdot, ctx.lo, ctx.hi, self._w_inv[N_WHEELS:], p.H, p.A, p.b, p.lb, p.ub, w_hold)
-        p.g[:N_ARM] = 0.0
+        _fill_stage(ctx.kin.J, xdot, ctx.lo, ctx.hi, self._w_inv[self.n_wheels :], p.H, p.A, p.b, p.lb, p.ub, w_hold)
+        p.g[: self.n_arm] = 0.0
         _add_return_term(ctx.kin.q_arm, arm.position_lower, arm.position_upper, self._return_gain, p.g)
         return p, w_hold
 
     def build(self, ctx: TickContext, xdot: FloatArray, mode: Mode) -> QPProblem:
         """Stage 2: the whole robot (see the module docstring)."""
         C, l, u = self.ee_box_rows(ctx, mode, ctx.lo, ctx.hi)
-        p = self._template(N_V, C.shape[0])
+        p = self._template(self.n_v, C.shape[0])
         cost = self.cost_diagonal(ctx, mode)
         _fill_stage(ctx.kin.J, xdot, ctx.lo, ctx.hi, cost, p.H, p.A, p.b, p.lb, p.ub, _NO_HOLD)
-        p.g[:N_V] = 0.0
+        p.g[: self.n_v] = 0.0
         if mode == Mode.DM_NULLSPACE:
             assert ctx.grad_q is not None
             _add_nullspace_term(cost, ctx.grad_q, float(self.config.k_N), self._v_n_max, p.g)
         arm = self.robot.arm
-        _add_return_term(ctx.kin.q_arm, arm.position_lower, arm.position_upper, self._return_gain, p.g[N_WHEELS:])
+        _add_return_term(ctx.kin.q_arm, arm.position_lower, arm.position_upper, self._return_gain, p.g[self.n_wheels :])
         if C.shape[0]:
-            p.C[:, :N_V] = C
+            p.C[:, : self.n_v] = C
             p.l[:] = l
             p.u[:] = u
         return p
@@ -536,7 +548,7 @@ class QpController(Controller):
         """
         checker = self._fallback if self._fallback is not None else self._full
         self.task_checks += 1
-        n = problem.n - N_S
+        n = problem.n - self._n_s
         saved = problem.ub[n:].copy()
         problem.ub[n:] = 0.0  # s⁺ = s⁻ = 0
         try:
@@ -567,7 +579,7 @@ class QpController(Controller):
             z = self._solve(self._arm, p)
             if z is not None and (self._closed_form_hit or task_residual(p, z) <= SLACK_ACCEPT):
                 self.last_stage = "arm"
-                return self.finish(ctx, np.concatenate([w_hold, z[:N_ARM]]), xdot, alpha=0.0)
+                return self.finish(ctx, np.concatenate([w_hold, z[: self.n_arm]]), xdot, alpha=0.0)
         problem = self.build(ctx, xdot, mode)
         z = self._solve(self._full, problem)
         if z is None:
@@ -576,7 +588,7 @@ class QpController(Controller):
         self.last_stage = "full"
         status, reason = Status.OK, ""
         if problem.n_in:  # the EE box (DM_CARTESIAN, eq. (17)), re-checked whatever solved the stage
-            out = _hold_ee_box(problem.C, problem.l, problem.u, problem.lb, problem.ub, z, N_V)
+            out = _hold_ee_box(problem.C, problem.l, problem.u, problem.lb, problem.ub, z, self.n_v)
             if out > 0.0:
                 self.ee_box_corrections += 1
                 status = Status.SATURATED
@@ -584,4 +596,4 @@ class QpController(Controller):
         if status == Status.OK and not self._closed_form_hit and task_residual(problem, z) > 1e-6:
             status, reason = Status.SATURATED, "the bounds cut the task (best effort)"
         alpha = self.config.qp.dm_alpha if mode == Mode.DM_NULLSPACE else self.config.qp.alpha
-        return self.finish(ctx, z[:N_V], xdot, status=status, reason=reason, alpha=alpha)
+        return self.finish(ctx, z[: self.n_v], xdot, status=status, reason=reason, alpha=alpha)

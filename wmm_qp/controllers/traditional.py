@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config import N_ARM, N_WHEELS
 from ..types import Command, Mode, Reference, RobotState
 from .base import Controller
 
@@ -27,6 +26,6 @@ class TraditionalController(Controller):
         v = Jp @ xdot
         if mode == Mode.DM_NULLSPACE:
             assert ctx.grad_q is not None
-            v_n = self.config.k_N * np.concatenate([np.zeros(N_WHEELS), ctx.grad_q])  # eq. (19)
-            v = v + (np.eye(N_WHEELS + N_ARM) - Jp @ ctx.kin.J) @ v_n
+            v_n = self.config.k_N * np.concatenate([np.zeros(self.n_wheels), ctx.grad_q])  # eq. (19)
+            v = v + (np.eye(self.n_v) - Jp @ ctx.kin.J) @ v_n
         return self.finish(ctx, v, xdot, alpha=float("nan"))

@@ -1,4 +1,4 @@
-"""Wheel speed bounds: speed and acceleration limits of the Mecanum wheels (acceleration wins)."""
+"""Wheel speed bounds: speed and acceleration limits of the base's wheels (acceleration wins)."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ def wheel_bounds(w_prev: FloatArray, base: BaseConfig, dt: float) -> tuple[Float
         dt: [s] control period.
     """
     step = base.wheel_acceleration_max * dt
-    w_max = np.full(4, base.wheel_speed_max)
+    w_max = base.wheel_speed_max
     return intersect_by_priority(w_prev - step, w_prev + step, -w_max, w_max)
 
 

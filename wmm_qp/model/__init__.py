@@ -1,7 +1,19 @@
-"""Kinematic model of the WMM: Mecanum base, Pinocchio arm, and their composition."""
+"""Kinematic model of the WMM: the base kinds, the Pinocchio arm, and their composition."""
 
 from .arm import ArmModel
-from .mecanum import MecanumBase
+from .bases import BASES, Base, DiffDriveBase, FixedBase, MecanumBase, OmniBase, make_base
 from .wmm import Kinematics, WmmModel, rot_z
 
-__all__ = ["ArmModel", "Kinematics", "MecanumBase", "WmmModel", "rot_z"]
+__all__ = [
+    "BASES",
+    "ArmModel",
+    "Base",
+    "DiffDriveBase",
+    "FixedBase",
+    "Kinematics",
+    "MecanumBase",
+    "OmniBase",
+    "WmmModel",
+    "make_base",
+    "rot_z",
+]

@@ -1,22 +1,24 @@
-"""The manipulator on Pinocchio: position of the EE frame, its Jacobian and Hessian.
+"""The manipulator on Pinocchio: pose of the EE frame, its Jacobian and Hessian, in the base frame.
 
-Only the translational part is used (r = 3: the EE orientation is free). Continuous
-joints are stored by Pinocchio as (cos, sin) pairs; :meth:`ArmModel.pin_q` maps the 7 joint
-angles to Pinocchio's configuration vector once per call.
+Built once from the robot description: Pinocchio's reduced model of the chosen joints (every
+other joint of the URDF locked), its root placed at the mount (DESIGN.md §7: p_mount + R_mount
+p_m(q_m), R_mount J_arm), so every quantity here is already expressed in the base frame. The
+per-tick code only indexes. Continuous joints are stored by Pinocchio as (cos, sin) pairs;
+:meth:`ArmModel.pin_q` maps the n joint values to Pinocchio's configuration vector.
 """
 
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
 from .._jit import jit
-from ..config import N_ARM, FloatArray
+from ..config import ArmConfig, FloatArray
 from ..exceptions import ConfigError
+from . import urdf as U
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 IntArray = np.ndarray[Any, np.dtype[np.int64]]
@@ -32,65 +34,98 @@ def _pin_q(q: FloatArray, idx_q: IntArray, nq: IntArray, out: FloatArray) -> Non
             out[idx_q[i] + 1] = math.sin(q[i])
 
 
+def mount_placement(config: ArmConfig) -> pin.SE3:
+    """The arm's root in the base frame (``mount_xyz``, ``mount_rpy``)."""
+    rpy = np.asarray(config.mount_rpy, dtype=float)
+    return pin.SE3(pin.rpy.rpyToMatrix(rpy), np.asarray(config.mount_xyz, dtype=float))
+
+
 class ArmModel:
-    """Pinocchio model of the arm, expressed in the arm's base frame.
+    """Pinocchio model of the arm, expressed in the base frame.
 
     Args:
-        urdf: the arm's URDF.
-        ee_frame: the end-effector frame's name.
+        config: the arm of a loaded robot description (joints, locked joints, mount).
+        source: the robot file, for errors (default: the URDF).
 
     Raises:
-        ConfigError: the URDF does not load, lacks the frame, or is not a 7-DOF chain.
+        ConfigError: the URDF does not load or lacks the frame or a joint.
     """
 
-    def __init__(self, urdf: Path, ee_frame: str) -> None:
-        try:
-            self.model = pin.buildModelFromUrdf(str(urdf))
-        except (RuntimeError, ValueError) as e:
-            raise ConfigError(urdf, "", f"Pinocchio cannot load this URDF: {e}") from None
-        if self.model.nv != N_ARM:
-            raise ConfigError(urdf, "", f"expected a {N_ARM}-DOF arm, the URDF has {self.model.nv}")
-        if not self.model.existFrame(ee_frame):
-            raise ConfigError(urdf, "", f"no frame named {ee_frame!r}")
+    def __init__(self, config: ArmConfig, source: Any = None) -> None:
+        where = source if source is not None else config.urdf
+        full = U.load_full_model(where, config.urdf)
+        for name in config.joints:
+            if not full.existJointName(name):
+                raise ConfigError(where, "arm.joints", f"the URDF has no joint named {name!r}")
+        if not full.existFrame(config.ee_frame):
+            raise ConfigError(where, "arm.ee_frame", f"the URDF has no frame named {config.ee_frame!r}")
+        self.model = U.reduced_model(full, config.joints, dict(config.locked), mount_placement(config))
         self.data = self.model.createData()
-        self.frame_id = self.model.getFrameId(ee_frame)
-        joints = [self.model.joints[j] for j in range(1, self.model.njoints)]
-        # Where each joint angle goes in Pinocchio's q: idx_q, and nq (1: the angle; 2: cos, sin)
-        self._idx_q = np.array([j.idx_q for j in joints], dtype=np.int64)
-        self._nq = np.array([j.nq for j in joints], dtype=np.int64)
+        self.frame_id = self.model.getFrameId(config.ee_frame)
+        ids = [self.model.getJointId(n) for n in config.joints]
+        if self.model.nv != len(ids):
+            raise ConfigError(where, "arm.joints", f"the reduced model has {self.model.nv} DOF, not {len(ids)}")
+        # Where each joint value goes in Pinocchio's q (idx_q; nq 1: the value, 2: cos, sin) and v
+        self._idx_q = np.array([self.model.joints[j].idx_q for j in ids], dtype=np.int64)
+        self._nq = np.array([self.model.joints[j].nq for j in ids], dtype=np.int64)
+        self._idx_v = np.array([self.model.joints[j].idx_v for j in ids], dtype=np.int64)
+        self._identity_order = bool((self._idx_v == np.arange(len(ids))).all())
         self._q = pin.neutral(self.model)
-        self.joint_names = [self.model.names[j] for j in range(1, self.model.njoints)]
+        self.joint_names = list(config.joints)
+        self.n = len(ids)
 
     def pin_q(self, q: FloatArray) -> FloatArray:
-        """Pinocchio configuration of the 7 joint angles q [rad] (a reused buffer)."""
+        """Pinocchio configuration of the n joint values q (a reused buffer)."""
         q = np.asarray(q, dtype=np.float64)
-        if q.shape != (N_ARM,):  # the kernel does not bounds-check
-            raise ValueError(f"q must have {N_ARM} entries, got shape {q.shape}")
+        if q.shape != (self.n,):  # the kernel does not bounds-check
+            raise ValueError(f"q must have {self.n} entries, got shape {q.shape}")
         _pin_q(q, self._idx_q, self._nq, self._q)
         return self._q
 
+    def _cols(self, J: FloatArray) -> FloatArray:
+        """J's columns in the order of ``joints`` (Pinocchio's v order is the chain's: a no-op)."""
+        return J if self._identity_order else J[..., self._idx_v]
+
     def position(self, q: FloatArray) -> FloatArray:
-        """p_m(q_m) [m]: EE position in the arm base frame, eq. (1)."""
+        """p(q_m) [m]: EE position in the base frame, eqs. (1), (2) (mount included)."""
         pin.forwardKinematics(self.model, self.data, self.pin_q(q))
         return pin.updateFramePlacement(self.model, self.data, self.frame_id).translation.copy()
 
+    def pose(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """EE position and orientation (3×3) in the base frame."""
+        pin.forwardKinematics(self.model, self.data, self.pin_q(q))
+        M = pin.updateFramePlacement(self.model, self.data, self.frame_id)
+        return M.translation.copy(), M.rotation.copy()
+
     def position_jacobian(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """EE position and translational Jacobian (3×7) in the arm base frame, eqs. (1), (5)."""
+        """EE position and translational Jacobian (3×n) in the base frame, eqs. (1), (5)."""
         qq = self.pin_q(q)
         pin.computeJointJacobians(self.model, self.data, qq)  # also runs forward kinematics
         p = pin.updateFramePlacement(self.model, self.data, self.frame_id).translation.copy()
         J = pin.getFrameJacobian(self.model, self.data, self.frame_id, _LWA)[:3].copy()
-        return p, J
+        return p, self._cols(J)
+
+    def pose_jacobian(self, q: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """EE position, orientation (3×3) and the 6×n Jacobian [linear; angular] in the base frame
+        (LOCAL_WORLD_ALIGNED: the EE's velocity and angular velocity, base-frame axes)."""
+        qq = self.pin_q(q)
+        pin.computeJointJacobians(self.model, self.data, qq)
+        M = pin.updateFramePlacement(self.model, self.data, self.frame_id)
+        J = pin.getFrameJacobian(self.model, self.data, self.frame_id, _LWA).copy()
+        return M.translation.copy(), M.rotation.copy(), self._cols(J)
 
     def jacobian_derivatives(self, q: FloatArray) -> FloatArray:
-        """∂J/∂q_k for every joint k: an array D with D[k] = ∂J_arm/∂q_k (3×7), shape (7, 3, 7).
+        """∂J/∂q_k for every joint k: an array D with D[k] = ∂J_arm/∂q_k (3×n), shape (n, 3, n).
 
-        Analytic, from Pinocchio's kinematic Hessian. Must follow :meth:`position_jacobian`
-        at the same q (it reuses the joint Jacobians computed there). With pin ≥ 4.1 the
-        returned tensor must be read as ``H.reshape(nv, nv, 6)[k, i, :] = ∂J_i/∂q_k``
+        Analytic, from Pinocchio's kinematic Hessian. Must follow :meth:`position_jacobian` or
+        :meth:`pose_jacobian` at the same q (it reuses the joint Jacobians computed there). With
+        pin ≥ 4.1 the returned tensor must be read as ``H.reshape(nv, nv, 6)[k, i, :] = ∂J_i/∂q_k``
         (DESIGN.md §1; checked against finite differences in the tests).
         """
         pin.computeJointKinematicHessians(self.model, self.data)
         H = pin.getFrameKinematicHessian(self.model, self.data, self.frame_id, _LWA)
         nv = self.model.nv
-        return np.ascontiguousarray(H.reshape(nv, nv, 6)[:, :, :3].transpose(0, 2, 1))
+        D = H.reshape(nv, nv, 6)[:, :, :3].transpose(0, 2, 1)
+        if not self._identity_order:
+            D = D[self._idx_v][:, :, self._idx_v]
+        return np.ascontiguousarray(D)

@@ -31,7 +31,7 @@ import pinocchio as pin
 
 import wmm_qp as w
 from wmm_qp.limits import braking_command, joint_motion_bounds, wheel_bounds, wheel_braking_command
-from wmm_qp.model.mecanum import MecanumBase
+from wmm_qp.model.bases import MecanumBase
 from wmm_qp.solvers import INF, QPProblem, make_backend
 
 from .stats import now_ns, summarize_ns
@@ -142,7 +142,7 @@ def build_models(robot: w.RobotConfig, tmp: Path) -> dict[int, GenericWmm]:
 
 
 def start_q(n: int) -> np.ndarray:
-    q7 = np.array(w.PAPER_START_Q_ARM)
+    q7 = np.array(w.load_robot_config().arm.start)
     return {6: np.delete(q7, 2), 7: q7, 14: np.tile(q7, 2)}[n]
 
 
