@@ -82,7 +82,7 @@ def drill(
     sim = SimRobot(core.model, sim_cfg, ramp=True)
     st = sim.reset()
     w_push = np.linalg.lstsq(core.model.base.M, np.array([push_speed, 0.0, 0.0]), rcond=None)[0]
-    assert np.abs(w_push).max() <= robot.base.wheel_speed_max  # within the wheel limits
+    assert (np.abs(w_push) <= robot.base.wheel_speed_max).all()  # within the wheel limits
     w_step = robot.base.wheel_acceleration_max * SIM_DT_US * 1e-6
     period_us = round(1e6 / rate_hz)
     push_end, end = round(push_time * 1e6), round((push_time + after) * 1e6)

@@ -14,7 +14,7 @@ from wmm_qp.manipulability import (
     yoshikawa_manipulability,
 )
 
-W = np.array([1, 1, 1, 1, 2.5, 2.5, 2.5])
+W = np.array([1, 1, 1, 1, 2.5, 2.5, 2.5])  # the paper's, eq. (8)
 X = np.array([1.0, 0, 0])
 Z = np.array([0.0, 0, 1])
 
@@ -73,7 +73,7 @@ def test_cartesian_gradient_near_a_singularity_falls_back_to_least_squares() -> 
 def test_cartesian_gradient_predicts_dm_change_along_minimum_norm_motion() -> None:
     kin = model().kinematics(np.zeros(3), Q0, hessian=True)
     assert kin.dJ_arm is not None
-    _, g = dm_gradient(kin.J_arm, kin.dJ_arm, X, config().W)
+    _, g = dm_gradient(kin.J_arm, kin.dJ_arm, X, config().weights_for(model().config))
     gx = dm_cartesian_gradient(g, kin.J_m)
     dx = np.array([0.0, 0.0, -1e-5])
     dq = np.linalg.pinv(kin.J_m) @ dx

@@ -58,7 +58,7 @@ def test_acceleration_violation_is_caught(model: wmm_qp.WmmModel) -> None:
 
 def test_velocity_violation_is_caught(model: wmm_qp.WmmModel) -> None:
     vmax = np.array(model.config.arm.velocity_max)
-    wmax = model.config.base.wheel_speed_max
+    wmax = float(model.config.base.wheel_speed_max[0])
     # a step from rest straight above the velocity limit: velocity and acceleration both count
     v = run(model, [(np.array([wmax * 1.1, 0, 0, 0]), np.r_[vmax[0] * 1.1, np.zeros(6)])] * 3)
     assert v["velocity"] == 3

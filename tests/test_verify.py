@@ -31,9 +31,9 @@ def test_a_command_that_cannot_brake_before_the_limit_is_a_position_violation() 
 
 def test_verify_catches_a_controller_without_the_braking_bound(monkeypatch: pytest.MonkeyPatch) -> None:
     """Drop the braking-distance part of bounds (13): the referee must notice."""
-    from wmm_qp.config import N_WHEELS
     from wmm_qp.limits import intersect_by_priority
 
+    N_WHEELS = model().n_wheels
     ctl = w.QpController(model(), config().with_(qp={"solver": "daqp"}))
     arm, wheels = model().config.arm, ctl.bounds
 

@@ -18,7 +18,6 @@ from .exceptions import ConfigError, InvalidInput, SolverFailed, SolverNotFound,
 from .model import Kinematics, WmmModel
 from .types import Command, Mode, Reference, RobotState, Status
 
-
 __version__ = "0.1.0"
 
 __all__ = [
@@ -34,10 +33,10 @@ __all__ = [
     "Reference",
     "RobotConfig",
     "RobotState",
-    "TaskConfig",
     "SolverFailed",
     "SolverNotFound",
     "Status",
+    "TaskConfig",
     "TraditionalController",
     "WmmModel",
     "WmmQpError",

@@ -431,7 +431,7 @@ def load_robot_config(path: Path | str | None = None) -> RobotConfig:
     Raises:
         ConfigError: naming the file and key of the first problem found.
     """
-    from .model import urdf as U
+    from .model import urdf as urdf_io
 
     path = Path(path) if path is not None else default_robot_file()
     r = TomlTable(path, read_toml(path))
@@ -454,13 +454,13 @@ def load_robot_config(path: Path | str | None = None) -> RobotConfig:
             "start",
         }
     )
-    urdf = U.resolve_urdf(path, a.string("urdf"))
-    full = U.load_full_model(path, urdf)
+    urdf = urdf_io.resolve_urdf(path, a.string("urdf"))
+    full = urdf_io.load_full_model(path, urdf)
     joints = a.get("joints", None)
     if joints is not None and (not isinstance(joints, list) or not all(isinstance(j, str) for j in joints)):
         raise ConfigError(path, "arm.joints", f"must be a list of joint names, got {joints!r}")
     ee_frame = a.string("ee_frame")
-    chain = U.read_chain(path, full, ee_frame, joints)
+    chain = urdf_io.read_chain(path, full, ee_frame, joints)
     n = len(chain.joints)
     locked_t = a.table("locked", required=False)
     locked: dict[str, float] = {}

@@ -26,6 +26,13 @@ class Mode(enum.StrEnum):
     DM_NULLSPACE = "dm_nullspace"
 
 
+AT_REST: FloatArray = np.zeros(0)
+"""``RobotState.wheel_speeds`` of a state built without wheel speeds: the wheels are at rest (the
+controller reads it as zeros of the robot's wheel count). Only this object means that: a field
+replaced by None, or by an empty array, after construction is malformed (a safe stop)."""
+AT_REST.setflags(write=False)
+
+
 def _vec(a: object, n: int | None, name: str) -> FloatArray:
     v = np.array(a, dtype=np.float64).reshape(-1)  # an own, writable, contiguous copy
     if n is not None and v.shape != (n,):
@@ -52,20 +59,20 @@ class RobotState:
         q_base: [m, m, rad] base pose (x_b, y_b, ψ) — odometry on a real robot.
         q_arm: [rad or m] joint values q_m, in the robot description's joint order.
         v_arm: [rad/s or m/s] joint rates now (bounds (13) start from them); None = at rest.
-        wheel_speeds: [rad/s] wheel speeds now, in the base kind's wheel order; None = at rest.
+        wheel_speeds: [rad/s] wheel speeds now, in the base kind's wheel order; not given (None
+            at construction) = at rest, stored as :data:`AT_REST`.
     """
 
     q_base: FloatArray
     q_arm: FloatArray
     v_arm: FloatArray = None  # type: ignore[assignment]  # None → zeros, in __post_init__
-    wheel_speeds: FloatArray | None = None
+    wheel_speeds: FloatArray = None  # type: ignore[assignment]  # None → AT_REST, in __post_init__
 
     def __post_init__(self) -> None:
         self.q_base = _vec(self.q_base, 3, "q_base")
         self.q_arm = _vec(self.q_arm, None, "q_arm")
         self.v_arm = np.zeros(self.q_arm.shape[0]) if self.v_arm is None else _vec(self.v_arm, None, "v_arm")
-        if self.wheel_speeds is not None:
-            self.wheel_speeds = _vec(self.wheel_speeds, None, "wheel_speeds")
+        self.wheel_speeds = AT_REST if self.wheel_speeds is None else _vec(self.wheel_speeds, None, "wheel_speeds")
 
     def has_shapes(self, n_arm: int, n_wheels: int) -> bool:
         """Every field a float vector of its length (the fields may be replaced after construction)."""
@@ -74,12 +81,11 @@ class RobotState:
             _is_vec(self.q_base, 3)
             and _is_vec(self.q_arm, n_arm)
             and _is_vec(self.v_arm, n_arm)
-            and (w is None or _is_vec(w, n_wheels))
+            and (w is AT_REST or _is_vec(w, n_wheels))
         )
 
     def is_finite(self) -> bool:
-        w = self.wheel_speeds
-        return all(all_finite(a) for a in (self.q_base, self.q_arm, self.v_arm)) and (w is None or all_finite(w))
+        return all(all_finite(a) for a in (self.q_base, self.q_arm, self.v_arm, self.wheel_speeds))
 
 
 @dataclass(slots=True)

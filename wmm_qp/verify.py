@@ -30,7 +30,7 @@ import numpy as np
 
 from .config import FloatArray, RobotConfig
 from .model.wmm import WmmModel
-from .types import Command, Mode, Reference, RobotState
+from .types import AT_REST, Command, Mode, Reference, RobotState
 
 KINDS = ("position", "velocity", "acceleration", "wheel", "ee_box")
 TOL = 1e-9
@@ -70,7 +70,7 @@ def check_command(
         overrun_lo = stop_cmd < np.minimum(arm.position_lower, stop_now) - tol * dt
     out["position"] = int(np.sum(~finite | too_high | too_low | overrun_hi | overrun_lo))
     w = np.asarray(cmd.wheel_speeds)
-    w0 = np.zeros(base.n_wheels) if state.wheel_speeds is None else state.wheel_speeds
+    w0 = np.zeros(base.n_wheels) if state.wheel_speeds is AT_REST else state.wheel_speeds
     aw = base.wheel_acceleration_max * dt
     bad_w = (
         ~np.isfinite(w)
@@ -99,7 +99,7 @@ def check_ee_box(
     kin = model.kinematics(state.q_base, state.q_arm)  # eqs. (2), (5)
     a, aw = arm.acceleration_max * dt, base.wheel_acceleration_max * dt
     v0 = state.v_arm
-    w0 = np.zeros(base.n_wheels) if state.wheel_speeds is None else state.wheel_speeds
+    w0 = np.zeros(base.n_wheels) if state.wheel_speeds is AT_REST else state.wheel_speeds
     brake = np.concatenate([w0 - np.clip(w0, -aw, aw), v0 - np.clip(v0, -a, a)])  # full braking at A
     v = np.concatenate([np.asarray(cmd.wheel_speeds, dtype=float), np.asarray(cmd.arm_rates, dtype=float)])
     p, p_brake = kin.x + dt * (kin.J @ v), kin.x + dt * (kin.J @ brake)

@@ -54,9 +54,10 @@ class SimNode:
     """The simulated robot as a Zenoh node.
 
     Args:
-        svc: service config (keys, endpoints, validation ranges).
+        svc: service config (keys, endpoints, validation ranges; an open robot id is the
+            robot's name).
         sim_cfg: the sim's config (rate, noise, stale timeout).
-        robot: robot config.
+        robot: robot config (commands must carry its number of wheels and joints).
         seed: noise seed; None = the sim config's.
         ramp: ramp executed rates at the acceleration limits (see module docstring).
         spin_s: [s] spin before each deadline. Default 0 (sleep only): the sim integrates
@@ -70,12 +71,15 @@ class SimNode:
     def __init__(self, svc: ServiceConfig, sim_cfg: SimConfig, robot: w.RobotConfig,
                  seed: int | None = None, ramp: bool = True, spin_s: float = 0.0,
                  state_loss: float = 0.0, state_delay: float = 0.0, fault_seed: int = 0) -> None:
+        svc = svc.with_robot(robot)
         self.svc = svc
         self.cfg = sim_cfg
+        self.robot = robot
         self.model = w.WmmModel(robot)
         self.sim = SimRobot(self.model, sim_cfg, seed=seed, ramp=ramp)
         self.keys = Keys.of(svc.prefix, svc.robot)
-        self.validate = Validator(CommandMsg, svc.robot, svc.validation)
+        self.validate = Validator(CommandMsg, svc.robot, svc.validation, n_arm=robot.n_arm,
+                                  n_wheels=robot.n_wheels)
         self.validate_box = Validator(BoxMsg, svc.robot, svc.validation)
         self.loop = RateLoop(sim_cfg.rate_hz, spin_s)
         self.cmd_seq = -1

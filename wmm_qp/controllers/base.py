@@ -20,7 +20,7 @@ from ..manipulability import directional_manipulability, dm_cartesian_gradient, 
 from ..model.wmm import Kinematics, WmmModel
 from ..pseudoinverse import damping_factor, sigma_min
 from ..tasks import orientation_error, quat_to_matrix
-from ..types import Command, Mode, Reference, RobotState, Status
+from ..types import AT_REST, Command, Mode, Reference, RobotState, Status
 
 
 @dataclass(slots=True)
@@ -184,12 +184,12 @@ class Controller(ABC):
         array: the state is malformed) is treated as unknown, and its part of the command is the
         braking step from zero, i.e. zero — the stop command, as the robot's own stale-command
         stop would apply; the reason says so. Non-finite entries of an otherwise usable vector (a
-        NaN state) are taken as 0 as well. A :class:`RobotState` whose ``wheel_speeds`` is None
-        (documented as: at rest) brakes its wheels from rest.
+        NaN state) are taken as 0 as well. A state built without wheel speeds (:data:`AT_REST`)
+        brakes its wheels from rest.
         """
         try:
             w_raw = getattr(state, "wheel_speeds", None)
-            if w_raw is None and isinstance(state, RobotState):
+            if w_raw is AT_REST:
                 w_raw = self._rest_wheels
             w = _usable_rates(w_raw, self.n_wheels)
             v_arm = _usable_rates(getattr(state, "v_arm", None), self.n_arm)
@@ -216,8 +216,9 @@ class Controller(ABC):
 
         With the pose task the angular rows of ``kin.J`` (and so of ``kin.J_m``) are scaled by
         ``task.orientation_weight`` here, once: every consumer (the QP's task rows, the closed form,
-        the pseudoinverses, σ_min, ``task_error``) then sees the weighted task, and
-        :meth:`task_velocity` scales the angular reference alike.
+        the pseudoinverses, ``task_error``) then sees the weighted task, and :meth:`task_velocity`
+        scales the angular reference alike. σ_min, which switches the singularity damping, is the
+        translational rows' for both task kinds (the threshold is the paper's, in m/s per rad/s).
         """
         kin = self.model.kinematics(state.q_base, state.q_arm, hessian=need_gradient, pose=self.pose)
         if self.pose:
@@ -230,8 +231,8 @@ class Controller(ABC):
             dm, grad_q = dm_gradient(kin.J_arm, kin.dJ_arm, u, W)  # eqs. (8), (9)
         else:
             dm, grad_q = directional_manipulability(kin.J_arm, u, W), None  # eq. (8)
-        sig = sigma_min(kin.J_m)
-        wheels = self._rest_wheels if state.wheel_speeds is None else state.wheel_speeds
+        sig = sigma_min(kin.J_m[:3] if self.pose else kin.J_m)  # the arm's translational σ_min: the DLS law's
+        wheels = self._rest_wheels if state.wheel_speeds is AT_REST else state.wheel_speeds
         lo, hi = self.bounds(
             np.concatenate((self._no_wheel_q, state.q_arm)),
             np.concatenate((wheels, state.v_arm)),

@@ -32,7 +32,8 @@ class PaperController(Controller):
         """α of eq. (14) (our reading, see the module docstring)."""
         if (ctx.arm_hi - ctx.arm_lo <= 1e-12).all():
             return 1.0
-        v0 = weighted_pinv(ctx.kin.J, weight_matrix_diag(0.0, self.n_wheels, self.n_arm), ctx.damping) @ xdot  # α = 0: arm only
+        arm_only = weight_matrix_diag(0.0, self.n_wheels, self.n_arm)  # α = 0
+        v0 = weighted_pinv(ctx.kin.J, arm_only, ctx.damping) @ xdot
         inside = (ctx.arm_lo - 1e-12 <= v0[self.n_wheels :]).all() and (v0[self.n_wheels :] <= ctx.arm_hi + 1e-12).all()
         return 0.0 if inside else self.config.alpha
 

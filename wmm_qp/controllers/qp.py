@@ -303,6 +303,13 @@ def _hold_ee_box(
     return worst
 
 
+def _saturated(v: FloatArray, feedforward: FloatArray, limit: float) -> FloatArray:
+    """v with its feedback part v − feedforward scaled down to the norm ``limit``."""
+    fb = v - feedforward
+    e = math.sqrt(float(fb @ fb))
+    return feedforward + fb * (limit / e) if e > limit else v
+
+
 class QpController(Controller):
     """QP controller (DESIGN.md §2).
 
@@ -421,16 +428,20 @@ class QpController(Controller):
         instead of K_x·e (10 m/s per metre), with the base at full speed and the arm at its
         speed limits.
         """
-        xdot = self.task_velocity(ctx, reference)
+        lin = self.linear_velocity(ctx, reference)
         if reference.x_d is not None and reference.mode != Mode.DM_CARTESIAN:
-            fb = xdot - reference.xd_d  # K_x (x_d − x), eq. (18)
-            e = math.sqrt(float(fb @ fb))
-            v_rec = self.config.qp.recovery_speed
-            if e > v_rec:
-                xdot = reference.xd_d + fb * (v_rec / e)
-        n = math.sqrt(float(xdot @ xdot))
+            lin = _saturated(lin, reference.xd_d, self.config.qp.recovery_speed)  # eq. (18)
+        n = math.sqrt(float(lin @ lin))
         cap = self.config.qp.task_speed_max
-        return xdot * (cap / n) if n > cap else xdot
+        if not self.pose:
+            return lin * (cap / n) if n > cap else lin
+        task = self.config.task  # the pose task: the same for the angular part, one common scale
+        ang = self.angular_velocity(ctx, reference)
+        if reference.quat_d is not None:
+            ang = _saturated(ang, reference.omega_d, task.angular_recovery_speed)
+        n_w = math.sqrt(float(ang @ ang))
+        scale = min(1.0, cap / n if n > 0 else 1.0, task.angular_speed_max / n_w if n_w > 0 else 1.0)
+        return np.concatenate((lin * scale, (self._w_R * scale) * ang))
 
     def _template(self, n: int, n_in: int) -> QPProblem:
         """A preallocated problem in z = [v (n); s⁺; s⁻] with the slack's fixed parts filled in.

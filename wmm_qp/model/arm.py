@@ -18,7 +18,7 @@ import pinocchio as pin
 from .._jit import jit
 from ..config import ArmConfig, FloatArray
 from ..exceptions import ConfigError
-from . import urdf as U
+from . import urdf as urdf_io
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 IntArray = np.ndarray[Any, np.dtype[np.int64]]
@@ -53,13 +53,13 @@ class ArmModel:
 
     def __init__(self, config: ArmConfig, source: Any = None) -> None:
         where = source if source is not None else config.urdf
-        full = U.load_full_model(where, config.urdf)
+        full = urdf_io.load_full_model(where, config.urdf)
         for name in config.joints:
             if not full.existJointName(name):
                 raise ConfigError(where, "arm.joints", f"the URDF has no joint named {name!r}")
         if not full.existFrame(config.ee_frame):
             raise ConfigError(where, "arm.ee_frame", f"the URDF has no frame named {config.ee_frame!r}")
-        self.model = U.reduced_model(full, config.joints, dict(config.locked), mount_placement(config))
+        self.model = urdf_io.reduced_model(full, config.joints, dict(config.locked), mount_placement(config))
         self.data = self.model.createData()
         self.frame_id = self.model.getFrameId(config.ee_frame)
         ids = [self.model.getJointId(n) for n in config.joints]
