@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from core_fixtures import robot
 from wmm_qp_service.cli import main
-from wmm_qp_service.experiments.log import COLUMNS
+from wmm_qp_service.experiments.log import columns
 
 EXPECTED_COLUMNS = [
     "t", "mode", *(f"q{i}" for i in range(1, 8)), *(f"qd_cmd{i}" for i in range(1, 8)),
@@ -33,7 +33,7 @@ def read_log(path: Path) -> list[dict[str, str]]:
 
 
 def test_columns_are_the_issue_s() -> None:
-    assert list(COLUMNS) == EXPECTED_COLUMNS
+    assert list(columns(robot().n_arm, robot().n_wheels)) == EXPECTED_COLUMNS  # the Gen3: 7 joints, 4 wheels
 
 
 @pytest.mark.parametrize("controller", ["traditional", "paper", "qp"])
@@ -166,3 +166,53 @@ def test_circle_realtime(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> 
 def test_bad_duration_is_a_clear_error(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["experiment", "dm", "--duration", "-1"]) == 2
     assert "duration" in capsys.readouterr().err
+
+
+# Any robot (issue 12) ------------------------------------------------------------------------------
+ROBOTS = Path(__file__).resolve().parents[1] / "configs" / "robots"
+
+
+@pytest.mark.parametrize(
+    "name, n_arm, n_wheels", [("panda_diffdrive", 7, 2), ("ur5_omni", 6, 3), ("tiago", 8, 2)]
+)
+def test_circle_on_any_robot(name: str, n_arm: int, n_wheels: int, capsys: pytest.CaptureFixture[str],
+                             tmp_path: Path) -> None:  # fmt: skip
+    """The circle from the robot's own start: its sizes in the log, every bound kept, the EE on the circle."""
+    log = tmp_path / "c.csv"
+    r = run_json(capsys, "circle", "--robot-config", str(ROBOTS / f"{name}.toml"), "--duration", "1", "--log", str(log))
+    assert r["robot"] == name and r["task"] == "position"
+    assert sum(r["violations"].values()) == 0
+    assert r["ee_error_max"]["x"] < 0.01 and r["ee_error_max"]["y"] < 0.01
+    with open(log) as f:
+        header = next(csv.reader(f))
+    assert header == list(columns(n_arm, n_wheels))
+    assert f"q{n_arm}" in header and f"q{n_arm + 1}" not in header and f"wheel_cmd{n_wheels + 1}" not in header
+
+
+def test_dm_on_another_robot(capsys: pytest.CaptureFixture[str]) -> None:
+    r = run_json(capsys, "dm", "--robot-config", str(ROBOTS / "ur5_omni.toml"), "--duration", "2")
+    assert r["robot"] == "ur5_omni" and sum(r["violations"].values()) == 0
+    assert r["dm_final"] > 0 and "ee_box_holds_start" in r
+
+
+def test_push_on_another_robot_has_one_torque_per_joint(capsys: pytest.CaptureFixture[str]) -> None:
+    r = run_json(capsys, "push", "--robot-config", str(ROBOTS / "ur5_omni.toml"), "--duration", "1")
+    for name in ("with_dm", "without_dm"):
+        assert len(r[name]["max_abs_torque"]) == 6
+    assert sum(r["violations"].values()) == 0
+
+
+def test_pose_task_circle(capsys: pytest.CaptureFixture[str]) -> None:
+    """--task pose: the circle holds the EE's start orientation as well, inside every bound."""
+    r = run_json(capsys, "circle", "--task", "pose", "--duration", "1")
+    assert r["task"] == "pose" and sum(r["violations"].values()) == 0
+    assert r["ee_error_max"]["x"] < 0.01
+
+
+def test_a_bad_robot_file_is_one_line(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text((ROBOTS / "gen3_mecanum.toml").read_text().replace('kind = "mecanum"', 'kind = "hovercraft"'))
+    bad.with_name("gen3_7dof.urdf").write_text((ROBOTS / "gen3_7dof.urdf").read_text())
+    assert main(["experiment", "circle", "--robot-config", str(bad), "--duration", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1 and str(bad) in err and "base.kind" in err

@@ -5,6 +5,10 @@ stderr when it is a terminal. ``--realtime``: through the daemon and the sim
 processes over Zenoh on loopback, in real time (push: no ``--log``/``--plots``). Prints a
 summary, or one JSON object with ``--json``; ``--log`` writes the per-tick CSV, ``--plots``
 PNG figures.
+
+Any robot: ``--robot-config FILE`` (default: the Gen3 on its Mecanum base, whose runs are the
+paper's tables in docs/results.md); every experiment starts at the robot's ``arm.start``.
+``--task pose`` overrides the controller config's task kind (in-process only).
 """
 
 from __future__ import annotations
@@ -17,11 +21,18 @@ from typing import Any
 
 import numpy as np
 
+from wmm_qp.config import TASK_KINDS
+
+from .common import add_config_arguments, load_configs
+
 HELP = "reproduce one of the paper's experiments (circle, dm, push)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("name", choices=("circle", "dm", "push"), help="which experiment")
+    add_config_arguments(parser)
+    parser.add_argument("--task", choices=TASK_KINDS, default=None,
+                        help="task kind, overriding the controller config's [task] kind (not with --realtime)")
     parser.add_argument("--controller", choices=("traditional", "paper", "qp"), default="qp")
     parser.add_argument("--solver", default=None, help="QP backend (qp controller only)")
     parser.add_argument("--direction", choices=("x", "z"), default="x", help="DM direction (dm)")
@@ -73,6 +84,11 @@ def run(args: argparse.Namespace) -> int:
         return _fail(f"--duration must be > 0, got {args.duration}")
     if args.solver is not None and args.controller != "qp":
         return _fail("--solver only applies to --controller qp")
+    if args.task is not None and args.realtime:
+        return _fail("--task does not apply with --realtime (the daemon loads its own --controller-config)")
+    robot, ctl_cfg = load_configs(args)
+    if args.task is not None:
+        ctl_cfg = ctl_cfg.with_(task={"kind": args.task})
     if args.plots is not None:
         args.plots.mkdir(parents=True, exist_ok=True)
         from ..experiments import plots
@@ -80,11 +96,14 @@ def run(args: argparse.Namespace) -> int:
         plots._plt()
 
     def setup() -> Any:
-        return make_setup(args.controller, args.solver, slip=not args.no_slip, seed=args.seed)
+        return make_setup(args.controller, args.solver, slip=not args.no_slip, seed=args.seed, robot=robot,
+                          ctl_cfg=ctl_cfg)
 
+    first = setup()  # a config error (a W of another length, a solver missing) before anything runs
     tty = not args.json or sys.stderr.isatty()
     tag = args.controller
-    result: dict[str, Any] = {"experiment": args.name, "controller": args.controller}
+    result: dict[str, Any] = {"experiment": args.name, "robot": robot.name, "task": ctl_cfg.task.kind,
+                              "controller": args.controller}
     if args.controller == "qp":
         result["solver"] = args.solver
     if args.realtime and args.name == "push":
@@ -92,7 +111,8 @@ def run(args: argparse.Namespace) -> int:
 
         rt_runs = run_push_realtime(setup, args.controller, args.solver, args.duration or push.DEFAULT_DM_DURATION,
                                  slip=not args.no_slip, seed=args.seed, rate_hz=args.rate, progress=tty,
-                                 log_dir=args.process_logs)  # fmt: skip
+                                 log_dir=args.process_logs, robot_file=args.robot_config,
+                                 controller_file=args.controller_config)  # fmt: skip
         result["realtime"] = {name: r.pop("realtime") for name, r in rt_runs.items()}
         reasons = [r.pop("controller_reasons") for r in rt_runs.values()]
         result |= rt_runs
@@ -103,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
         result["controller_reasons"] = {k: v for r in reasons for k, v in r.items()}
         traces: dict[str, Any] = {}
     elif args.realtime:
-        s = setup()
+        s = first
         rt = _realtime(args, s, tty)
         tr = rt.trace
         result["realtime"] = rt.service
@@ -124,7 +144,7 @@ def run(args: argparse.Namespace) -> int:
             else:
                 plots.plot_dm(tr, args.plots, tag)
     elif args.name == "circle":
-        s = setup()
+        s = first
         tr = circle.run_circle(s, args.duration or circle.DEFAULT_DURATION, progress=tty)
         result |= {"duration": float(tr.t[-1] + s.ctl_cfg.dt), **circle.circle_metrics(tr)}
         traces = {"": tr}
@@ -133,7 +153,7 @@ def run(args: argparse.Namespace) -> int:
 
             plot_circle(tr, args.plots, tag)
     elif args.name == "dm":
-        s = setup()
+        s = first
         duration = args.duration or dm.DEFAULT_DURATION
         tr = dm.run_dm(s, args.direction, duration, progress=tty)
         result |= {
@@ -161,8 +181,8 @@ def run(args: argparse.Namespace) -> int:
             s0 = runs["with_dm"][0]
             plot_push(
                 {n: (r[1], r[2]) for n, r in runs.items()},
-                np.asarray(s0.ctl_cfg.W),
-                np.asarray(s0.model.config.arm.torque_limit),
+                np.asarray(s0.W),
+                np.asarray(s0.robot.arm.torque_limit),
                 args.plots,
                 tag,
             )
@@ -196,6 +216,8 @@ def _realtime(args: argparse.Namespace, s: Any, tty: bool) -> Any:
         rate_hz=args.rate,
         progress=tty,
         log_dir=args.process_logs,
+        robot_file=args.robot_config,
+        controller_file=args.controller_config,
     )
 
 

@@ -1,8 +1,9 @@
 """The circle beyond the arm's workspace (paper Sec. IV-B, Table I, Figs. 5–6).
 
 x_d(t) = x0 + [0.25(cos ωt − 1), 0.25 sin ωt, 0], ω = π/20 rad/s, with its feed-forward
-velocity, TRACK mode, from the paper's start configuration, base slip on. x0 is the true EE
-position at t = 0.
+velocity, TRACK mode, from the robot's start configuration (``arm.start``; the Gen3's is the
+paper's), base slip on. x0 is the true EE position at t = 0. Any robot: with the pose task the
+reference also holds the EE's start orientation (quat_d, ω_d = 0).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import numpy as np
 
 import wmm_qp
 from wmm_qp.config import FloatArray
+from wmm_qp.tasks import rotation_to_quat
 
 from .runner import Setup, Trace, rms, run
 
@@ -33,11 +35,13 @@ def circle(x0: FloatArray, t: float) -> tuple[FloatArray, FloatArray]:
 
 def run_circle(setup: Setup, duration: float = DEFAULT_DURATION, progress: bool = True) -> Trace:
     """Run the circle and return its trace."""
-    x0 = setup.model.ee_position(np.zeros(3), np.array(wmm_qp.PAPER_START_Q_ARM))
+    q_arm = np.array(setup.robot.arm.start)
+    x0 = setup.model.ee_position(np.zeros(3), q_arm)
+    quat_d = rotation_to_quat(setup.model.ee_pose(np.zeros(3), q_arm)[1]) if setup.controller.pose else None
 
     def reference(t: float, _st: Any, _cmd: Any) -> wmm_qp.Reference:
         x_d, xd_d = circle(x0, t)
-        return wmm_qp.Reference(mode=wmm_qp.Mode.TRACK, x_d=x_d, xd_d=xd_d)
+        return wmm_qp.Reference(mode=wmm_qp.Mode.TRACK, x_d=x_d, xd_d=xd_d, quat_d=quat_d)
 
     return run(
         setup,

@@ -4,7 +4,11 @@ Phase 1, 0–5 s: Cartesian-space DM enhancement (Mode.DM_CARTESIAN, eqs. (16)�
 moves along the Cartesian DM gradient with z kept in [0.36, 0.56] m (the controller config's
 EE box). Phase 2, 5–20 s: null-space enhancement (Mode.DM_NULLSPACE, eqs. (18)–(19)) holding
 x_d = the EE position at t = 5 s (the controller's own estimate, odometry-based: what a real
-controller knows). u = x (base, yaw-compensated frame) or u = z.
+controller knows). u = x (base, yaw-compensated frame) or u = z. Any robot: it starts at the
+robot's ``arm.start``; with the pose task the null-space phase also holds the EE orientation of
+t = 5 s. The EE box is the controller config's (the paper's z ∈ [0.36, 0.56] m by default): on
+a robot whose start EE height lies outside it, the Cartesian phase has no active axis and stays
+still (``dm_metrics``' ``ee_box_holds_start`` says so).
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ import numpy as np
 
 import wmm_qp
 from wmm_qp.config import FloatArray
+from wmm_qp.tasks import rotation_to_quat
 
 from .runner import Setup, Trace, run
 
@@ -25,10 +30,12 @@ DIRECTIONS = {"x": np.array([1.0, 0.0, 0.0]), "z": np.array([0.0, 0.0, 1.0])}
 
 
 def dm_reference(
-    model: wmm_qp.WmmModel, u: FloatArray, t_switch: float = CARTESIAN_END
+    model: wmm_qp.WmmModel, u: FloatArray, t_switch: float = CARTESIAN_END, pose: bool = False
 ) -> Callable[[float, Any, Any], wmm_qp.Reference]:
-    """The DM scenario's reference function (Cartesian phase, then null space holding the EE)."""
+    """The DM scenario's reference function (Cartesian phase, then null space holding the EE;
+    with ``pose`` also its orientation)."""
     hold: list[FloatArray] = []
+    quat: list[FloatArray | None] = []
 
     def reference(t: float, st: Any, _cmd: Any) -> wmm_qp.Reference:
         if t < t_switch - 1e-9:
@@ -36,7 +43,8 @@ def dm_reference(
             return wmm_qp.Reference(mode=wmm_qp.Mode.DM_CARTESIAN, x_d=x, direction=u)
         if not hold:
             hold.append(model.ee_position(st.base_odom, st.q_arm))
-        return wmm_qp.Reference(mode=wmm_qp.Mode.DM_NULLSPACE, x_d=hold[0], direction=u)
+            quat.append(rotation_to_quat(model.ee_pose(st.base_odom, st.q_arm)[1]) if pose else None)
+        return wmm_qp.Reference(mode=wmm_qp.Mode.DM_NULLSPACE, x_d=hold[0], direction=u, quat_d=quat[0])
 
     return reference
 
@@ -46,7 +54,7 @@ def run_dm(
 ) -> Trace:
     """Run both DM phases (the Cartesian phase is shortened when duration < 10 s)."""
     u = DIRECTIONS[direction]
-    ref = dm_reference(setup.model, u, cartesian_end(duration))
+    ref = dm_reference(setup.model, u, cartesian_end(duration), pose=setup.controller.pose)
     return run(
         setup, ref, duration, dm_direction=u, progress=f"dm {direction}" if progress else None
     )
@@ -65,6 +73,8 @@ def dm_metrics(trace: Trace, setup: Setup, direction: str, t_switch: float) -> d
     - ``ee_drift_max``: [m] max ‖x_true(t) − x_true(t_5)‖ in the null-space phase (ground truth,
       so base slip counts); ``ee_drift_max_model``: the same from the odometry-based model EE.
     - ``torque_norm_per_10N_*``: [N·m] ‖W J_mᵀ u‖·10 N = 10 / H2.
+    - ``ee_box_holds_start``: the start EE position lies inside the controller config's EE box
+      on every boxed axis (else the Cartesian phase cannot move, eq. (17)).
     """
     i5 = trace.at(t_switch)
     ns = slice(i5, None)
@@ -88,5 +98,11 @@ def dm_metrics(trace: Trace, setup: Setup, direction: str, t_switch: float) -> d
         "base_travel": float(np.linalg.norm(trace.base_true[-1, :2] - trace.base_true[0, :2])),
         "torque_norm_per_10N_start": 10.0 / float(trace.dm[0]),
         "torque_norm_per_10N_final": 10.0 / float(trace.dm[-1]),
+        "ee_box_holds_start": _in_box(setup, trace.ee_true[0]),
         "violations": trace.violations,
     }
+
+
+def _in_box(setup: Setup, x: FloatArray) -> bool:
+    lo, hi = np.asarray(setup.ctl_cfg.ee_box_lower), np.asarray(setup.ctl_cfg.ee_box_upper)
+    return bool(np.all((lo <= x) & (x <= hi)))

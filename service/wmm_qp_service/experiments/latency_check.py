@@ -31,7 +31,7 @@ def run(delay: int, duration: float = 20.0) -> tuple[dict[str, int], float]:
     m = s.model
     sim = SimRobot(m, s.sim_cfg, seed=s.seed)
     sim.reset()
-    x0 = m.ee_position(np.zeros(3), np.array(w.PAPER_START_Q_ARM))
+    x0 = m.ee_position(np.zeros(3), np.array(s.robot.arm.start))
     dt = s.ctl_cfg.dt
     n_sub = max(1, round(s.sim_cfg.rate_hz / s.ctl_cfg.rate_hz))
     hist: collections.deque[w.RobotState] = collections.deque(maxlen=delay + 1)

@@ -72,7 +72,7 @@ def plot_push(
     fig, ax = plt.subplots(1, 3, figsize=(14, 4))
     for k, (name, (tr, i0)) in enumerate(runs.items()):
         t = tr.t[i0:] - tr.t[i0]
-        for j in range(7):
+        for j in range(tr.tau.shape[1]):  # one line per joint of the robot
             ax[k].plot(t, tr.tau[i0:, j], label=f"τ{j + 1}")
         ax[k].axhline(limits[0], color="r", ls=":", lw=0.8)
         ax[k].axhline(limits[-1], color="m", ls=":", lw=0.8)

@@ -11,6 +11,11 @@ Why μ = 0.65: in this quasi-static model the arm can push at most min_i τ_lim,
 DM enhancement (joint 4 limits). 165.8 N lies between: the push is near the arm's limit, as
 the paper's was. The paper's torque-sensor figures (weighted norm ≈ 7.5 N·m) imply a smaller
 force; a 26 kg box with such a force would move with or without DM in a quasi-static model.
+
+Any robot: the run starts at the robot's ``arm.start``, the box stands 1 cm ahead of its EE and
+reaches at least ``HEADROOM`` above the EE (:func:`box_at`; for the Gen3 that is the sim's
+0.6 m box). The mass and μ stay the ones calibrated for the Gen3 above, so on another robot the
+run shows whether that arm can push this box, not the paper's claim.
 """
 
 from __future__ import annotations
@@ -33,6 +38,15 @@ OVERSHOOT = 0.02  # [m] the operator keeps pushing a little beyond
 PUSH_SPEED = 0.02  # [m/s] quasi-static
 DEFAULT_DM_DURATION = 20.0  # [s] DM enhancement before the push (with_dm)
 SETTLE = 2.0  # [s] after the reference stops
+HEADROOM = 0.1  # [m] the box's top is at least this far above the EE
+
+
+def box_at(ee_true: Any) -> BoxConfig:
+    """The push's box: its face ``GAP`` ahead of the true EE position, centred on it in y, at
+    least ``HEADROOM`` taller than the EE's height (the sim's default box where that suffices)."""
+    ee = np.asarray(ee_true, dtype=float)
+    height = max(BoxConfig().height, float(ee[2]) + HEADROOM)
+    return BoxConfig(mass=MASS, mu=MU, face_x=float(ee[0]) + GAP, center_y=float(ee[1]), height=height)
 
 
 def _push_phase(setup: Setup, trace0: Trace | None, scale: float, progress: str | None) -> Trace:
@@ -45,10 +59,7 @@ def _push_phase(setup: Setup, trace0: Trace | None, scale: float, progress: str 
         sim.reset()
     st = sim.state()
     x_start = m.ee_position(st.base_odom, st.q_arm)
-    box = BoxConfig(
-        mass=MASS, mu=MU, face_x=float(st.ee_true[0]) + GAP, center_y=float(st.ee_true[1])
-    )
-    sim.place_box(box)
+    sim.place_box(box_at(st.ee_true))
     distance = GAP + TARGET + OVERSHOOT
     speed = PUSH_SPEED / scale
     t_move = distance / speed
@@ -95,7 +106,7 @@ def run_push(
     u = DIRECTIONS["x"]
     pre = run(
         s,
-        dm_reference(s.model, u, cartesian_end(dm_duration)),
+        dm_reference(s.model, u, cartesian_end(dm_duration), pose=s.controller.pose),
         dm_duration,
         dm_direction=u,
         progress="push: dm" if progress else None,
@@ -115,7 +126,7 @@ def push_metrics(setup: Setup, trace: Trace, i0: int) -> dict[str, Any]:
     ``saturated_joint`` the 0-based index of the first joint that stalled the push (null if none).
     """
     tau = trace.tau[i0:]
-    W = np.asarray(setup.ctl_cfg.W, dtype=float)
+    W = np.asarray(setup.W, dtype=float)
     stalled = trace.stalled_joint[i0:]
     first = np.flatnonzero(stalled >= 0)
     distance = float(trace.sim.state().box_displacement) if trace.sim is not None else float("nan")

@@ -198,6 +198,8 @@ class StackOptions:
         slip: the sim's base slip on or off.
         seed: the sim's slip seed (None: the sim config's).
         log_dir: the processes' logs go here.
+        robot_file: the robot file both processes load (None: their default, the Gen3).
+        controller_file: the daemon's controller config (None: its default).
     """
 
     controller: str
@@ -206,6 +208,8 @@ class StackOptions:
     slip: bool
     seed: int | None
     log_dir: Path
+    robot_file: Path | None = None
+    controller_file: Path | None = None
 
 
 def _on_stack(opts: StackOptions, drive: Callable[[Client, Recorder], Any]) -> tuple[Any, Recorder, dict[str, Any]]:
@@ -215,8 +219,11 @@ def _on_stack(opts: StackOptions, drive: Callable[[Client, Recorder], Any]) -> t
         (what ``drive`` returned, the closed recorder, the service-side figures).
     """
     svc = isolated_config()
-    daemon_args = ["--controller", opts.controller, *(["--solver", opts.solver] if opts.solver else [])]
-    sim_args = _sim_config_file(opts.slip, opts.log_dir) + ([] if opts.seed is None else ["--seed", str(opts.seed)])
+    robot_args = [] if opts.robot_file is None else ["--robot-config", str(opts.robot_file)]
+    daemon_args = ["--controller", opts.controller, *(["--solver", opts.solver] if opts.solver else []), *robot_args,
+                   *([] if opts.controller_file is None else ["--controller-config", str(opts.controller_file)])]
+    sim_args = (_sim_config_file(opts.slip, opts.log_dir) + ([] if opts.seed is None else ["--seed", str(opts.seed)])
+                + robot_args)  # fmt: skip
     stack = Stack(svc, rate_hz=opts.rate_hz, log_dir=opts.log_dir, extra_daemon_args=daemon_args,
                   extra_sim_args=sim_args)  # fmt: skip
     try:
@@ -262,10 +269,12 @@ def _on_stack(opts: StackOptions, drive: Callable[[Client, Recorder], Any]) -> t
 
 
 def _options(name: str, setup: Setup, controller: str, solver: str | None, slip: bool, seed: int | None,
-             rate_hz: float | None, log_dir: Path | None) -> StackOptions:
+             rate_hz: float | None, log_dir: Path | None, robot_file: Path | None = None,
+             controller_file: Path | None = None) -> StackOptions:
     log_dir = log_dir or Path(tempfile.mkdtemp(prefix=f"wmm-qp-rt-{name}-"))
     log_dir.mkdir(parents=True, exist_ok=True)
-    return StackOptions(controller, solver, float(rate_hz or setup.ctl_cfg.rate_hz), slip, seed, log_dir)
+    return StackOptions(controller, solver, float(rate_hz or setup.ctl_cfg.rate_hz), slip, seed, log_dir,
+                        robot_file, controller_file)
 
 
 def run_realtime(
@@ -281,6 +290,8 @@ def run_realtime(
     rate_hz: float | None = None,
     progress: bool = True,
     log_dir: Path | None = None,
+    robot_file: Path | None = None,
+    controller_file: Path | None = None,
 ) -> RealtimeResult:
     """Run ``circle`` or ``dm`` through the daemon and the sim over Zenoh, in real time.
 
@@ -296,13 +307,16 @@ def run_realtime(
         rate_hz: [Hz] control rate (None: the controller config's).
         progress: a progress bar on stderr (when it is a terminal).
         log_dir: keep the processes' logs here (None: a temporary folder).
+        robot_file: the robot file the sim and the daemon load (None: their default); the same
+            robot as ``setup``'s.
+        controller_file: the daemon's controller config (None: its default).
 
     Returns:
         The trace and the service-side figures.
     """
     if name not in ("circle", "dm"):
         raise RealtimeError(f"no realtime scenario {name!r} here (push: run_push_realtime)")
-    opts = _options(name, setup, controller, solver, slip, seed, rate_hz, log_dir)
+    opts = _options(name, setup, controller, solver, slip, seed, rate_hz, log_dir, robot_file, controller_file)
     u = DIRECTIONS[direction] if name == "dm" else np.asarray(setup.ctl_cfg.direction, dtype=float)
     bar = Progress(f"{name} (realtime)", progress) if progress else None
 
@@ -346,8 +360,9 @@ def drive_push(c: Client, rec: Recorder, model: Any, scale: float, bar: Progress
     if st is None:
         raise RealtimeError("no state from the sim")
     x_start = model.ee_position(np.array(st.q_base), np.array(st.q_arm))
-    face_x = float(st.ee_true[0]) + push.GAP
-    c.place_box(push.MASS, push.MU, face_x, float(st.ee_true[1]))
+    box = push.box_at(st.ee_true)
+    face_x = box.face_x
+    c.place_box(box.mass, box.mu, box.face_x, box.center_y, box.width, box.height)
     end = time.monotonic() + 5.0
     while not ((s := c.wait_state(0.5)) is not None and math.isfinite(s.box_position)):
         if time.monotonic() > end:
@@ -376,7 +391,7 @@ def push_metrics_realtime(setup: Setup, rec: Recorder, start: PushStart) -> dict
     if not states:
         raise RealtimeError("no state with the box arrived")
     tau = np.array([s.tau for s in states])
-    W = np.asarray(setup.ctl_cfg.W, dtype=float)
+    W = np.asarray(setup.W, dtype=float)
     stalled = np.array([s.stalled_joint for s in states])
     first = np.flatnonzero(stalled >= 0)
     distance = float(states[-1].box_position - start.face_x)
@@ -405,12 +420,15 @@ def run_push_realtime(
     rate_hz: float | None = None,
     progress: bool = True,
     log_dir: Path | None = None,
+    robot_file: Path | None = None,
+    controller_file: Path | None = None,
 ) -> dict[str, dict[str, Any]]:
     """The box push through the daemon and the sim over Zenoh: with and without DM first.
 
     Args:
         setup_factory: () → a fresh :class:`Setup` (model, configs).
-        controller, solver, slip, seed, rate_hz, progress, log_dir: as :func:`run_realtime`.
+        controller, solver, slip, seed, rate_hz, progress, log_dir, robot_file, controller_file: as
+            :func:`run_realtime`.
         dm_duration: [s] DM enhancement before the push (with_dm); below 20 s it also speeds
             the push up in proportion, as in-process.
 
@@ -423,7 +441,7 @@ def run_push_realtime(
     for name in ("with_dm", "without_dm"):
         setup = setup_factory()
         opts = _options(f"push-{name}", setup, controller, solver, slip, seed, rate_hz,
-                        None if log_dir is None else log_dir / name)  # fmt: skip
+                        None if log_dir is None else log_dir / name, robot_file, controller_file)  # fmt: skip
         bar = Progress(f"push {name} (realtime)", progress) if progress else None
 
         def drive(c: Client, rec: Recorder, with_dm: bool = name == "with_dm",
@@ -484,7 +502,7 @@ def build_trace(
     tel = [m for m in tel[first:] if m.mode in modes and m.t - t0 < duration - 1e-9]
     idx = match_states(states, tel)
     m = setup.model
-    W = np.asarray(setup.ctl_cfg.W, dtype=float)
+    W = np.asarray(setup.W, dtype=float)
     u = np.asarray(u, dtype=float) / np.linalg.norm(u)
     rows_st = [states[i] for i in idx]
     q = np.array([s.q_arm for s in rows_st])

@@ -36,14 +36,14 @@ class Trace:
         t: [s] tick times.
         mode: the reference's mode per tick.
         status: the command's status per tick.
-        q: [rad] (n, 7) true joint angles at the tick.
-        qd_cmd: [rad/s] (n, 7) commanded joint rates.
-        wheel_cmd: [rad/s] (n, 4) commanded wheel speeds.
+        q: [rad] (n, n_arm) true joint angles at the tick (m for a prismatic joint).
+        qd_cmd: [rad/s] (n, n_arm) commanded joint rates.
+        wheel_cmd: [rad/s] (n, n_wheels) commanded wheel speeds (n_wheels = 0: a fixed base).
         base_twist_cmd: (n, 3) commanded body twist M·wheel_cmd [m/s, m/s, rad/s].
         base_odom, base_true: (n, 3) base poses [m, m, rad].
         ee_des, ee_true: [m] (n, 3) desired and true EE positions.
         dm: H2 along the run's DM direction at the true joint angles.
-        tau: [N·m] (n, 7) joint torques from contact.
+        tau: [N·m] (n, n_arm) joint torques from contact.
         box_displacement: [m] how far the box has moved (nan without a box).
         stalled_joint: per tick, the joint stalling the push or -1.
         violations: the referee's counts at the end.
@@ -104,9 +104,9 @@ class Setup:
     """Everything a run needs.
 
     Attributes:
-        model: kinematic model.
+        model: kinematic model (its ``config`` is the robot).
         controller: a controller made by :func:`wmm_qp.make_controller`.
-        ctl_cfg: the controller's config (rate, gains, W).
+        ctl_cfg: the controller's config (rate, gains).
         sim_cfg: the sim's config.
         seed: slip/drift seed.
     """
@@ -116,6 +116,16 @@ class Setup:
     ctl_cfg: wmm_qp.ControllerConfig
     sim_cfg: SimConfig
     seed: int | None = None
+
+    @property
+    def robot(self) -> wmm_qp.RobotConfig:
+        """The robot description the run drives."""
+        return self.model.config
+
+    @property
+    def W(self) -> FloatArray:
+        """W of eq. (8) for this robot (the controller config's, else the robot's default)."""
+        return self.ctl_cfg.weights_for(self.robot)
 
 
 def run(
@@ -138,21 +148,22 @@ def run(
         reference: the scenario, called once per tick.
         duration: [s] run length.
         dm_direction: u (base frame) for the logged DM.
-        q_base, q_arm: start pose (default: origin, the paper's start configuration).
+        q_base, q_arm: start pose (default: origin, the robot's ``arm.start``; the Gen3's is the
+            paper's start configuration).
         box: a box to push, or None.
         stop: optional early end.
         progress: label of the progress bar (None = no bar).
         sim: continue with this sim instead of a fresh one (then q_base/q_arm/box are ignored).
     """
     m = setup.model
-    W = np.asarray(setup.ctl_cfg.W, dtype=float)
+    W = np.asarray(setup.W, dtype=float)
     u = np.asarray(dm_direction, dtype=float)
     u = u / np.linalg.norm(u)
     if sim is None:
         sim = SimRobot(m, setup.sim_cfg, seed=setup.seed)
         sim.reset(
             q_base=np.zeros(3) if q_base is None else q_base,
-            q_arm=wmm_qp.PAPER_START_Q_ARM if q_arm is None else q_arm,
+            q_arm=q_arm,  # None: the robot's arm.start
             box=box,
         )
     dt = setup.ctl_cfg.dt
@@ -274,7 +285,13 @@ def concat(a: Trace, b: Trace) -> Trace:
 
 
 def make_setup(
-    controller: str, solver: str | None = None, *, slip: bool = True, seed: int | None = None
+    controller: str,
+    solver: str | None = None,
+    *,
+    slip: bool = True,
+    seed: int | None = None,
+    robot: wmm_qp.RobotConfig | None = None,
+    ctl_cfg: wmm_qp.ControllerConfig | None = None,
 ) -> Setup:
     """Load the configs and build the model, the controller and the sim config.
 
@@ -283,12 +300,15 @@ def make_setup(
         solver: QP backend name (qp only); None = the config's.
         slip: base slip/drift on (the sim config's values) or off.
         seed: slip seed; None = the sim config's.
+        robot: the robot description; None = the default robot file (the Gen3).
+        ctl_cfg: the controller config; None = the default controller config.
     """
     from wmm_qp_sim import load_sim_config
 
-    robot = wmm_qp.load_robot_config()
+    robot = wmm_qp.load_robot_config() if robot is None else robot
     model = wmm_qp.WmmModel(robot)
-    cfg = wmm_qp.load_controller_config()
+    cfg = wmm_qp.load_controller_config() if ctl_cfg is None else ctl_cfg
+    cfg.weights_for(robot)  # a W of another length than the robot's: the config error, now
     if solver is not None:
         cfg = cfg.with_(qp={"solver": solver})
     ctl = wmm_qp.make_controller(controller, model, cfg)
