@@ -115,3 +115,59 @@ def test_fastest_backend_breaks_a_p50_tie_by_p99() -> None:
     ticks["osqp"]["p50"] = 20.0  # clearly faster: p50 decides
     t = targets({"tick_us": ticks})
     assert t["fastest_backend"] == "osqp" and t["fastest_p99_le_250us"] is False
+
+
+# Any robot (issue 12) ------------------------------------------------------------------------------
+ROBOTS = w.default_robot_file().parent
+
+
+@pytest.mark.parametrize("name", ["panda_diffdrive.toml", "ur5_omni.toml", "tiago.toml"])
+@pytest.mark.parametrize("task", ["position", "pose"])
+def test_controller_case_on_any_robot_and_task(name: str, task: str) -> None:
+    robot = w.load_robot_config(ROBOTS / name)
+    cfg = w.load_controller_config().with_(task={"kind": task})
+    r = controller.run_case(robot, cfg, "daqp", "track", ticks=20, breakdown=False)
+    assert r["tick_us"]["n"] == 20 and r["max_rate_excess"] <= 1e-9
+    assert r["status"].get("safe_stop", 0) == 0
+
+
+def test_scaling_follows_the_robot_s_arm(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    robot = w.load_robot_config(ROBOTS / "ur5_omni.toml")  # 6 joints, 3 omni wheels
+    models = scaling.build_models(robot, tmp_path)
+    assert {n: m.n for n, m in models.items()} == {5: 5, 6: 6, 12: 12}
+    r = scaling.run_one(models[12], w.load_controller_config(), "daqp", ticks=5, max_seconds=10)
+    assert r["n_vars"] == 3 + 12 + 6 and r["failures"] == 0
+
+
+def test_robots_section_times_every_robot_task_and_solver(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from wmm_qp_service.bench.runner import run_robots, shipped_robots
+
+    files = shipped_robots()
+    assert files[0].name == w.default_robot_file().name and len(files) >= 4
+    bad = tmp_path / "broken.toml"
+    bad.write_text('name = "broken"\n')
+    r = run_robots(w.load_controller_config(), ["daqp"], 3, 10.0, files=[files[0], ROBOTS / "tiago.toml", bad])
+    assert set(r) == {"wmm", "tiago", "broken"}
+    assert r["broken"]["available"] is False and "broken.toml" in r["broken"]["reason"]
+    for name in ("wmm", "tiago"):
+        for task in ("position", "pose"):
+            assert r[name][task]["daqp"]["tick_us"]["n"] == 3
+
+
+def test_pink_race_needs_a_holonomic_base() -> None:
+    r = pink_race.run(w.load_robot_config(ROBOTS / "panda_diffdrive.toml"), w.load_controller_config(), ticks=5)
+    assert r["available"] is False and "diff_drive" in r["reason"]
+
+
+def test_pink_race_on_the_omni_base() -> None:
+    pytest.importorskip("pink")
+    r = pink_race.run(w.load_robot_config(ROBOTS / "ur5_omni.toml"), w.load_controller_config(), ticks=10)
+    assert r["available"] and r["ours"]["failures"] == 0 and r["pink"]["failures"] == 0
+
+
+def test_cli_robot_config_and_task(capsys: pytest.CaptureFixture[str]) -> None:
+    rc = main(["bench", "--json", "--only", "controller", "--ticks", "5", "--solver", "daqp", "--mode", "track",
+               "--no-breakdown", "--robot-config", str(ROBOTS / "tiago.toml"), "--task", "pose"])  # fmt: skip
+    assert rc == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["robot"] == "tiago" and out["task"] == "pose" and set(out["tick_us"]["daqp"]) >= {"p50", "p99"}

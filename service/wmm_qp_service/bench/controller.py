@@ -31,12 +31,13 @@ MODES: tuple[str, ...] = ("hold", "track", "dm_cartesian", "dm_nullspace")
 PIECES: tuple[str, ...] = ("kinematics", "dm", "sigma", "bounds", "qp_build", "solve", "other")
 
 
-def reference_at(mode: w.Mode, x0: np.ndarray, t: float) -> w.Reference:
-    """The reference of each mode at time t [s]: the circle, or x0 for HOLD."""
+def reference_at(mode: w.Mode, x0: np.ndarray, t: float, quat0: np.ndarray | None = None) -> w.Reference:
+    """The reference of each mode at time t [s]: the circle, or x0 for HOLD; with ``quat0`` (the
+    pose task) the EE also holds that orientation."""
     if mode == w.Mode.HOLD:
-        return w.Reference(mode=mode, x_d=x0, xd_d=np.zeros(3))
+        return w.Reference(mode=mode, x_d=x0, xd_d=np.zeros(3), quat_d=quat0)
     x_d, xd_d = circle(x0, t)
-    return w.Reference(mode=mode, x_d=x_d, xd_d=xd_d)
+    return w.Reference(mode=mode, x_d=x_d, xd_d=xd_d, quat_d=quat0)
 
 
 class _TimedBackend(QPBackend):
@@ -117,8 +118,8 @@ def run_case(
     """Time ``ticks`` controller steps of one (solver, mode) along the moving reference.
 
     Args:
-        robot: robot config.
-        cfg: controller config (its solver is replaced by ``solver``).
+        robot: robot config (any robot: the start is its ``arm.start``).
+        cfg: controller config (its solver is replaced by ``solver``; its task kind is used).
         solver: backend name.
         mode: a :class:`wmm_qp.Mode` value.
         ticks: number of ticks per pass.
@@ -137,8 +138,9 @@ def run_case(
         assert isinstance(ctl, w.QpController)
         ctl.warm_up()  # compiled kernels loaded before timing, as the daemon does
         dt = ctl.dt
-        bot = IdealRobot.at_paper_start(model)
+        bot = IdealRobot.at_start(model)
         x0 = bot.ee()
+        quat0 = bot.ee_quat() if ctl.pose else None
         timer = PieceTimer(PIECES)
         samples: list[int] = []
         stages: dict[str, int] = {}
@@ -151,7 +153,7 @@ def run_case(
         ctx = instrumented(ctl, timer) if pass_name == "breakdown" else _null()
         with ctx:
             for k in range(ticks):
-                ref = reference_at(m, x0, k * dt)
+                ref = reference_at(m, x0, k * dt, quat0)
                 state = bot.state()
                 t0 = now_ns()
                 cmd = ctl.step(state, ref)
@@ -173,7 +175,7 @@ def run_case(
                 excess = max(
                     excess,
                     float(np.max(np.abs(cmd.arm_rates) - vmax)),
-                    float(np.max(np.abs(cmd.wheel_speeds)) - wmax),
+                    float(np.max(np.abs(cmd.wheel_speeds) - wmax, initial=-np.inf)),
                 )
                 if k * dt >= 1.0 and m != w.Mode.DM_CARTESIAN:
                     x_d = x0 if m == w.Mode.HOLD else circle(x0, (k + 1) * dt)[0]

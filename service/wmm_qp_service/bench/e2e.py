@@ -50,13 +50,21 @@ def _pct(a: np.ndarray) -> dict[str, float]:
     return {"p50": round(float(p50), 1), "p99": round(float(p99), 1), "max": round(float(a.max()), 1), "n": int(a.size)}
 
 
-def run_rate(rate_hz: float, ticks: int, log_dir: Path | None = None) -> dict[str, Any]:
+def run_rate(
+    rate_hz: float,
+    ticks: int,
+    log_dir: Path | None = None,
+    robot_file: Path | None = None,
+    controller_file: Path | None = None,
+) -> dict[str, Any]:
     """One rate: start the stack, track the circle for ``ticks`` ticks, measure, stop.
 
     Args:
         rate_hz: [Hz] daemon rate.
         ticks: control ticks to measure (duration = ticks / rate_hz).
         log_dir: the processes' logs (None: a temporary folder).
+        robot_file: the robot file of the sim and the daemon (None: their default).
+        controller_file: the daemon's controller config (None: its default).
 
     Returns:
         The figures of the module docstring, plus the load average, exit codes and faults.
@@ -76,7 +84,10 @@ def run_rate(rate_hz: float, ticks: int, log_dir: Path | None = None) -> dict[st
         "loadavg_before": [round(x, 2) for x in os.getloadavg()],
         "logs": str(log_dir),
     }
-    stack = Stack(svc, rate_hz=rate_hz, log_dir=log_dir)
+    robot_args = [] if robot_file is None else ["--robot-config", str(robot_file)]
+    ctl_args = [] if controller_file is None else ["--controller-config", str(controller_file)]
+    stack = Stack(svc, rate_hz=rate_hz, log_dir=log_dir, extra_daemon_args=robot_args + ctl_args,
+                  extra_sim_args=robot_args)  # fmt: skip
     try:
         stack.start()
         with Client(svc, name="bench-e2e", telemetry=True) as c:
@@ -156,12 +167,17 @@ def run_rate(rate_hz: float, ticks: int, log_dir: Path | None = None) -> dict[st
     }
 
 
-def run(ticks: int, rates: tuple[float, ...] = RATES) -> dict[str, Any]:
+def run(
+    ticks: int,
+    rates: tuple[float, ...] = RATES,
+    robot_file: Path | None = None,
+    controller_file: Path | None = None,
+) -> dict[str, Any]:
     """Every rate in turn: {"available", "<rate>": figures of :func:`run_rate`}."""
     out: dict[str, Any] = {"available": True}
     for r in rates:
         print(f"e2e: {r:g} Hz for {ticks} ticks ({ticks / r:.0f} s)", file=sys.stderr, flush=True)
-        res = run_rate(r, ticks)
+        res = run_rate(r, ticks, robot_file=robot_file, controller_file=controller_file)
         out[f"{r:g}"] = res
         out["available"] = out["available"] and bool(res.get("available"))
     return out

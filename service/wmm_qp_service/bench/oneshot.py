@@ -30,7 +30,7 @@ def capture_problems(robot: w.RobotConfig, cfg: w.ControllerConfig, n: int) -> l
     model = w.WmmModel(robot)
     ctl = w.make_controller("qp", model, cfg.with_(qp={"solver": "daqp"}))
     assert isinstance(ctl, w.QpController)
-    bot = IdealRobot.at_paper_start(model)
+    bot = IdealRobot.at_start(model)
     x0 = bot.ee()
     out: list[QPProblem] = []
     for k in range(n):

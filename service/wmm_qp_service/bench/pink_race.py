@@ -1,8 +1,9 @@
 """A side-by-side race against pink (``pin-pink``) on the same robot and trajectory.
 
-pink's robot: a Pinocchio model of the Gen3 (configs/gen3_7dof.urdf) on a planar root joint
-(x, y, yaw; velocity = body twist). Its tick: ``Configuration.update(q)`` (kinematics), set
-the target, ``solve_ik`` with a position-only ``FrameTask`` on the EE frame,
+pink's robot: the robot's own arm model (wmm_qp's reduced Pinocchio model: the robot file's
+joints, every other joint locked, the mount folded in, the robot file's limits) on a planar
+root joint (x, y, yaw; velocity = body twist). Its tick: ``Configuration.update(q)``
+(kinematics), set the target, ``solve_ik`` with a position-only ``FrameTask`` on the EE frame,
 ``ConfigurationLimit`` and ``VelocityLimit`` (and, in the second variant, pink's
 ``AccelerationLimit``, which limits the arm joints only: it skips the planar base joint),
 solver ``proxqp`` — exactly what a pink user writes.
@@ -10,7 +11,10 @@ solver ``proxqp`` — exactly what a pink user writes.
 Same control law: with task gain K_x·Δt and target x_d + ẋ_d/K_x, pink's dead-beat step
 Δq = gain·J⁺e gives v = ẋ_d + K_x(x_d − x), which is eq. (18). The target's orientation is
 the EE's current one, so the task is position-only. Base velocity limits for pink are the
-body-twist box the wheel speed limit allows on each axis (R·w_max, R·w_max, R·w_max/L).
+body-twist box the wheel limits allow on each axis alone: for axis i, the largest s with
+|w_j(s·e_i)| ≤ w_max,j for every wheel j (for the Mecanum base R·w_max, R·w_max, R·w_max/L).
+A planar joint moves sideways, so the race needs a holonomic base (Mecanum, omni); on a
+differential drive or a fixed base it is reported as not available.
 
 Ours: ``QpController.step`` in TRACK mode with the same solver (proxsuite), whose tick also
 includes the bounds (13), the acceleration bounds of the wheels, σ_min and the diagnostics.
@@ -39,6 +43,35 @@ def pink_available() -> bool:
     return True
 
 
+def planar_model(robot: w.RobotConfig, arm: Any) -> Any:
+    """pink's model: a planar root joint carrying the robot's reduced arm model, with the robot
+    file's position and velocity limits."""
+    import pinocchio as pin
+
+    planar = pin.Model()
+    jid = planar.addJoint(0, pin.JointModelPlanar(), pin.SE3.Identity(), "planar_base")
+    fid = planar.addFrame(pin.Frame("planar_base_link", jid, 0, pin.SE3.Identity(), pin.FrameType.BODY))
+    model = pin.appendModel(planar, arm.model, fid, pin.SE3.Identity())
+    lo, hi, vmax = model.lowerPositionLimit.copy(), model.upperPositionLimit.copy(), model.velocityLimit.copy()
+    for i, name in enumerate(robot.arm.joints):
+        j = model.joints[model.getJointId(name)]
+        vmax[j.idx_v] = robot.arm.velocity_max[i]
+        if j.nq == 1:  # continuous joints (cos, sin) have no position limits
+            lo[j.idx_q], hi[j.idx_q] = robot.arm.position_lower[i], robot.arm.position_upper[i]
+    model.lowerPositionLimit, model.upperPositionLimit, model.velocityLimit = lo, hi, vmax
+    return model
+
+
+def twist_box(base: Any, wheel_limit: np.ndarray) -> np.ndarray:
+    """Per axis of the body twist (v_x, v_y, ω) alone, the largest magnitude the wheel limits allow."""
+    out = np.zeros(3)
+    for i in range(3):
+        wheels = np.abs(base.wheel_speeds(np.eye(3)[i]))
+        used = wheels > 1e-12
+        out[i] = float(np.min(np.asarray(wheel_limit)[used] / wheels[used])) if used.any() else 0.0
+    return out
+
+
 def _run_pink(
     robot: w.RobotConfig, cfg: w.ControllerConfig, ticks: int, accel: bool, max_seconds: float
 ) -> dict[str, Any]:
@@ -50,31 +83,19 @@ def _run_pink(
     from pink.limits import AccelerationLimit, ConfigurationLimit, VelocityLimit
     from pink.tasks import FrameTask
 
-    model = pin.buildModelFromUrdf(str(robot.arm.urdf), pin.JointModelPlanar())
+    wmm = w.WmmModel(robot)
+    arm = wmm.arm
+    model = planar_model(robot, arm)
     data = model.createData()
     b = robot.base
-    L = b.l1 + b.l2
-    v_lim = np.concatenate(
-        [
-            [b.wheel_radius * b.wheel_speed_max] * 2,
-            [b.wheel_radius * b.wheel_speed_max / L],
-            robot.arm.velocity_max,
-        ]
-    )
-    a_lim = np.concatenate(
-        [
-            [b.wheel_radius * b.wheel_acceleration_max] * 2,
-            [b.wheel_radius * b.wheel_acceleration_max / L],
-            robot.arm.acceleration_max,
-        ]
-    )
+    v_lim = np.concatenate([twist_box(wmm.base, b.wheel_speed_max), robot.arm.velocity_max])
+    a_lim = np.concatenate([twist_box(wmm.base, b.wheel_acceleration_max), robot.arm.acceleration_max])
     limits: list[Any] = [ConfigurationLimit(model), VelocityLimit(model, v_lim)]
     acc_limit = AccelerationLimit(model, a_lim) if accel else None
     if acc_limit is not None:
         limits.append(acc_limit)
     # q: planar (x, y, cos ψ, sin ψ), then the arm (continuous joints as cos, sin pairs).
-    arm = w.WmmModel(robot).arm
-    q = np.concatenate([[0.0, 0.0, 1.0, 0.0], arm.pin_q(np.array(w.PAPER_START_Q_ARM)).copy()])
+    q = np.concatenate([[0.0, 0.0, 1.0, 0.0], arm.pin_q(np.array(robot.arm.start)).copy()])
     conf = Configuration(model, data, q)
     ee = robot.arm.ee_frame
     dt, K = cfg.dt, float(np.max(cfg.K_x)) if np.ndim(cfg.K_x) else float(cfg.K_x)
@@ -138,7 +159,7 @@ def _run_ours(
     model = w.WmmModel(robot)
     ctl = w.make_controller("qp", model, cfg.with_(qp={"solver": "proxsuite"}))
     ctl.warm_up()  # compiled kernels loaded before timing, as the daemon does
-    bot = IdealRobot.at_paper_start(model)
+    bot = IdealRobot.at_start(model)
     x0 = bot.ee()
     samples: list[int] = []
     err2: list[float] = []
@@ -155,7 +176,7 @@ def _run_ours(
         excess = max(
             excess,
             float(np.max(np.abs(cmd.arm_rates) - robot.arm.velocity_max)),
-            float(np.max(np.abs(cmd.wheel_speeds)) - robot.base.wheel_speed_max),
+            float(np.max(np.abs(cmd.wheel_speeds) - robot.base.wheel_speed_max, initial=-np.inf)),
         )
         bot.apply(cmd, ctl.dt)
         if k * ctl.dt >= 1.0:
@@ -188,6 +209,14 @@ def run(
             "available": False,
             "reason": "pin-pink is not installed: pip install 'wmm-qp[bench]'",
         }
+    base = w.WmmModel(robot).base
+    if not base.holonomic:
+        return {
+            "available": False,
+            "reason": f"the pink race needs a holonomic base (pink's planar root joint moves sideways); "
+            f"{robot.name!r} has a {base.kind} base",
+        }
+    cfg = cfg.with_(task={"kind": "position"})  # pink's task here is position-only: so is ours
     print(f"pink race: ours ({ticks} ticks)", file=sys.stderr, flush=True)
     ours = _run_ours(robot, cfg, ticks, max_seconds)
     print(f"pink race: pink ({ticks} ticks)", file=sys.stderr, flush=True)

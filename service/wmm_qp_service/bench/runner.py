@@ -3,15 +3,58 @@
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 from typing import Any
 
 import wmm_qp as w
+from wmm_qp.config import TASK_KINDS
 from wmm_qp.solvers import available_solvers
 
 from . import controller, e2e, oneshot, pink_race, scaling
 from .machine import machine_info
 
-SECTIONS: tuple[str, ...] = ("controller", "oneshot", "pink", "scaling", "e2e")
+SECTIONS: tuple[str, ...] = ("controller", "oneshot", "pink", "scaling", "robots", "e2e")
+
+
+def shipped_robots() -> list[Path]:
+    """The robot files shipped in ``configs/robots/``, the default robot first."""
+    default = w.default_robot_file()
+    files = sorted(default.parent.glob("*.toml"))
+    return sorted(files, key=lambda f: f.name != default.name)
+
+
+def run_robots(
+    cfg: w.ControllerConfig,
+    solvers: list[str],
+    ticks: int,
+    max_seconds: float,
+    files: list[Path] | None = None,
+) -> dict[str, Any]:
+    """Track-mode tick of the controller for every robot × task kind × solver (clean pass only).
+
+    Returns:
+        {robot name: {"file", "n_arm", "n_wheels", "base", task kind: {solver: run_case's "tick_us",
+        "stages", "status", "track_rms_m", "max_rate_excess"}}}; a robot file that does not load
+        (an optional package missing) gives {"file", "available": False, "reason"}.
+    """
+    out: dict[str, Any] = {}
+    for f in files if files is not None else shipped_robots():
+        try:
+            robot = w.load_robot_config(f)
+        except w.ConfigError as e:
+            out[f.stem] = {"file": str(f), "available": False, "reason": str(e)}
+            continue
+        row: dict[str, Any] = {"file": str(f), "available": True, "n_arm": robot.n_arm,
+                               "n_wheels": robot.n_wheels, "base": robot.base.kind}  # fmt: skip
+        for kind in TASK_KINDS:
+            task_cfg = cfg.with_(task={"kind": kind})
+            row[kind] = {}
+            for s in solvers:
+                print(f"robots: {robot.name} / {kind} / {s} ({ticks} ticks)", file=sys.stderr, flush=True)
+                r = controller.run_case(robot, task_cfg, s, "track", ticks, breakdown=False, max_seconds=max_seconds)
+                row[kind][s] = r
+        out[robot.name] = row
+    return out
 
 
 def run_bench(
@@ -22,6 +65,9 @@ def run_bench(
     breakdown: bool = True,
     max_seconds: float = 30.0,
     skip: list[str] | None = None,
+    robot: w.RobotConfig | None = None,
+    cfg: w.ControllerConfig | None = None,
+    controller_file: Path | None = None,
 ) -> dict[str, Any]:
     """Every section (or ``only`` one); progress goes to stderr.
 
@@ -34,15 +80,22 @@ def run_bench(
         breakdown: also run the instrumented pass of the controller section.
         max_seconds: [s] wall-clock budget per timed pass (a pass stops early past it).
         skip: sections not to run.
+        robot: the robot of every section but "robots" (None: the default robot file).
+        cfg: the controller config (None: the default one); "robots" times each of its task
+            kinds, the other sections use its own (but "e2e": its daemon loads ``controller_file``).
+        controller_file: the daemon's controller config in "e2e" (None: its default).
 
     Returns:
-        {"machine", "ticks", "tick_us" {solver: {p50, p99, max}} (track mode), "controller",
-        "oneshot", "pink", "pink_tick_us" {p50, p99}, "scaling", "e2e", "targets"}.
+        {"machine", "robot", "task", "ticks", "tick_us" {solver: {p50, p99, max}} (track mode),
+        "controller", "oneshot", "pink", "pink_tick_us" {p50, p99}, "scaling", "robots", "e2e",
+        "targets"}.
     """
-    robot, cfg = w.load_robot_config(), w.load_controller_config()
+    robot = w.load_robot_config() if robot is None else robot
+    cfg = w.load_controller_config() if cfg is None else cfg
     solvers = solvers or available_solvers()
     modes = modes or list(controller.MODES)
-    out: dict[str, Any] = {"machine": machine_info(), "ticks": ticks, "rate_hz": cfg.rate_hz}
+    out: dict[str, Any] = {"machine": machine_info(), "robot": robot.name, "robot_file": str(robot.path),
+                           "task": cfg.task.kind, "ticks": ticks, "rate_hz": cfg.rate_hz}  # fmt: skip
     sections = tuple(s for s in (SECTIONS if only is None else (only,)) if s not in (skip or ()))
     if "controller" in sections:
         res = controller.run(robot, cfg, solvers, modes, ticks, breakdown, max_seconds)
@@ -58,11 +111,22 @@ def run_bench(
             out["pink_tick_us"] = {k: race["pink"]["tick_us"][k] for k in ("p50", "p99")}
     if "scaling" in sections:
         out["scaling"] = scaling.run(robot, cfg, solvers, min(ticks, 10000), max_seconds)
+    if "robots" in sections:
+        out["robots"] = run_robots(cfg, solvers, ticks, max_seconds)
     if "e2e" in sections:
         print("e2e: daemon + sim over Zenoh", file=sys.stderr, flush=True)
-        out["e2e"] = e2e.run(ticks)
+        out["e2e"] = e2e.run(ticks, robot_file=None if _is_default(robot) else robot.path,
+                             controller_file=controller_file)  # fmt: skip
     out["targets"] = targets(out)
     return out
+
+
+def _is_default(robot: w.RobotConfig) -> bool:
+    """The robot was read from the default robot file (which the processes load by themselves)."""
+    try:
+        return robot.path is None or robot.path.resolve() == w.default_robot_file().resolve()
+    except OSError:
+        return False
 
 
 def targets(r: dict[str, Any]) -> dict[str, Any]:

@@ -1,21 +1,25 @@
-"""Per-tick cost against the number of arm joints: 6, 7 (the Gen3) and 14 (two Gen3s).
+"""Per-tick cost against the number of arm joints: n − 1, n and 2n for the robot's arm of n joints
+(6, 7 and 14 for the Gen3).
 
-``wmm_qp``'s controller is hard-wired to one 7-DOF arm (``N_ARM = 7``), so this section
-builds the controller's whole-robot QP itself, with ``wmm_qp``'s pieces, on generic
-Pinocchio models: per tick, kinematics of every EE (``computeJointJacobians``), the bounds
+A synthetic benchmark: it builds the controller's whole-robot QP itself, with ``wmm_qp``'s pieces,
+on Pinocchio models of its own (one or two arms, any number of joints), so it does not go
+through ``QpController``: per tick, kinematics of every EE (``computeJointJacobians``), the bounds
 (13) (``joint_motion_bounds``) and the wheel bounds, the QP of DESIGN.md §2 with a task slack
 (z = [v_b; v_m; s], H = blkdiag(W_x⁻¹, ρI), A = [J_b P, J_m, I], one 3-row task per arm;
 always feasible, as the controller's slack stage) and a persistent ``wmm_qp.solvers``
-backend. The 7-DOF row is the Gen3 through this same path,
-so the rows compare with each other (not with the controller's own figures).
+backend. The n-joint row is the robot's own arm through this same path, so the rows compare
+with each other (not with the controller's own figures).
 
-Models (URDFs generated in a temporary directory from configs/gen3_7dof.urdf):
+Models (from the robot's URDF, reduced as ``wmm_qp`` reduces it: the robot file's joints, every
+other joint locked, the mount folded in; a dual-arm URDF is generated in a temporary directory):
 
-* 6 DOF: the Gen3 with joint_3 locked at 0 (``pin.buildReducedModel``) — the Gen3 6-DOF's
-  topology;
-* 7 DOF: the Gen3;
-* 14 DOF: two Gen3s side by side on the base (±0.25 m in y), each EE following its own
+* n − 1: the arm with its third joint locked at 0 (for the Gen3: joint_3, the Gen3 6-DOF's
+  topology);
+* n: the arm;
+* 2n: two copies of the arm side by side on the base (±0.25 m in y), each EE following its own
   circle (a 6-row task).
+
+The base is the robot's (its kind's P(ψ) of eq. (3) and its wheel limits).
 """
 
 from __future__ import annotations
@@ -31,7 +35,9 @@ import pinocchio as pin
 
 import wmm_qp as w
 from wmm_qp.limits import braking_command, joint_motion_bounds, wheel_bounds, wheel_braking_command
-from wmm_qp.model.bases import MecanumBase
+from wmm_qp.model.arm import mount_placement
+from wmm_qp.model.bases import make_base
+from wmm_qp.model.urdf import reduced_model
 from wmm_qp.solvers import INF, QPProblem, make_backend
 
 from .stats import now_ns, summarize_ns
@@ -71,7 +77,7 @@ def dual_arm_urdf(urdf: Path, out: Path, offset_y: float = 0.25) -> Path:
 
 
 class GenericWmm:
-    """A Mecanum base carrying an arm model with one or more EE frames (any number of joints)."""
+    """The robot's base carrying an arm model with one or more EE frames (any number of joints)."""
 
     def __init__(
         self,
@@ -85,7 +91,7 @@ class GenericWmm:
     ) -> None:
         self.model, self.data = model, model.createData()
         self.frames = [model.getFrameId(f) for f in ee_frames]
-        self.base = MecanumBase(robot.base)
+        self.base = make_base(robot.base)
         self.robot = robot
         self.vmax, self.amax, self.qlo, self.qhi = vmax, amax, qlo, qhi
         self.n = model.nv
@@ -102,7 +108,7 @@ class GenericWmm:
         return self._q
 
     def kinematics(self, q_base: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Stacked EE positions x (3k,) [m] and the whole-robot Jacobian J (3k × (4+n)), eq. (5)."""
+        """Stacked EE positions x (3k,) [m] and the whole-robot Jacobian J (3k × (n_wheels + n)), eq. (5)."""
         pin.computeJointJacobians(self.model, self.data, self.pin_q(q))
         c, s = np.cos(q_base[2]), np.sin(q_base[2])
         R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
@@ -118,32 +124,38 @@ class GenericWmm:
 
 
 def build_models(robot: w.RobotConfig, tmp: Path) -> dict[int, GenericWmm]:
+    """{n − 1, n, 2n: model} for the robot's arm of n joints (the module docstring); no n − 1
+    model for an arm of fewer than three joints."""
     arm = robot.arm
-    gen3 = pin.buildModelFromUrdf(str(arm.urdf))
+    n, ee = arm.n, arm.ee_frame
+    full = pin.buildModelFromUrdf(str(arm.urdf))
+    mount, locked = mount_placement(arm), dict(arm.locked)
     lo = np.asarray(arm.position_lower, float)
     hi = np.asarray(arm.position_upper, float)
     vm, am = np.asarray(arm.velocity_max, float), np.asarray(arm.acceleration_max, float)
-    out = {7: GenericWmm(gen3, [arm.ee_frame], robot, vm, am, lo, hi)}
-    lock = [gen3.getJointId("joint_3")]
-    six = pin.buildReducedModel(gen3, lock, pin.neutral(gen3))
-    keep = [i for i in range(7) if i != 2]
-    out[6] = GenericWmm(six, [arm.ee_frame], robot, vm[keep], am[keep], lo[keep], hi[keep])
-    dual = pin.buildModelFromUrdf(str(dual_arm_urdf(arm.urdf, tmp / "dual.urdf")))
-    out[14] = GenericWmm(
-        dual,
-        ["l_" + arm.ee_frame, "r_" + arm.ee_frame],
-        robot,
-        np.tile(vm, 2),
-        np.tile(am, 2),
-        np.tile(lo, 2),
-        np.tile(hi, 2),
+    out = {n: GenericWmm(reduced_model(full, arm.joints, locked, mount), [ee], robot, vm, am, lo, hi)}
+    if n >= 3:
+        keep = [i for i in range(n) if i != 2]
+        fewer = reduced_model(full, tuple(arm.joints[i] for i in keep), locked | {arm.joints[2]: 0.0}, mount)
+        out[n - 1] = GenericWmm(fewer, [ee], robot, vm[keep], am[keep], lo[keep], hi[keep])
+    dual_full = pin.buildModelFromUrdf(str(dual_arm_urdf(arm.urdf, tmp / "dual.urdf")))
+    sides = ("l_", "r_")
+    dual = reduced_model(
+        dual_full,
+        tuple(p + j for p in sides for j in arm.joints),
+        {p + j: v for p in sides for j, v in locked.items()},
+        mount,
+    )
+    out[2 * n] = GenericWmm(
+        dual, [p + ee for p in sides], robot, np.tile(vm, 2), np.tile(am, 2), np.tile(lo, 2), np.tile(hi, 2)
     )
     return out
 
 
-def start_q(n: int) -> np.ndarray:
-    q7 = np.array(w.load_robot_config().arm.start)
-    return {6: np.delete(q7, 2), 7: q7, 14: np.tile(q7, 2)}[n]
+def start_q(robot: w.RobotConfig, n: int) -> np.ndarray:
+    """The start of each model: the robot's ``arm.start`` (without its third joint for n − 1, twice for 2n)."""
+    q = np.array(robot.arm.start, dtype=float)
+    return {q.size - 1: np.delete(q, 2), q.size: q, 2 * q.size: np.tile(q, 2)}[n]
 
 
 def run_one(
@@ -151,7 +163,7 @@ def run_one(
 ) -> dict[str, Any]:
     """Ticks of the generic QP controller on one model along the circle (each EE its own)."""
     dt, alpha = cfg.dt, cfg.qp.alpha
-    n, nw = m.n, 4
+    n, nw = m.n, m.base.n_wheels
     w_inv = 1.0 / np.concatenate([np.full(nw, alpha), np.full(n, 1.0 - alpha)])  # eq. (12)
     m_eq = 3 * len(m.frames)
     H = np.diag(np.concatenate([w_inv, np.full(m_eq, SLACK_WEIGHT)]))
@@ -159,7 +171,7 @@ def run_one(
     I_s, s_lo, s_hi = np.eye(m_eq), np.full(m_eq, -INF), np.full(m_eq, INF)
     K = float(np.max(cfg.K_x))
     backend = make_backend(solver, cfg.qp.eps_abs)
-    qb, q, v, wh = np.zeros(3), start_q(n), np.zeros(n), np.zeros(4)
+    qb, q, v, wh = np.zeros(3), start_q(m.robot, n), np.zeros(n), np.zeros(nw)
     x0, _ = m.kinematics(qb, q)
     k_ee = x0.size // 3
     C0, e0 = np.zeros((0, nw + n + m_eq)), np.zeros(0)
@@ -223,10 +235,9 @@ def run(
     ticks: int,
     max_seconds: float = 30.0,
 ) -> dict[str, Any]:
-    """{solver: {n_arm: run_one(...)}} for n_arm in 6, 7, 14."""
+    """{solver: {n_arm: run_one(...)}} for n_arm in n − 1, n, 2n (n: the robot's arm)."""
     res: dict[str, Any] = {
-        "note": "generic whole-robot QP built in the benchmark (wmm_qp's "
-        "controller is hard-wired to 7 arm joints)"
+        "note": "synthetic: the whole-robot QP built in the benchmark on its own one- and two-arm models"
     }
     with tempfile.TemporaryDirectory() as d:
         models = build_models(robot, Path(d))

@@ -1,7 +1,8 @@
 """The moving reference every section follows, and the ideal robot that executes commands.
 
 The paper's circle experiment (DESIGN.md §1): x_d(t) = x0 + [0.25(cos ωt − 1), 0.25 sin ωt, 0],
-ω = π/20 rad/s, from q_b = 0 and the paper's start configuration. The state fed back to the
+ω = π/20 rad/s, from q_b = 0 and the robot's start configuration (``arm.start``; the Gen3's is
+the paper's). The state fed back to the
 controller is its own command integrated over one period (joint rates and wheel speeds are
 executed exactly), so the state moves as on a perfect robot.
 """
@@ -14,6 +15,7 @@ import numpy as np
 
 import wmm_qp as w
 from wmm_qp.config import FloatArray
+from wmm_qp.tasks import rotation_to_quat
 
 RADIUS = 0.25  # [m]
 OMEGA = np.pi / 20.0  # [rad/s]
@@ -38,8 +40,10 @@ class IdealRobot:
     wheels: FloatArray
 
     @classmethod
-    def at_paper_start(cls, model: w.WmmModel) -> IdealRobot:
-        return cls(model, np.zeros(3), np.array(w.PAPER_START_Q_ARM), np.zeros(7), np.zeros(4))
+    def at_start(cls, model: w.WmmModel) -> IdealRobot:
+        """At rest at q_b = 0 and the robot's ``arm.start``."""
+        q_arm = np.array(model.config.arm.start)
+        return cls(model, np.zeros(3), q_arm, np.zeros(model.n_arm), np.zeros(model.n_wheels))
 
     def state(self) -> w.RobotState:
         return w.RobotState(
@@ -57,3 +61,7 @@ class IdealRobot:
 
     def ee(self) -> FloatArray:
         return self.model.ee_position(self.q_base, self.q_arm)
+
+    def ee_quat(self) -> FloatArray:
+        """The EE orientation (world), a quaternion [x, y, z, w]."""
+        return rotation_to_quat(self.model.ee_pose(self.q_base, self.q_arm)[1])

@@ -1,5 +1,10 @@
 """``wmm-qp bench``: per-tick controller time, one-shot vs persistent QPs, the pink race,
-scaling with the number of joints and the loop over Zenoh (issue 6, docs/benchmarks.md)."""
+scaling with the number of joints, every shipped robot × task kind × solver, and the loop over
+Zenoh (issues 6 and 12, docs/benchmarks.md).
+
+``--robot-config FILE`` picks the robot of every section but ``robots`` (which loops over the
+shipped robot files); ``--task KIND`` overrides the controller config's task kind (not in
+``e2e``, whose daemon loads ``--controller-config``; ``pink`` is position-only)."""
 
 from __future__ import annotations
 
@@ -9,14 +14,21 @@ import math
 import sys
 from typing import Any
 
+from wmm_qp.config import TASK_KINDS
+
+from .common import add_config_arguments, load_configs
+
 HELP = "measure per-tick controller time and the loop over Zenoh"
 
-_SECTIONS = ("controller", "oneshot", "pink", "scaling", "e2e")
+_SECTIONS = ("controller", "oneshot", "pink", "scaling", "robots", "e2e")
 _MODES = ("hold", "track", "dm_cartesian", "dm_nullspace")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    add_config_arguments(parser)
+    parser.add_argument("--task", choices=TASK_KINDS, default=None,
+                        help="task kind, overriding the controller config's [task] kind")
     parser.add_argument("--ticks", type=int, default=20000, help="ticks per case (default 20000)")
     parser.add_argument("--only", choices=_SECTIONS, help="run one section only")
     parser.add_argument("--skip", action="append", choices=_SECTIONS, help="a section not to run (repeatable)")
@@ -61,6 +73,7 @@ def _fmt(s: dict[str, Any]) -> str:
 def _print_report(r: dict[str, Any]) -> None:
     m = r["machine"]
     print(f"machine: {m['nproc']} cores, {m['cpu']}, Python {m['python']}, load {m['loadavg']}")
+    print(f"robot: {r['robot']} ({r['robot_file']}), task {r['task']}")
     for solver, modes in r.get("controller", {}).items():
         for mode, c in modes.items():
             print(f"controller {solver:9s} {mode:12s} {_fmt(c['tick_us'])}  stages {c['stages']}")
@@ -82,6 +95,13 @@ def _print_report(r: dict[str, Any]) -> None:
             print(f"race       pink/ours p50 ×{race['ratio_p50']}  p99 ×{race['ratio_p99']}  fair {race['fair']}")
         else:
             print(f"race       {race['reason']}")
+    for name, row in r.get("robots", {}).items():
+        if not row.get("available"):
+            print(f"robots     {name}: {row.get('reason')}")
+            continue
+        for kind in ("position", "pose"):
+            for solver, c in row.get(kind, {}).items():
+                print(f"robots     {name:16s} {kind:8s} {solver:9s} track {_fmt(c['tick_us'])}")
     sc = r.get("scaling", {})
     for solver, rows in sc.items():
         if isinstance(rows, dict):
@@ -121,6 +141,10 @@ def run(args: argparse.Namespace) -> int:
         if s not in available_solvers():
             print(f"wmm-qp bench: error: solver {s!r} is not installed", file=sys.stderr)
             return 2
+    robot, cfg = load_configs(args)
+    if args.task is not None:
+        cfg = cfg.with_(task={"kind": args.task})
+    cfg.weights_for(robot)  # a W of another length than the robot's: one line, exit 2
     from wmm_qp_service.bench import run_bench
 
     result = run_bench(
@@ -131,6 +155,9 @@ def run(args: argparse.Namespace) -> int:
         breakdown=not args.no_breakdown,
         max_seconds=args.max_seconds,
         skip=args.skip,
+        robot=robot,
+        cfg=cfg,
+        controller_file=args.controller_config,
     )
     if args.json:
         json.dump(_clean(result), sys.stdout, indent=1)
