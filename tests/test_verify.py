@@ -111,3 +111,18 @@ def test_verify_catches_the_qp_without_its_ee_box_recheck(solver: str, monkeypat
     assert verify_controller(ctl, model(), 300, 0).by_kind["ee_box"] == 0
     monkeypatch.setattr(qp_module, "_hold_ee_box", lambda *a: 0.0)
     assert verify_controller(ctl, model(), 300, 0).by_kind["ee_box"] > 0
+
+
+# The command (issue 12): any robot, either task kind ------------------------------------------------
+@pytest.mark.parametrize("robot_file, task", [("ur5_omni.toml", "pose"), ("tiago.toml", "position")])
+def test_verify_command_on_any_robot_and_task(robot_file: str, task: str, capsys: pytest.CaptureFixture[str]) -> None:
+    import json
+
+    from wmm_qp_service.cli import main
+
+    path = w.default_robot_file().parent / robot_file
+    argv = ["verify", "--robot-config", str(path), "--task", task, "--solver", "daqp", "--samples", "30", "--json"]
+    assert main(argv) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert (out["robot"], out["task"], out["samples"], out["violations"]) == (path.stem, task, 30, 0)
+    assert out["steps"] == 4 * 30 and out["examples"] == []

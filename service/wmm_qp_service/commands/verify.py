@@ -1,4 +1,8 @@
-"""``wmm-qp verify``: random states through a controller, every command refereed."""
+"""``wmm-qp verify``: random states through a controller, every command refereed.
+
+Any robot (``--robot-config FILE``, default the Gen3); ``--task position|pose`` overrides the
+controller config's ``[task] kind`` (with ``pose`` every sample also carries a target
+orientation and an angular feed-forward)."""
 
 from __future__ import annotations
 
@@ -7,6 +11,7 @@ import json
 import sys
 
 import wmm_qp as w
+from wmm_qp.config import TASK_KINDS
 from wmm_qp.controllers.qp import QpController
 from wmm_qp.solvers import SOLVER_NAMES
 from wmm_qp.verify import KINDS, verify_controller
@@ -42,6 +47,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--samples", type=_positive, default=1000, help="random states (each run in every mode)")
     parser.add_argument("--seed", type=_seed, default=0, help="RNG seed (>= 0)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--task", choices=TASK_KINDS, default=None,
+                        help="task kind, overriding the controller config's [task] kind")
     add_config_arguments(parser)
 
 
@@ -49,6 +56,8 @@ def run(args: argparse.Namespace) -> int:
     robot, cfg = load_configs(args)
     if args.solver:
         cfg = cfg.with_(qp={"solver": args.solver})
+    if args.task:
+        cfg = cfg.with_(task={"kind": args.task})
     model = w.WmmModel(robot)
     ctl = w.make_controller(args.controller, model, cfg)
     tty = sys.stderr.isatty() and not args.json
@@ -58,11 +67,15 @@ def run(args: argparse.Namespace) -> int:
             print(f"\rverify: {i}/{n} states", end="" if i < n else "\n", file=sys.stderr, flush=True)
 
     rep = verify_controller(ctl, model, args.samples, args.seed, progress)
-    label = args.controller + (f" ({ctl.solver})" if isinstance(ctl, QpController) else "")
+    label = f"{robot.name}, {cfg.task.kind} task: " + args.controller
+    label += f" ({ctl.solver})" if isinstance(ctl, QpController) else ""
     if args.json:
         print(
             json.dumps(
                 {
+                    "robot": robot.name,
+                    "robot_file": str(robot.path),
+                    "task": cfg.task.kind,
                     "controller": args.controller,
                     "solver": ctl.solver if isinstance(ctl, QpController) else None,
                     "samples": rep.samples,
@@ -72,6 +85,7 @@ def run(args: argparse.Namespace) -> int:
                     "by_mode": rep.by_mode,
                     "by_case": rep.by_case,
                     "statuses": rep.statuses,
+                    "examples": rep.examples,
                     "seed": args.seed,
                 }
             )
