@@ -22,9 +22,9 @@ class Plant:
     def __init__(self, model: w.WmmModel) -> None:
         self.model = model
         self.q_base = np.zeros(3)
-        self.q_arm = np.array(w.load_robot_config().arm.start)
-        self.v_arm = np.zeros(7)
-        self.wheels = np.zeros(4)
+        self.q_arm = np.array(model.config.arm.start)
+        self.v_arm = np.zeros(model.n_arm)
+        self.wheels = np.zeros(model.n_wheels)
         self.seq = 0
         self.instance = "sim-A"
         self.violations: dict[str, int] = {"position": 0}
@@ -41,7 +41,7 @@ class Plant:
             robot="wmm", seq=self.seq, stamp=0.0, t=0.0, q_base=self.q_base.tolist(),
             q_arm=self.q_arm.tolist(), v_arm=self.v_arm.tolist(), wheel_speeds=self.wheels.tolist(),
             base_true=self.q_base.tolist(), ee_true=self.model.ee_position(self.q_base, self.q_arm).tolist(),
-            tau=[0.0] * 7, contact_force=[0.0] * 3, instance=self.instance, lease="core",
+            tau=[0.0] * self.model.n_arm, contact_force=[0.0] * 3, instance=self.instance, lease="core",
             violations=dict(self.violations), cmd_seq=self.cmd_seq)
         d.update(kw)
         return StateMsg(**d)  # type: ignore[arg-type]
@@ -52,8 +52,8 @@ def robot() -> w.RobotConfig:
     return w.load_robot_config()
 
 
-def make(robot: w.RobotConfig) -> tuple[ControlCore, Plant]:
-    core = ControlCore(ServiceConfig(), w.load_controller_config(), robot)
+def make(robot: w.RobotConfig, ctl: w.ControllerConfig | None = None) -> tuple[ControlCore, Plant]:
+    core = ControlCore(ServiceConfig(), ctl or w.load_controller_config(), robot)
     return core, Plant(core.model)
 
 
@@ -74,11 +74,11 @@ def run(core: ControlCore, plant: Plant, t: float, n: int,
 
 def max_step_ratio(robot: w.RobotConfig, cmds: list[w.Command]) -> float:
     a = np.asarray(robot.arm.acceleration_max) * DT
-    wa = robot.base.wheel_acceleration_max * DT
+    wa = np.asarray(robot.base.wheel_acceleration_max) * DT
     worst = 0.0
     for p, q in itertools.pairwise(cmds):
         worst = max(worst, float(np.max(np.abs(q.arm_rates - p.arm_rates) / a)),
-                    float(np.max(np.abs(q.wheel_speeds - p.wheel_speeds) / wa)))
+                    float(np.max(np.abs(q.wheel_speeds - p.wheel_speeds) / wa, initial=0.0)))
     return worst
 
 
@@ -149,3 +149,175 @@ def test_sim_lost_is_a_fault(robot: w.RobotConfig) -> None:
     assert core.state_time == -math.inf
     core.tick(t)
     assert core.safe and core.last_fault.startswith("sim lost")
+
+
+# ---------------------------------------------------------------- any robot
+def other_robots() -> list[object]:
+    return ["gen3_diff_drive", "gen3_omni", "gen3_fixed", "ur5_omni", "panda_diffdrive", "tiago"]
+
+
+def load_other(name: str, folder) -> w.RobotConfig:  # type: ignore[no-untyped-def]
+    from service_robots import gen3_file, shipped
+
+    if name.startswith("gen3_"):
+        return w.load_robot_config(gen3_file(folder, name.removeprefix("gen3_")))
+    return shipped(name)
+
+
+@pytest.mark.parametrize("name", other_robots())
+def test_any_robot_tracks_and_changes_modes_inside_the_bounds(tmp_path, name: str) -> None:  # type: ignore[no-untyped-def]
+    robot = load_other(name, tmp_path)
+    core, plant = make(robot)
+    assert (len(plant.q_arm), len(plant.wheels)) == (robot.n_arm, robot.n_wheels)
+    x0 = core.model.ee_position(plant.q_base, plant.q_arm)
+    target = x0 + np.array([0.03, 0.02, -0.01])
+    core.on_mode(ModeMsg(robot="wmm", seq=1, stamp=0.0, mode="track"))
+    t, cmds = run(core, plant, 0.0, 750, setpoint=target)
+    assert all(c.status != w.Status.SAFE_STOP for c in cmds), cmds[-1].reason
+    assert np.linalg.norm(core.model.ee_position(plant.q_base, plant.q_arm) - target) < 3e-3
+    for mode in ("hold", "dm_nullspace", "dm_cartesian", "hold"):
+        core.on_mode(ModeMsg(robot="wmm", seq=1, stamp=0.0, mode=mode))
+        t, more = run(core, plant, t, 100, setpoint=target)
+        cmds += more
+    assert all(c.status != w.Status.SAFE_STOP for c in cmds), [c.reason for c in cmds if c.reason][:3]
+    assert max_step_ratio(robot, cmds) <= 1.0 + 1e-6
+    assert all((np.abs(c.arm_rates) <= robot.arm.velocity_max + 1e-9).all() for c in cmds)
+
+
+@pytest.mark.parametrize("name", ["gen3_mecanum", "gen3_fixed", "ur5_omni"])
+def test_info_names_the_joints_and_wheels(tmp_path, name: str) -> None:  # type: ignore[no-untyped-def]
+    from collections import Counter
+
+    from wmm_qp_service.protocol import InfoMsg, decode, encode
+    from wmm_qp_service.rate_loop import RateLoop
+
+    robot = w.load_robot_config() if name == "gen3_mecanum" else load_other(name, tmp_path)
+    core, _ = make(robot)
+    info = decode(InfoMsg, encode(core.info(RateLoop(500.0, 0.0), Counter(), {})))
+    assert info.joints == list(robot.arm.joints) and info.n_arm == robot.n_arm == len(info.joints)
+    assert info.wheels == list(core.model.base.wheel_names) and info.n_wheels == robot.n_wheels
+    assert info.base_kind == robot.base.kind and info.task == "position"
+    assert info.robot == robot.name == core.svc.robot  # an open robot id is the robot's name
+    assert info.config["controller"]["W"] == robot.arm.default_W().tolist()
+    if name == "gen3_mecanum":
+        assert info.wheels == ["front_left", "front_right", "rear_left", "rear_right"]
+        assert info.config["controller"]["W"] == [1.0, 1.0, 1.0, 1.0, 2.5, 2.5, 2.5]
+
+
+# ---------------------------------------------------------------- the pose task
+def pose_core(robot: w.RobotConfig) -> tuple[ControlCore, Plant]:
+    return make(robot, w.load_controller_config().with_(task={"kind": "pose"}))
+
+
+def orientation_error(core: ControlCore, plant: Plant, quat: np.ndarray) -> float:
+    from wmm_qp import tasks
+
+    _, R = core.model.ee_pose(plant.q_base, plant.q_arm)
+    return float(np.linalg.norm(tasks.orientation_error(tasks.quat_to_matrix(quat), R)))
+
+
+def rotated(quat: np.ndarray, axis: list[float], angle: float) -> np.ndarray:
+    from wmm_qp_service.smoother import quat_exp, quat_multiply
+
+    return quat_multiply(quat_exp(angle * np.asarray(axis) / np.linalg.norm(axis)), quat)
+
+
+def test_pose_task_hold_latches_the_ee_orientation(robot: w.RobotConfig) -> None:
+    from wmm_qp.tasks import rotation_to_quat
+
+    core, plant = pose_core(robot)
+    _, R0 = core.model.ee_pose(plant.q_base, plant.q_arm)
+    q0 = rotation_to_quat(R0)
+    _, cmds = run(core, plant, 0.0, 200)
+    assert core.mode == w.Mode.HOLD and core.pose
+    assert core.ref.quat_d is not None and np.allclose(core.ref.quat_d, q0, atol=1e-12)
+    assert np.allclose(core.ref.omega_d, 0.0)
+    assert orientation_error(core, plant, q0) < 1e-6 and np.abs(cmds[-1].v).max() < 1e-6
+    from collections import Counter
+
+    from wmm_qp_service.rate_loop import RateLoop
+
+    st = core.status(RateLoop(500.0, 0.0), Counter(), {})
+    assert np.allclose(st.quat_d, q0)
+
+
+def test_pose_task_reaches_a_streamed_orientation_and_hold_relatches(robot: w.RobotConfig) -> None:
+    core, plant = pose_core(robot)
+    t, cmds = run(core, plant, 0.0, 20)
+    q_start = core.orient.quat.copy()
+    x0 = core.model.ee_position(plant.q_base, plant.q_arm)
+    core.on_mode(ModeMsg(robot="wmm", seq=1, stamp=0.0, mode="track"))
+    target = rotated(q_start, [0.0, 0.3, 1.0], 0.3)
+    for _ in range(1500):  # 3 s: 0.3 rad at the saturated recovery speed (0.5 rad/s) and K_R
+        core.on_state(plant.msg(), t)
+        core.on_setpoint(SetpointMsg(robot="wmm", seq=1, stamp=t, x=x0.tolist(), source="op",
+                                     q=target.tolist()), t)
+        cmd = core.tick(t)
+        assert cmd is not None and cmd.status != w.Status.SAFE_STOP, cmd and cmd.reason
+        plant.apply(cmd)
+        cmds.append(cmd)
+        t += DT
+    assert orientation_error(core, plant, target) < 1e-3
+    assert np.linalg.norm(core.model.ee_position(plant.q_base, plant.q_arm) - x0) < 2e-3
+    assert max_step_ratio(robot, cmds) <= 1.0 + 1e-6
+    assert core.orientation_ignored == 0
+    # hold: the orientation target is the EE's own again (latched), not the streamed one
+    core.on_mode(ModeMsg(robot="wmm", seq=1, stamp=0.0, mode="hold"))
+    _, R = core.model.ee_pose(plant.q_base, plant.q_arm)
+    t, more = run(core, plant, t, 200)
+    from wmm_qp.tasks import rotation_to_quat
+
+    assert abs(abs(float(np.dot(core.orient.quat, rotation_to_quat(R)))) - 1.0) < 1e-9
+    assert max_step_ratio(robot, cmds + more) <= 1.0 + 1e-6
+
+
+def test_pose_task_turns_at_the_streamed_angular_velocity(robot: w.RobotConfig) -> None:
+    """A setpoint's ``w`` is feed-forward: between samples the target turns at it."""
+    core, plant = pose_core(robot)
+    t, _ = run(core, plant, 0.0, 20)
+    x0 = core.model.ee_position(plant.q_base, plant.q_arm)
+    core.on_mode(ModeMsg(robot="wmm", seq=1, stamp=0.0, mode="track"))
+    run(core, plant, t, 1)
+    t += DT
+    q1 = core.orient.quat.copy()
+    core.on_setpoint(SetpointMsg(robot="wmm", seq=1, stamp=t, x=x0.tolist(), source="op",
+                                 q=q1.tolist(), w=[0.0, 0.0, 0.2]), t)
+    for _ in range(50):  # 0.1 s without a new sample
+        core.on_state(plant.msg(), t)
+        plant.apply(core.tick(t))  # type: ignore[arg-type]
+        t += DT
+    expected = rotated(q1, [0.0, 0.0, 1.0], 0.2 * 50 * DT)
+    assert abs(abs(float(np.dot(core.orient.quat, expected))) - 1.0) < 1e-9
+    assert np.allclose(core.ref.omega_d, [0.0, 0.0, 0.2])
+    for _ in range(200):  # past setpoint_timeout (0.25 s): the target stops turning
+        core.on_state(plant.msg(), t)
+        plant.apply(core.tick(t))  # type: ignore[arg-type]
+        t += DT
+    assert core.orient.resting and np.allclose(core.ref.omega_d, 0.0)
+
+
+def test_position_task_ignores_a_setpoints_orientation_and_counts_it(robot: w.RobotConfig) -> None:
+    """docs/protocol.md: with the position task a setpoint carrying ``q`` is followed in position;
+    its orientation is ignored and counted (``status.orientation_ignored``)."""
+    core, plant = make(robot)
+    t, _ = run(core, plant, 0.0, 5)
+    x0 = core.model.ee_position(plant.q_base, plant.q_arm)
+    target = x0 + np.array([0.02, 0.0, 0.0])
+    core.on_mode(ModeMsg(robot="wmm", seq=1, stamp=0.0, mode="track"))
+    for _ in range(600):
+        core.on_state(plant.msg(), t)
+        assert core.on_setpoint(SetpointMsg(robot="wmm", seq=1, stamp=t, x=target.tolist(), source="op",
+                                            q=[0.0, 0.0, 0.38, 0.92], w=[0.0, 0.0, 1.0]), t)
+        cmd = core.tick(t)
+        assert cmd is not None
+        plant.apply(cmd)
+        t += DT
+    assert core.ref.quat_d is None and np.allclose(core.ref.omega_d, 0.0)
+    assert np.linalg.norm(core.model.ee_position(plant.q_base, plant.q_arm) - target) < 2e-3
+    assert core.orientation_ignored == 600
+    from collections import Counter
+
+    from wmm_qp_service.rate_loop import RateLoop
+
+    st = core.status(RateLoop(500.0, 0.0), Counter(), {})
+    assert st.orientation_ignored == 600 and st.quat_d == []

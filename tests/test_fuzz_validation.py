@@ -25,25 +25,30 @@ from wmm_qp_service.validation import Reject, Validator
 import wmm_qp as w
 
 ROBOT = "wmm"
+CONFIG = w.load_robot_config()
+N_ARM, N_WHEELS = CONFIG.n_arm, CONFIG.n_wheels
 TYPES: dict[str, type[msgspec.Struct]] = {"state": StateMsg, "setpoint": SetpointMsg, "mode": ModeMsg,
                                           "cmd": CommandMsg}
 
 
 def validators() -> dict[str, Validator[Any]]:
     lim = ServiceConfig().validation
-    return {k: Validator(t, ROBOT, lim) for k, t in TYPES.items()}
+    return {k: Validator(t, ROBOT, lim, n_arm=N_ARM, n_wheels=N_WHEELS) for k, t in TYPES.items()}
 
 
 def well_formed(msg: msgspec.Struct) -> None:
     """What every accepted message guarantees."""
     assert msg.robot == ROBOT and msg.v == PROTOCOL_VERSION  # type: ignore[attr-defined]
     assert math.isfinite(msg.stamp)  # type: ignore[attr-defined]
-    sizes = {"q_base": 3, "q_arm": 7, "v_arm": 7, "wheel_speeds": 4, "x": 3, "xd": 3, "direction": 3,
-             "arm_rates": 7}
+    sizes = {"q_base": 3, "q_arm": N_ARM, "v_arm": N_ARM, "wheel_speeds": N_WHEELS, "x": 3, "xd": 3,
+             "direction": 3, "arm_rates": N_ARM, "q": 4, "w": 3}
     for name, n in sizes.items():
         v = getattr(msg, name, None)
         if v is not None:
             assert len(v) == n and all(math.isfinite(e) for e in v), (name, v)
+    for name, n in {"tau": N_ARM, "ee_true": 3, "base_true": 3, "contact_force": 3}.items():  # may hold nan
+        v = getattr(msg, name, None)
+        assert v is None or len(v) == n, (name, v)
 
 
 hostile = st.recursive(
@@ -95,13 +100,13 @@ def test_mutator_covers_every_kind_and_key() -> None:
 
 def test_mutation_fuzz_through_the_validators_and_the_controller() -> None:
     """20,000 mutated messages; the accepted ones drive a ControlCore against an exact plant."""
-    robot = w.load_robot_config()
+    robot = CONFIG
     core = ControlCore(ServiceConfig(), w.load_controller_config(), robot)
     vals = validators()
     mut = Mutator(ROBOT, seed=7)
     dt = core.dt
-    q_arm = np.array(w.load_robot_config().arm.start)
-    v_arm, wheels, q_base = np.zeros(7), np.zeros(4), np.zeros(3)
+    q_arm = np.array(robot.arm.start)
+    v_arm, wheels, q_base = np.zeros(robot.n_arm), np.zeros(robot.n_wheels), np.zeros(3)
     vmax = np.asarray(robot.arm.velocity_max)
     rejected = 0
     t = 0.0
@@ -121,7 +126,7 @@ def test_mutation_fuzz_through_the_validators_and_the_controller() -> None:
         if i % 4 == 3:  # one control tick per four messages, with the true state
             core.on_state(StateMsg(robot=ROBOT, seq=i + 1, stamp=t, t=t, q_base=q_base.tolist(),
                                    q_arm=q_arm.tolist(), v_arm=v_arm.tolist(), wheel_speeds=wheels.tolist(),
-                                   base_true=q_base.tolist(), ee_true=[0.0] * 3, tau=[0.0] * 7,
+                                   base_true=q_base.tolist(), ee_true=[0.0] * 3, tau=[0.0] * robot.n_arm,
                                    contact_force=[0.0] * 3, instance="sim"), t)
             cmd = core.tick(t)
             assert cmd is not None
@@ -161,3 +166,25 @@ def test_huge_payload_is_rejected_before_decoding() -> None:
     big = msgspec.msgpack.encode(SetpointMsg(robot=ROBOT, seq=1, stamp=0.0, x=[0.5] * 20_000, source="op"))
     assert v(big) is None and v.rejected == Counter({"size": 1})
     assert "bytes exceeds" in v.last_rejection
+
+
+@pytest.mark.parametrize("base", ["diff_drive", "fixed"])
+def test_mutations_for_another_robot(tmp_path, base: str) -> None:  # type: ignore[no-untyped-def]
+    """The templates and validators take the robot's sizes: the valid templates of a Gen3 on
+    another base pass its validators, and whatever else passes has its lengths."""
+    from service_robots import gen3_file
+
+    robot = w.load_robot_config(gen3_file(tmp_path, base))
+    na, nw = robot.n_arm, robot.n_wheels
+    lim = ServiceConfig().validation
+    vals = {k: Validator(t, "r", lim, n_arm=na, n_wheels=nw) for k, t in TYPES.items()}
+    mut = Mutator("r", seed=3, config=robot)
+    for key, v in vals.items():
+        assert v(msgspec.msgpack.encode(mut.templates[key])) is not None, (key, v.last_rejection)
+    for i in range(4000):
+        key = list(TYPES)[i % 4]
+        msg = vals[key](mut.payload(key)[0])
+        if msg is not None:
+            for name, n in (("q_arm", na), ("v_arm", na), ("tau", na), ("arm_rates", na), ("wheel_speeds", nw)):
+                if (vec := getattr(msg, name, None)) is not None:
+                    assert len(vec) == n, (name, vec)

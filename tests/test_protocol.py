@@ -21,6 +21,11 @@ from wmm_qp_service.protocol import (
 from wmm_qp_service.validation import Reject, Rejected, Validator
 
 LIM = ValidationConfig()
+N_ARM, N_WHEELS = 7, 4  # the messages below are the Gen3's (7 joints, 4 Mecanum wheels)
+
+
+def validator(cls: type, robot: str = "r1", n_arm: int = N_ARM, n_wheels: int = N_WHEELS) -> Validator:
+    return Validator(cls, robot, LIM, n_arm=n_arm, n_wheels=n_wheels)
 
 
 def state(**kw: object) -> StateMsg:
@@ -47,7 +52,7 @@ def cmd(**kw: object) -> CommandMsg:
 
 def check(cls: type, data: bytes) -> Reject | None:
     try:
-        Validator(cls, "r1", LIM).check(data)
+        validator(cls).check(data)
     except Rejected as e:
         return e.reason
     return None
@@ -61,7 +66,7 @@ def test_valid_messages_round_trip() -> None:
         (ModeMsg, ModeMsg(robot="r1", mode="dm_nullspace", direction=[0, 0, 1.0])),
         (CommandMsg, cmd()),
     ]:
-        v = Validator(cls, "r1", LIM)
+        v = validator(cls)
         assert v(encode(msg)) == msg
         assert v.accepted == 1 and not v.rejected
 
@@ -113,7 +118,7 @@ def test_rejections(cls: type, payload: bytes, reason: Reject) -> None:
 
 
 def test_rejections_are_counted_by_reason() -> None:
-    v = Validator(SetpointMsg, "r1", LIM)
+    v = validator(SetpointMsg)
     assert v(b"\xc1junk") is None
     assert v(encode(sp(robot="x", x=[0.6, 0, 0.5]))) is None
     assert v(encode(sp(robot="x", x=[0.6, 0, 0.5]))) is None
@@ -124,7 +129,7 @@ def test_rejections_are_counted_by_reason() -> None:
 @settings(max_examples=300, deadline=None)
 @given(st.binary(max_size=200))
 def test_random_bytes_never_raise_and_never_pass(data: bytes) -> None:
-    v = Validator(SetpointMsg, "r1", LIM)
+    v = validator(SetpointMsg)
     out = v(data)  # must not raise
     assert out is None or isinstance(out, SetpointMsg)
     assert v.accepted + sum(v.rejected.values()) == 1
@@ -141,7 +146,7 @@ def test_box_message_round_trips_and_is_checked() -> None:
     from wmm_qp_service.protocol import BoxMsg
 
     ok = BoxMsg(robot="r1", seq=1, stamp=1.0, mass=26.0, mu=0.65, face_x=0.66, center_y=-0.02)
-    assert Validator(BoxMsg, "r1", LIM).check(encode(ok)) == ok
+    assert validator(BoxMsg).check(encode(ok)) == ok
     assert Keys.of("wmm", "r1").sim_box == "wmm/r1/sim/box"
     other = BoxMsg(robot="r2", seq=1, stamp=1.0, mass=26.0, mu=0.65, face_x=0.66, center_y=0.0)
     assert check(BoxMsg, encode(other)) == Reject.ROBOT
@@ -173,3 +178,102 @@ def test_a_command_missing_a_required_field_is_rejected(field: str) -> None:
 def test_keys_of_the_control_lease() -> None:
     k = Keys.of("wmm", "r1")
     assert k.lease("abc") == "wmm/r1/lease/abc" and k.lease_all == "wmm/r1/lease/*"
+
+
+# ---------------------------------------------------------------- the robot's vector lengths
+@pytest.mark.parametrize("base, n_wheels", [("diff_drive", 2), ("fixed", 0)])
+def test_joint_and_wheel_vectors_have_the_robots_lengths(tmp_path, base: str, n_wheels: int) -> None:  # type: ignore[no-untyped-def]
+    """A Gen3 on another base: its sizes are accepted, the Mecanum Gen3's are rejected (size)."""
+    from service_robots import gen3_file
+
+    import wmm_qp as w
+
+    robot = w.load_robot_config(gen3_file(tmp_path, base))
+    assert (robot.n_arm, robot.n_wheels) == (7, n_wheels)
+    na, nw = robot.n_arm, robot.n_wheels
+    ok_state = state(wheel_speeds=[0.0] * nw)
+    ok_cmd = cmd(wheel_speeds=[0.1] * nw)
+    for cls, good, bad in ((StateMsg, ok_state, state()), (CommandMsg, ok_cmd, cmd())):
+        v = validator(cls, n_arm=na, n_wheels=nw)
+        assert v.check(encode(good)) == good
+        with pytest.raises(Rejected) as e:
+            v.check(encode(bad))  # 4 wheels: the Mecanum robot's
+        assert e.value.reason == Reject.SIZE and "wheel_speeds has 4 entries, expected" in e.value.detail
+
+
+def test_a_six_joint_robots_messages(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """The UR5 on an omni base (6 joints, 3 wheels): every joint vector has 6 entries."""
+    from service_robots import shipped
+
+    robot = shipped("ur5_omni")
+    na, nw = robot.n_arm, robot.n_wheels
+    assert (na, nw) == (6, 3)
+    good = state(q_arm=[0.1] * na, v_arm=[0.0] * na, tau=[0.0] * na, wheel_speeds=[0.0] * nw)
+    v = validator(StateMsg, n_arm=na, n_wheels=nw)
+    assert v.check(encode(good)) == good
+    for field, n in (("q_arm", 7), ("v_arm", 7), ("tau", 7), ("wheel_speeds", 4)):
+        assert check_sized(StateMsg, encode(msgspec.structs.replace(good, **{field: [0.0] * n})), na, nw) \
+            == Reject.SIZE, field
+    c = cmd(arm_rates=[0.1] * na, wheel_speeds=[0.0] * nw)
+    assert check_sized(CommandMsg, encode(c), na, nw) is None
+    assert check_sized(CommandMsg, encode(cmd()), na, nw) == Reject.SIZE  # the Gen3's 7 + 4
+
+
+def check_sized(cls: type, data: bytes, n_arm: int, n_wheels: int) -> Reject | None:
+    try:
+        validator(cls, n_arm=n_arm, n_wheels=n_wheels).check(data)
+    except Rejected as e:
+        return e.reason
+    return None
+
+
+def test_a_validator_of_joint_vectors_needs_the_robots_sizes() -> None:
+    from wmm_qp_service.protocol import TelemetryMsg
+
+    for cls in (StateMsg, CommandMsg, TelemetryMsg):
+        with pytest.raises(ValueError, match="n_arm and n_wheels"):
+            Validator(cls, "r1", LIM)
+    Validator(SetpointMsg, "r1", LIM)  # task-space messages do not
+    Validator(ModeMsg, "r1", LIM)
+
+
+def test_telemetry_is_checked_against_the_robots_sizes() -> None:
+    from wmm_qp_service.protocol import TelemetryMsg
+
+    tel = TelemetryMsg(robot="r1", seq=3, stamp=1.0, t=0.1, mode="track", x=[0.6, 0.0, 0.5],
+                       x_d=[0.6, 0.0, 0.5], xd_d=[0.0] * 3, ee_true=[math.nan] * 3, ee_error=math.nan,
+                       wheel_speeds=[0.0] * 2, arm_rates=[0.0] * 6, status="ok", dm=1.0, task_error=0.0,
+                       tick_us=50.0)
+    assert check_sized(TelemetryMsg, encode(tel), 6, 2) is None
+    assert check_sized(TelemetryMsg, encode(tel), 7, 4) == Reject.SIZE
+    assert check_sized(TelemetryMsg, encode(msgspec.structs.replace(tel, mode="fly")), 6, 2) == Reject.MODE
+
+
+# ---------------------------------------------------------------- the setpoint's orientation
+@pytest.mark.parametrize(
+    ("fields", "reason"),
+    [
+        ({"q": [0.0, 0.0, 0.0, 1.0]}, None),
+        ({"q": [0.0, 0.0, 0.0, 2.0], "w": [0.0, 0.0, 0.5]}, None),  # normalised by the controller
+        ({"w": [0.1, 0.0, 0.0]}, None),
+        ({"q": [0.0, 0.0, 1.0]}, Reject.SIZE),
+        ({"q": [0.0, 0.0, 0.0, 0.0]}, Reject.RANGE),
+        ({"q": [1e-12, 0.0, 0.0, 0.0]}, Reject.RANGE),
+        ({"q": [0.0, 0.0, 0.0, math.nan]}, Reject.NON_FINITE),
+        ({"q": [0.0, 0.0, 0.0, 1e300]}, Reject.RANGE),
+        ({"w": [0.0, 0.0]}, Reject.SIZE),
+        ({"w": [0.0, math.inf, 0.0]}, Reject.NON_FINITE),
+        ({"w": [20.0, 0.0, 0.0]}, Reject.RANGE),
+    ],
+)
+def test_the_setpoints_orientation_is_checked(fields: dict[str, list[float]], reason: Reject | None) -> None:
+    assert check(SetpointMsg, encode(sp(**fields))) == reason
+
+
+def test_a_setpoint_without_orientation_decodes_as_before() -> None:
+    """``q`` and ``w`` are optional fields of version 2: a setpoint of an older sender (no such
+    keys on the wire) is accepted, with both None."""
+    data = msgspec.to_builtins(sp())
+    del data["q"], data["w"]
+    out = validator(SetpointMsg).check(msgspec.msgpack.encode(data))
+    assert out.q is None and out.w is None and out.x == [0.6, 0.0, 0.5]

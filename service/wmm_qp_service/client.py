@@ -35,7 +35,8 @@ class Client:
     """A Zenoh client of one robot's daemon (use as a context manager).
 
     Args:
-        svc: service config (prefix, robot id, endpoints).
+        svc: service config (prefix, robot id, endpoints); an open robot id (``""``) is the
+            default robot file's name (:meth:`~.config.ServiceConfig.resolved`).
         name: this client's name (its liveliness token is ``alive/<name>``). Its setpoints
             carry ``source = "<name>-<random>"`` (:attr:`source`): one operator holds the
             daemon's setpoint stream at a time.
@@ -43,6 +44,7 @@ class Client:
     """
 
     def __init__(self, svc: ServiceConfig, name: str = "client", telemetry: bool = False) -> None:
+        svc = svc.resolved()
         self.svc = svc
         self.name = name
         self.source = f"{name}-{secrets.token_hex(4)}"
@@ -93,11 +95,15 @@ class Client:
         return self._seq
 
     # ------------------------------------------------------------------ commands
-    def send_setpoint(self, x: Sequence[float] | Any, xd: Sequence[float] | Any | None = None) -> None:
-        """Stream an EE target x [m] (world); xd [m/s] its velocity (None: the daemon estimates)."""
+    def send_setpoint(self, x: Sequence[float] | Any, xd: Sequence[float] | Any | None = None,
+                      q: Sequence[float] | Any | None = None, w: Sequence[float] | Any | None = None) -> None:
+        """Stream an EE target x [m] (world); xd [m/s] its velocity (None: the daemon estimates);
+        with the pose task, q the target orientation (quaternion [x, y, z, w], world; None: keep
+        the daemon's) and w [rad/s] its angular velocity (None: 0)."""
         msg = SetpointMsg(robot=self.svc.robot, seq=self._next(), stamp=time.time(),
                           x=[float(v) for v in x], xd=None if xd is None else [float(v) for v in xd],
-                          source=self.source)
+                          source=self.source, q=None if q is None else [float(v) for v in q],
+                          w=None if w is None else [float(v) for v in w])
         self._pub_sp.put(encode(msg))
 
     def set_mode(self, mode: str, direction: Sequence[float] | None = None) -> None:

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
-from wmm_qp import ConfigError, default_config_dir
+from wmm_qp import ConfigError, RobotConfig, default_config_dir, default_robot_file
 from wmm_qp.config import TomlTable, read_toml
 
 _NAME = re.compile(r"^[A-Za-z0-9_\-]+(/[A-Za-z0-9_\-]+)*$")
@@ -109,6 +109,7 @@ class ValidationConfig:
         position_abs_max: [m] max |x|, |y| of a setpoint.
         z_min, z_max: [m] range of a setpoint's z.
         speed_max: [m/s] max norm of a setpoint's feed-forward velocity.
+        angular_speed_max: [rad/s] max norm of a setpoint's angular velocity ``w`` (pose task).
         state_abs_max: max |value| of any entry of a state message.
         command_abs_max: [rad/s] max |entry| of a command message.
         payload_max_bytes: larger payloads are rejected (``size``) before they are decoded
@@ -119,6 +120,7 @@ class ValidationConfig:
     z_min: float = -0.5
     z_max: float = 2.0
     speed_max: float = 2.0
+    angular_speed_max: float = 10.0
     state_abs_max: float = 1e3
     command_abs_max: float = 1e2
     payload_max_bytes: int = 4096
@@ -129,11 +131,12 @@ class ServiceConfig:
     """Everything the daemon, the sim's adapter and clients agree on.
 
     Attributes:
-        robot: robot id carried by every message.
+        robot: robot id carried by every message; "" (the default) = the robot description's
+            ``name`` (:meth:`with_robot`), so each robot file has its own keys.
         prefix: first segment(s) of every key expression (``<prefix>/<robot>/...``).
     """
 
-    robot: str = "wmm"
+    robot: str = ""
     prefix: str = "wmm"
     zenoh: ZenohConfig = field(default_factory=ZenohConfig)
     loop: LoopConfig = field(default_factory=LoopConfig)
@@ -147,6 +150,34 @@ class ServiceConfig:
             if isinstance(changes.get(name), dict):
                 changes[name] = replace(getattr(self, name), **changes[name])
         return replace(self, **changes)
+
+    def with_robot(self, robot: RobotConfig) -> ServiceConfig:
+        """This config with the robot id filled from the robot description when it is open
+        (``robot = ""``); an id the service config or ``--robot`` set is kept.
+
+        Raises:
+            ConfigError: the robot's name is not a key segment (letters, digits, _ -).
+        """
+        if self.robot:
+            return self
+        if not _NAME.match(robot.name):
+            raise ConfigError(robot.path or "<robot config>", "name",
+                              f"must be a key segment (letters, digits, _ -), got {robot.name!r}")
+        return replace(self, robot=robot.name)
+
+    def resolved(self) -> ServiceConfig:
+        """This config with an open robot id filled from the default robot file's ``name``
+        (what a client uses when it is given no robot description)."""
+        return self if self.robot else replace(self, robot=default_robot_id())
+
+
+def default_robot_id() -> str:
+    """The ``name`` of the default robot file (:func:`wmm_qp.default_robot_file`), read without
+    resolving its URDF; "wmm" when it sets none (the default of :func:`wmm_qp.load_robot_config`)."""
+    name = read_toml(default_robot_file()).get("name", "wmm")
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise ConfigError(default_robot_file(), "name", "must be a non-empty key segment (letters, digits, _ -)")
+    return name
 
 
 def _section(root: TomlTable, name: str, cls: Any, base: Any) -> Any:
@@ -187,7 +218,9 @@ def load_service_config(path: Path | str | None = None) -> ServiceConfig:
     data = root.data
     base = ServiceConfig()
     for k in ("robot", "prefix"):
-        v = data.get(k, getattr(base, k))
+        if k not in data:
+            continue
+        v = data[k]
         if not isinstance(v, str) or not _NAME.match(v):
             raise ConfigError(p, k, "must be a non-empty key segment (letters, digits, _ -)")
     cfg = ServiceConfig(

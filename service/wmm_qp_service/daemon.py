@@ -29,6 +29,7 @@ import numpy as np
 import zenoh
 
 import wmm_qp as w
+from wmm_qp.tasks import rotation_to_quat
 
 from .config import ServiceConfig
 from .keys import Keys
@@ -43,7 +44,7 @@ from .protocol import (
     encode,
 )
 from .rate_loop import RateLoop
-from .smoother import SetpointSmoother, VelocityEstimator
+from .smoother import OrientationTarget, SetpointSmoother, VelocityEstimator
 from .transport import ROLE_DAEMON, open_session
 from .validation import Validator
 
@@ -145,8 +146,14 @@ class ControlCore:
     The :class:`Daemon` feeds it validated messages and publishes what it returns; tests
     can drive it directly with a fake clock.
 
+    With the pose task (``ctl_cfg.task.kind = "pose"``) the reference carries an orientation
+    target too (:class:`~.smoother.OrientationTarget`): latched from the EE's orientation
+    wherever the position target is latched (a mode change, hold, after a safe stop), and
+    set by the setpoints' ``q`` and ``w`` in the modes that follow setpoints. With the position
+    task a setpoint's orientation is ignored and counted (``orientation_ignored``).
+
     Args:
-        svc: service config.
+        svc: service config (an open robot id is the robot's name).
         ctl_cfg: controller config (its rate is replaced by ``svc.loop.rate_hz``).
         robot: robot config.
         kind: controller kind (qp, paper, traditional); None = ``ctl_cfg.kind``.
@@ -154,6 +161,7 @@ class ControlCore:
 
     def __init__(self, svc: ServiceConfig, ctl_cfg: w.ControllerConfig, robot: w.RobotConfig,
                  kind: str | None = None) -> None:
+        svc = svc.with_robot(robot)
         self.svc = svc
         # Bounds (13) brake from where the joints can be when the next command (or the robot's
         # own command timeout) takes over: over a transport that is longer than in-process.
@@ -173,6 +181,9 @@ class ControlCore:
         sm = svc.smoothing
         self.smoother = SetpointSmoother(self.dt, sm.v_max, sm.a_max, sm.j_max)
         self.estimator = VelocityEstimator(v_max=sm.v_max)
+        self.pose = self.cfg.task.kind == "pose"
+        self.orient = OrientationTarget(self.dt)  # the pose task's orientation target
+        self.orientation_ignored = 0  # setpoints whose orientation the position task ignored
         self.mode = w.Mode.HOLD
         self.direction: np.ndarray | None = None
         self.state: w.RobotState | None = None
@@ -377,8 +388,12 @@ class ControlCore:
                 return False
         self.operator_time, self.operator_stamp = now, msg.stamp
         self.setpoint_time = now
+        if not self.pose and (msg.q is not None or msg.w is not None):
+            self.orientation_ignored += 1  # the position task (r = 3) has no orientation target
         if self.mode not in (w.Mode.TRACK, w.Mode.DM_NULLSPACE) or self.need_latch:
             return True
+        if self.pose:
+            self.orient.set_target(msg.q, msg.w)
         x = np.asarray(msg.x, dtype=float)
         if msg.xd is not None:  # a scripted trajectory: its own feed-forward velocity
             self.smoother.set_target(x, np.asarray(msg.xd, dtype=float))
@@ -412,16 +427,25 @@ class ControlCore:
         self.faults[kind or what.split(" (")[0]] += 1
 
     def _latch(self) -> None:
-        """Re-latch: the smoother restarts from the current EE position and velocity."""
+        """Re-latch: the smoother restarts from the current EE position and velocity (and,
+        with the pose task, the orientation target from the EE's orientation)."""
         assert self.state is not None
         st = self.state
         kin = self.model.kinematics(st.q_base, st.q_arm)
         xdot = kin.J @ np.concatenate([st.wheel_speeds, st.v_arm])
         self.smoother.reset(kin.x, xdot)
+        if self.pose:
+            self._latch_orientation()
         self.estimator.reset()
         self.ctl.reset()
         self.need_latch = False
         self.ref_valid = False
+
+    def _latch_orientation(self) -> None:
+        """The orientation target := the EE's orientation now (``model.ee_pose``), at rest."""
+        assert self.state is not None
+        _, R = self.model.ee_pose(self.state.q_base, self.state.q_arm)
+        self.orient.reset(rotation_to_quat(R))
 
     # ------------------------------------------------------------------ one tick
     def tick(self, now: float) -> w.Command | None:
@@ -470,19 +494,30 @@ class ControlCore:
             self.smoother.bring_to_rest()
         if self.mode == w.Mode.HOLD and not self.smoother.resting:
             self.smoother.bring_to_rest()
+        if self.pose and not self.orient.resting and (
+                self.mode not in (w.Mode.TRACK, w.Mode.DM_NULLSPACE)
+                or now - self.setpoint_time > wd.setpoint_timeout):
+            self.orient.bring_to_rest()
         # ground-truth error of the state (the previous tick's command) against its target
         if self.ref_valid and self.state_msg is not None and self.mode != w.Mode.DM_CARTESIAN:
             self.ee_error = float(np.linalg.norm(np.asarray(self.state_msg.ee_true) - self.ref.x_d))
         else:
             self.ee_error = math.nan
         x_d, xd_d = self.smoother.step()
-        self.ref = w.Reference(mode=self.mode, x_d=x_d, xd_d=xd_d, direction=self.direction)
+        if self.pose:
+            quat_d, omega_d = self.orient.step()
+            self.ref = w.Reference(mode=self.mode, x_d=x_d, xd_d=xd_d, direction=self.direction,
+                                   quat_d=quat_d, omega_d=omega_d)
+        else:
+            self.ref = w.Reference(mode=self.mode, x_d=x_d, xd_d=xd_d, direction=self.direction)
         self.ref_valid = True
         cmd = self.ctl.step(self._anchored(), self.ref)
         self.anchor_on_command = True
         if cmd.status == w.Status.SAFE_STOP:
             self._fault(f"controller: {cmd.reason}")
             self.smoother.reset(cmd.x if np.isfinite(cmd.x).all() else x_d)
+            if self.pose:
+                self._latch_orientation()
         self.cmd = cmd
         return cmd
 
@@ -578,17 +613,34 @@ class ControlCore:
             faults=dict(self.faults), lease=self.lease, lease_holder=self.lease_holder,
             sim_instance=self.instance, operator=self.operator,
             operator_conflicts=self.operator_conflicts, resume_needed=self.resume_needed,
-            round_trip_ms=self.round_trip * 1e3, protective_stop=bool(self.protective))
+            round_trip_ms=self.round_trip * 1e3, protective_stop=bool(self.protective),
+            quat_d=self.orient.quat.tolist() if self.pose else [],
+            orientation_ignored=self.orientation_ignored)
 
     def config_dict(self) -> dict[str, Any]:
         """The running configuration as plain data (for the ``info`` queryable)."""
-        c = self.cfg
+        c, r = self.cfg, self.robot
+        t = c.task
         return {
             "service": _plain(asdict(self.svc)),
             "controller": {"kind": self.kind, "rate_hz": c.rate_hz, "K_x": c.K_x, "alpha": c.alpha,
-                           "k_C": c.k_C, "k_N": c.k_N, "W": c.W.tolist(),
-                           "direction": c.direction.tolist(), "solver": c.qp.solver},
+                           "k_C": c.k_C, "k_N": c.k_N, "W": c.weights_for(r).tolist(),
+                           "direction": c.direction.tolist(), "solver": c.qp.solver,
+                           "task": {"kind": t.kind, "r": t.r, "K_R": t.K_R,
+                                    "orientation_weight": t.orientation_weight,
+                                    "angular_speed_max": t.angular_speed_max,
+                                    "angular_recovery_speed": t.angular_recovery_speed}},
+            "robot": {"name": r.name, "file": str(r.path) if r.path is not None else "",
+                      "ee_frame": r.arm.ee_frame, "joint_types": list(r.arm.joint_types),
+                      "start": r.arm.start.tolist()},
         }
+
+    def info(self, loop: RateLoop, rejected: Counter[str], accepted: dict[str, int]) -> InfoMsg:
+        """The ``info`` reply: status, the robot description's names and sizes, the configuration."""
+        return InfoMsg(robot=self.svc.robot, stamp=time.time(), status=self.status(loop, rejected, accepted),
+                       config=self.config_dict(), joints=list(self.robot.arm.joints),
+                       wheels=list(self.model.base.wheel_names), base_kind=self.model.base.kind,
+                       task=self.cfg.task.kind, n_arm=self.model.n_arm, n_wheels=self.model.n_wheels)
 
 
 def _plain(d: Any) -> Any:
@@ -605,7 +657,7 @@ class Daemon:
     """The control daemon over Zenoh (``wmm-qp serve``).
 
     Args:
-        svc: service config.
+        svc: service config (an open robot id is the robot's name).
         ctl_cfg: controller config.
         robot: robot config.
         kind: controller kind; None = the controller config's.
@@ -620,11 +672,12 @@ class Daemon:
     def __init__(self, svc: ServiceConfig, ctl_cfg: w.ControllerConfig, robot: w.RobotConfig,
                  kind: str | None = None, wait_lease: bool = False) -> None:
         self.wait_lease = wait_lease
+        svc = svc.with_robot(robot)
         self.svc = svc
         self.core = ControlCore(svc, ctl_cfg, robot, kind)
         self.keys = Keys.of(svc.prefix, svc.robot)
         lim = svc.validation
-        self.v_state = Validator(StateMsg, svc.robot, lim)
+        self.v_state = Validator(StateMsg, svc.robot, lim, n_arm=robot.n_arm, n_wheels=robot.n_wheels)
         self.v_mode = Validator(ModeMsg, svc.robot, lim)
         self.v_setpoint = Validator(SetpointMsg, svc.robot, lim)
         self.loop = RateLoop(svc.loop.rate_hz, svc.loop.spin_us * 1e-6)
@@ -663,11 +716,8 @@ class Daemon:
         n = 0
         while n < limit and (q := queryable.try_recv()) is not None:
             n += 1
-            info = InfoMsg(robot=self.svc.robot, stamp=time.time(),
-                           status=core.status(self.loop, self.rejected(), self.accepted()),
-                           config=core.config_dict())
             try:
-                q.reply(k.info, encode(info))
+                q.reply(k.info, encode(core.info(self.loop, self.rejected(), self.accepted())))
             except Exception as e:  # a vanished querier must not stop the loop
                 core.last_fault = f"info reply failed: {e}"
         return n

@@ -55,7 +55,7 @@ class Probe:
         self.statuses: list[StatusMsg] = []
         self.misrouted: Counter[str] = Counter()
         """Messages of another type received on the state or status key, by key."""
-        self.robot = w.load_robot_config()
+        self.robot = w.load_robot_config(stack.robot_file)
 
     def close(self) -> None:
         """Close the client's session."""
@@ -124,13 +124,14 @@ class Probe:
     def step_bound_ratio(self, cmd: TelemetryMsg, v_arm: np.ndarray, wheels: np.ndarray, dt: float) -> float:
         """max |cmd − v| / (A·dt) over joints and wheels (≤ 1: inside the acceleration bounds)."""
         a = np.asarray(self.robot.arm.acceleration_max) * dt
-        wa = self.robot.base.wheel_acceleration_max * dt
-        return float(max(np.max(np.abs(np.subtract(cmd.arm_rates, v_arm)) / a),
-                         np.max(np.abs(np.subtract(cmd.wheel_speeds, wheels)) / wa)))
+        wa = np.asarray(self.robot.base.wheel_acceleration_max) * dt
+        ratios = np.concatenate([np.abs(np.subtract(cmd.arm_rates, v_arm)) / a,
+                                 np.abs(np.subtract(cmd.wheel_speeds, wheels)) / wa])  # no wheels: arm only
+        return float(ratios.max())
 
 
 def _moving(st: StateMsg) -> float:
-    return float(max(np.abs(st.v_arm).max(), np.abs(st.wheel_speeds).max()))
+    return float(np.abs(np.concatenate([st.v_arm, st.wheel_speeds])).max())
 
 
 def sim_kill_and_restart(p: Probe, rate_hz: float) -> dict[str, Any]:
@@ -220,8 +221,9 @@ import sys, time
 from wmm_qp_service.client import Client
 from wmm_qp_service.config import load_service_config
 prefix, rate, seconds, x, y, z = sys.argv[1], float(sys.argv[2]), float(sys.argv[3]), *map(float, sys.argv[4:7])
-ep_d, ep_s = sys.argv[7], sys.argv[8]
-svc = load_service_config().with_(prefix=prefix, zenoh={"daemon_endpoint": ep_d, "sim_endpoint": ep_s})
+ep_d, ep_s, robot = sys.argv[7], sys.argv[8], sys.argv[9]
+svc = load_service_config().with_(prefix=prefix, robot=robot,
+                                  zenoh={"daemon_endpoint": ep_d, "sim_endpoint": ep_s})
 with Client(svc, name="flooder") as c:
     c.wait_for_daemon(10.0)
     n, t0 = 0, time.perf_counter()
@@ -261,7 +263,7 @@ def setpoint_flood(p: Probe, factor: float = 10.0, seconds: float = 5.0) -> dict
     svc = p.stack.svc
     base_hz, base_miss, _, _ = window(lambda: time.sleep(seconds))
     argv = [sys.executable, "-c", _FLOODER, svc.prefix, f"{factor * rate}", f"{seconds}",
-            *(f"{v}" for v in x), svc.zenoh.daemon_endpoint, svc.zenoh.sim_endpoint]
+            *(f"{v}" for v in x), svc.zenoh.daemon_endpoint, svc.zenoh.sim_endpoint, svc.robot]
     proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     try:
         time.sleep(2.0)  # the flooder's start-up (imports, session)

@@ -11,6 +11,7 @@ them straight to the validators and the :class:`~.daemon.ControlCore`.
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 import time
 from collections import Counter
@@ -37,23 +38,38 @@ KINDS = ("garbage", "truncated", "bitflip", "type_swap", "non_finite", "huge", "
 _ENC = msgspec.msgpack.Encoder()
 
 
-def templates(robot: str) -> dict[str, dict[str, Any]]:
-    """One valid message per key, as plain msgpack-able data."""
-    q = list(w.PAPER_START_Q_ARM)
+def templates(robot: str, config: w.RobotConfig | None = None) -> dict[str, dict[str, Any]]:
+    """One valid message per key, as plain msgpack-able data.
+
+    Args:
+        robot: the robot id they carry.
+        config: the robot description (sizes, start configuration); None: the default robot.
+    """
+    config = config if config is not None else _default_robot()
+    model = w.WmmModel(config)
+    q = config.arm.start.tolist()
+    na, nw = config.n_arm, config.n_wheels
+    x0 = model.ee_position(np.zeros(3), config.arm.start).tolist()
     msgs: dict[str, msgspec.Struct] = {
         "state": StateMsg(robot=robot, seq=1, stamp=time.time(), t=1.0, q_base=[0.0] * 3, q_arm=q,
-                          v_arm=[0.0] * 7, wheel_speeds=[0.0] * 4, base_true=[0.0] * 3,
-                          ee_true=[0.650, -0.0249, 0.492], tau=[0.0] * 7, contact_force=[0.0] * 3,
+                          v_arm=[0.0] * na, wheel_speeds=[0.0] * nw, base_true=[0.0] * 3,
+                          ee_true=x0, tau=[0.0] * na, contact_force=[0.0] * 3,
                           box_position=0.0, violations={"position": 0}, instance="fuzz-sim"),
-        "setpoint": SetpointMsg(robot=robot, seq=1, stamp=time.time(), x=[0.65, -0.02, 0.49],
-                                xd=[0.0, 0.01, 0.0], source="fuzz"),
+        "setpoint": SetpointMsg(robot=robot, seq=1, stamp=time.time(), x=[x0[0], x0[1] + 0.01, x0[2]],
+                                xd=[0.0, 0.01, 0.0], source="fuzz", q=[0.0, 0.0, 0.0, 1.0],
+                                w=[0.0, 0.0, 0.1]),
         "mode": ModeMsg(robot=robot, seq=1, stamp=time.time(), mode="hold", direction=[1.0, 0.0, 0.0]),
-        "cmd": CommandMsg(robot=robot, seq=1, stamp=time.time(), wheel_speeds=[0.0] * 4,
-                          arm_rates=[0.0] * 7, lease="fuzz", instance="fuzz-sim", period=0.002, stream=1),
+        "cmd": CommandMsg(robot=robot, seq=1, stamp=time.time(), wheel_speeds=[0.0] * nw,
+                          arm_rates=[0.0] * na, lease="fuzz", instance="fuzz-sim", period=0.002, stream=1),
     }
     out = {k: msgspec.to_builtins(m) for k, m in msgs.items()}
     out["info"] = {"query": "status"}
     return out
+
+
+@functools.cache
+def _default_robot() -> w.RobotConfig:
+    return w.load_robot_config()
 
 
 class Mutator:
@@ -62,12 +78,13 @@ class Mutator:
     Args:
         robot: the robot id the valid templates carry.
         seed: random seed.
+        config: the robot description of the templates (None: the default robot).
     """
 
-    def __init__(self, robot: str, seed: int = 0) -> None:
+    def __init__(self, robot: str, seed: int = 0, config: w.RobotConfig | None = None) -> None:
         self.rng = np.random.default_rng(seed)
         self.robot = robot
-        self.templates = templates(robot)
+        self.templates = templates(robot, config)
 
     def _choice(self, seq: Any) -> Any:
         return seq[int(self.rng.integers(len(seq)))]
@@ -151,6 +168,8 @@ class Mutator:
         if key == "setpoint":
             msg["x"] = (np.array(msg["x"]) + r.normal(0, 0.01, 3)).tolist()
             msg["xd"] = None if r.random() < 0.5 else r.normal(0, 0.05, 3).tolist()
+            msg["q"] = None if r.random() < 0.5 else r.normal(0, 1, 4).tolist()
+            msg["w"] = None if r.random() < 0.5 else r.normal(0, 0.2, 3).tolist()
         elif key == "mode":
             msg["mode"] = self._choice(["hold", "track", "dm_cartesian", "dm_nullspace"])
             msg["direction"] = None if r.random() < 0.5 else r.normal(0, 1, 3).tolist()
@@ -205,7 +224,8 @@ def _delta(a: dict[str, int], b: dict[str, int]) -> dict[str, int]:
 
 def fuzz_wire(client: Any, n: int, rate_hz: float = 4000.0, seed: int = 0,
               alive: Callable[[], int] | None = None, query_share: float = 0.01,
-              progress: Callable[[int], None] | None = None) -> FuzzReport:
+              progress: Callable[[int], None] | None = None,
+              robot: w.RobotConfig | None = None) -> FuzzReport:
     """Throw ``n`` hostile payloads at a running stack through ``client`` (a :class:`~.client.Client`).
 
     Keys are drawn uniformly from :data:`KEYS` (``info``: a query with a hostile payload and
@@ -220,8 +240,9 @@ def fuzz_wire(client: Any, n: int, rate_hz: float = 4000.0, seed: int = 0,
         alive: returns how many of the stack's processes are running (None: not checked).
         query_share: share of the messages that are ``info`` queries.
         progress: called every 10,000 messages with the count sent.
+        robot: the stack's robot description (the valid templates' sizes); None: the default.
     """
-    mut = Mutator(client.svc.robot, seed)
+    mut = Mutator(client.svc.robot, seed, robot)
     rep = FuzzReport()
     before = client.wait_for_daemon(10.0)
     n_alive = alive() if alive is not None else 0

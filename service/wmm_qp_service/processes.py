@@ -15,6 +15,8 @@ import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import wmm_qp as w
+
 from .config import ServiceConfig, load_service_config
 
 
@@ -25,9 +27,13 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def isolated_config(base: ServiceConfig | None = None, prefix: str | None = None) -> ServiceConfig:
-    """A service config with a unique key prefix and fresh loopback ports."""
+def isolated_config(base: ServiceConfig | None = None, prefix: str | None = None,
+                    robot: w.RobotConfig | None = None) -> ServiceConfig:
+    """A service config with a unique key prefix and fresh loopback ports; with ``robot``, its
+    name is the robot id (an isolated run of that robot, whatever id the service config sets)."""
     base = base or load_service_config()
+    if robot is not None:
+        base = base.with_(robot="").with_robot(robot)
     return base.with_(prefix=prefix or f"wmmrun{uuid.uuid4().hex[:10]}",
                       zenoh={"daemon_endpoint": f"tcp/127.0.0.1:{free_port()}",
                              "sim_endpoint": f"tcp/127.0.0.1:{free_port()}"})
@@ -42,9 +48,10 @@ def log_folder(path: str | Path | None, tag: str) -> Path:
     return folder
 
 
-def _service_args(svc: ServiceConfig) -> list[str]:
-    return ["--prefix", svc.prefix, "--robot", svc.robot,
-            "--daemon-endpoint", svc.zenoh.daemon_endpoint, "--sim-endpoint", svc.zenoh.sim_endpoint]
+def _service_args(svc: ServiceConfig, robot_file: Path | None) -> list[str]:
+    out = ["--prefix", svc.prefix, "--robot", svc.robot,
+           "--daemon-endpoint", svc.zenoh.daemon_endpoint, "--sim-endpoint", svc.zenoh.sim_endpoint]
+    return out + (["--robot-config", str(robot_file)] if robot_file is not None else [])
 
 
 @dataclass
@@ -52,9 +59,11 @@ class Stack:
     """A sim and a daemon process (a context manager that always stops them).
 
     Attributes:
-        svc: the config both run with.
+        svc: the config both run with (an open robot id is filled from the robot file's name,
+            so that clients of ``svc`` find the processes).
         rate_hz: [Hz] daemon rate.
         log_dir: where their stderr goes (None: discarded).
+        robot_file: the robot description both get (``--robot-config``); None: the default.
     """
 
     svc: ServiceConfig
@@ -62,7 +71,13 @@ class Stack:
     log_dir: Path | None = None
     extra_daemon_args: list[str] = field(default_factory=list)
     extra_sim_args: list[str] = field(default_factory=list)
+    robot_file: Path | None = None
     procs: dict[str, subprocess.Popen[bytes]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not self.svc.robot:
+            self.svc = (self.svc.resolved() if self.robot_file is None
+                        else self.svc.with_robot(w.load_robot_config(self.robot_file)))
 
     def _spawn(self, name: str, argv: list[str]) -> subprocess.Popen[bytes]:
         err = subprocess.DEVNULL if self.log_dir is None else open(self.log_dir / f"{name}.log", "ab")  # noqa: SIM115
@@ -74,12 +89,12 @@ class Stack:
 
     def start_sim(self) -> subprocess.Popen[bytes]:
         """Start (or restart) the sim."""
-        return self._spawn("sim", ["sim", *_service_args(self.svc), *self.extra_sim_args])
+        return self._spawn("sim", ["sim", *_service_args(self.svc, self.robot_file), *self.extra_sim_args])
 
     def start_daemon(self) -> subprocess.Popen[bytes]:
         """Start (or restart) the daemon."""
-        return self._spawn("daemon", ["serve", *_service_args(self.svc), "--rate", f"{self.rate_hz:g}",
-                                      *self.extra_daemon_args])
+        return self._spawn("daemon", ["serve", *_service_args(self.svc, self.robot_file),
+                                      "--rate", f"{self.rate_hz:g}", *self.extra_daemon_args])
 
     def start(self) -> Stack:
         """Start both."""

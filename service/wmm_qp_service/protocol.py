@@ -4,8 +4,11 @@ Every message is a msgpack map with ``type`` (the schema's tag), ``v`` (protocol
 ``robot`` (the robot id), ``seq`` (sender's counter) and ``stamp`` ([s], sender's
 ``time.time()``), plus its own fields. On receipt all five are required (a message that lacks
 one is rejected, ``schema``), although the Python constructors fill ``type`` and ``v``.
-Vectors are lists of floats with fixed lengths, checked on receipt by
-:mod:`wmm_qp_service.validation`. Units are SI, angles rad. See docs/protocol.md.
+Vectors are lists of floats whose lengths are the robot's (its description's joints and wheels,
+or 3 for task-space vectors), checked on receipt by :mod:`wmm_qp_service.validation`. Joint
+vectors are in the robot description's joint order (``RobotConfig.arm.joints``), wheel vectors
+in its base kind's wheel order (``WmmModel.base.wheel_names``); the daemon's ``info`` reply names
+both. Units are SI, angles rad (a prismatic joint's values are m, m/s). See docs/protocol.md.
 """
 
 from __future__ import annotations
@@ -16,7 +19,9 @@ import msgspec
 
 PROTOCOL_VERSION = 2
 """Bumped on any incompatible change of a schema below (2: the sim instance, the control lease,
-the setpoint's source and the command's period and state seq are required fields)."""
+the setpoint's source and the command's period and state seq are required fields). Optional
+fields with a default may be added within a version (2 gained the setpoint's ``q`` and ``w``,
+the status's ``quat_d`` and ``orientation_ignored``, and the info reply's robot description)."""
 
 
 class _Msg(msgspec.Struct, kw_only=True, forbid_unknown_fields=True, tag_field="type"):
@@ -43,12 +48,12 @@ class StateMsg(_Msg, tag="state", kw_only=True):
     Attributes:
         t: [s] sim time.
         q_base: [m, m, rad] base pose from odometry (what a controller may use).
-        q_arm: [rad] 7 joint angles.
-        v_arm: [rad/s] 7 executed joint rates.
-        wheel_speeds: [rad/s] 4 executed wheel speeds (FL, FR, RL, RR).
+        q_arm: [rad or m] n_arm joint values (the robot description's joint order).
+        v_arm: [rad/s or m/s] n_arm executed joint rates.
+        wheel_speeds: [rad/s] n_wheels executed wheel speeds (the base kind's wheel order).
         base_true: [m, m, rad] ground-truth base pose (for evaluation only).
         ee_true: [m] ground-truth EE position ("motion capture").
-        tau: [N·m] 7 joint torques from the contact model.
+        tau: [N·m or N] n_arm joint torques from the contact model.
         contact_force: [N] 3 EE contact force.
         box_position: [m] box position along the push axis (nan: no box).
         stalled_joint: the joint (0-based) that stalled the push this step (-1: none).
@@ -94,8 +99,8 @@ class CommandMsg(_Msg, tag="cmd", kw_only=True):
     """daemon → sim: one tick's command, held by the sim until the next.
 
     Attributes:
-        wheel_speeds: [rad/s] 4 wheel speeds (FL, FR, RL, RR).
-        arm_rates: [rad/s] 7 joint rates.
+        wheel_speeds: [rad/s] n_wheels wheel speeds (the base kind's wheel order).
+        arm_rates: [rad/s or m/s] n_arm joint rates (the robot description's joint order).
         status: controller status (ok, saturated, damped, safe_stop).
         lease: the sender's control lease id (the sim applies commands of the holder only).
         instance: the sim instance the command is for (the daemon's latched one).
@@ -145,11 +150,18 @@ class SetpointMsg(_Msg, tag="setpoint", kw_only=True):
         xd: [m/s] the target's velocity (feed-forward, e.g. a scripted trajectory);
             None: the daemon estimates it from the stream.
         source: the sending operator's id (one operator holds the stream at a time).
+        q: target EE orientation, a quaternion [x, y, z, w] (world; normalised by the
+            controller); None: keep the orientation target the daemon has. Used with the pose
+            task only: a daemon running the position task accepts the setpoint, ignores its
+            orientation and counts it (``StatusMsg.orientation_ignored``).
+        w: [rad/s] the orientation target's angular velocity (world; feed-forward); None: 0.
     """
 
     x: list[float]
     xd: list[float] | None = None
     source: str
+    q: list[float] | None = None
+    w: list[float] | None = None
 
 
 class ModeMsg(_Msg, tag="mode"):
@@ -209,6 +221,9 @@ class StatusMsg(_Msg, tag="status"):
         round_trip_ms: [ms] the smallest command → state round trip of the recent window
             (an upper bound of the state's age measured without shared clocks).
         protective_stop: the sim's firmware reports a protective stop.
+        quat_d: the orientation target, a quaternion [x, y, z, w] (world), pose task only
+            ([] with the position task).
+        orientation_ignored: setpoints whose orientation was ignored (the position task).
     """
 
     mode: str
@@ -234,6 +249,8 @@ class StatusMsg(_Msg, tag="status"):
     resume_needed: bool = False
     round_trip_ms: float = float("nan")
     protective_stop: bool = False
+    quat_d: list[float] = msgspec.field(default_factory=list)
+    orientation_ignored: int = 0
 
 
 class TelemetryMsg(_Msg, tag="telemetry"):
@@ -246,7 +263,7 @@ class TelemetryMsg(_Msg, tag="telemetry"):
         x_d, xd_d: [m], [m/s] the reference handed to the controller.
         ee_true: [m] ground-truth EE position from the last state.
         ee_error: [m] ‖ee_true − x_d‖ (tracking modes), nan otherwise.
-        wheel_speeds, arm_rates: [rad/s] the command.
+        wheel_speeds, arm_rates: [rad/s] the command (n_wheels, n_arm).
         status: controller status.
         dm: directional manipulability.
         task_error: [m/s] ‖J v − ẋ_ref‖.
@@ -269,15 +286,27 @@ class TelemetryMsg(_Msg, tag="telemetry"):
 
 
 class InfoMsg(_Msg, tag="info"):
-    """Reply of the ``info`` queryable: status plus the running configuration.
+    """Reply of the ``info`` queryable: status, the robot the daemon drives, the running configuration.
 
     Attributes:
         status: the current status.
-        config: service, controller settings as plain data.
+        config: service, controller and robot settings as plain data.
+        joints: the arm's controlled joints, in the order of every arm vector (``q_arm``,
+            ``v_arm``, ``tau``, ``arm_rates``).
+        wheels: the base's wheels, in the order of every wheel vector (``wheel_speeds``).
+        base_kind: ``mecanum``, ``omni``, ``diff_drive`` or ``fixed``.
+        task: the task kind, ``position`` (r = 3) or ``pose`` (r = 6: setpoints' ``q`` is used).
+        n_arm, n_wheels: the lengths of the arm and wheel vectors (``len(joints)``, ``len(wheels)``).
     """
 
     status: StatusMsg
     config: dict[str, Any] = msgspec.field(default_factory=dict)
+    joints: list[str] = msgspec.field(default_factory=list)
+    wheels: list[str] = msgspec.field(default_factory=list)
+    base_kind: str = ""
+    task: str = ""
+    n_arm: int = -1
+    n_wheels: int = -1
 
 
 _ENC = msgspec.msgpack.Encoder()

@@ -15,9 +15,16 @@ interface with the target's velocity as feed-forward follows it smoothly (0.6 mm
 
 The target's velocity is given by the client (feed-forward of a scripted trajectory) or
 estimated from the stream (:class:`VelocityEstimator`). A stale stream is brought to rest.
+
+The pose task's orientation target (:class:`OrientationTarget`) is not smoothed: a jump of the
+streamed orientation becomes an orientation error whose correction the controller saturates at
+``task.angular_recovery_speed`` inside its bounds (13); between samples it turns at the
+streamed angular velocity.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from numpy.typing import NDArray
@@ -174,3 +181,73 @@ class SetpointSmoother:
             self.acceleration = np.zeros(3)
             self._sync_input()
         return self.position.copy(), self.velocity.copy()
+
+
+def quat_multiply(a: FloatArray, b: FloatArray) -> FloatArray:
+    """a ⊗ b for quaternions [x, y, z, w]."""
+    ax, ay, az, aw = (float(v) for v in a)
+    bx, by, bz, bw = (float(v) for v in b)
+    return np.array([aw * bx + bw * ax + ay * bz - az * by,
+                     aw * by + bw * ay + az * bx - ax * bz,
+                     aw * bz + bw * az + ax * by - ay * bx,
+                     aw * bw - ax * bx - ay * by - az * bz])
+
+
+def quat_exp(rotation_vector: FloatArray) -> FloatArray:
+    """The unit quaternion [x, y, z, w] of a rotation vector θ [rad] (axis · angle)."""
+    t = np.asarray(rotation_vector, dtype=float)
+    angle = float(np.linalg.norm(t))
+    if angle < 1e-12:
+        return np.array([0.5 * t[0], 0.5 * t[1], 0.5 * t[2], 1.0])
+    s = math.sin(0.5 * angle) / angle
+    return np.array([s * t[0], s * t[1], s * t[2], math.cos(0.5 * angle)])
+
+
+def quat_normalised(q: FloatArray) -> FloatArray:
+    """q / |q|, with w ≥ 0 (the same rotation)."""
+    q = np.asarray(q, dtype=float)
+    q = q / float(np.linalg.norm(q))
+    return -q if q[3] < 0 else q
+
+
+class OrientationTarget:
+    """The pose task's orientation target: a quaternion [x, y, z, w] (world) and its angular
+    velocity ω [rad/s] (world), advanced each tick.
+
+    Between samples the target turns at ω: q ← exp(ω Δt) ⊗ q (like the position target, which
+    is extrapolated at its velocity). A stale stream (:meth:`bring_to_rest`) stops turning.
+
+    Args:
+        dt: [s] control period.
+    """
+
+    def __init__(self, dt: float) -> None:
+        self.dt = dt
+        self.quat = np.array([0.0, 0.0, 0.0, 1.0])
+        self.omega = np.zeros(3)
+
+    @property
+    def resting(self) -> bool:
+        """The target does not turn."""
+        return not self.omega.any()
+
+    def reset(self, quat: FloatArray) -> None:
+        """Latch the current EE orientation, at rest."""
+        self.quat = quat_normalised(quat)
+        self.omega = np.zeros(3)
+
+    def set_target(self, quat: FloatArray | None, omega: FloatArray | None = None) -> None:
+        """A new sample: orientation (None: keep the current target) turning at ω (None: 0)."""
+        if quat is not None:
+            self.quat = quat_normalised(quat)
+        self.omega = np.zeros(3) if omega is None else np.asarray(omega, dtype=float).copy()
+
+    def bring_to_rest(self) -> None:
+        """Stop turning (hold the current target)."""
+        self.omega = np.zeros(3)
+
+    def step(self) -> tuple[FloatArray, FloatArray]:
+        """Advance one period; returns (quat_d, ω_d)."""
+        if self.omega.any():
+            self.quat = quat_normalised(quat_multiply(quat_exp(self.omega * self.dt), self.quat))
+        return self.quat.copy(), self.omega.copy()

@@ -4,12 +4,16 @@ Nothing malformed reaches the controller. Checks, in order: the payload's length
 (``size``, before decoding), msgpack at all (``decode``), the protocol version when the
 header has one (``version``), the header's five fields present (``type``, ``v``, ``robot``,
 ``seq``, ``stamp``; else ``schema``), the expected schema (``schema``), the robot id (``robot``), NaN/inf in the
-time stamp (``non_finite``), vector sizes (``size``), NaN/inf (``non_finite``), ranges
-(``range``), the mode name (``mode``).
+time stamp (``non_finite``), vector sizes (``size``: the robot's number of joints ``n_arm`` and
+of wheels ``n_wheels`` for joint and wheel vectors, given to the :class:`Validator`; 3 for
+task-space vectors, 4 for a quaternion), NaN/inf (``non_finite``), ranges (``range``), the mode
+name (``mode``).
 A box (:class:`~.protocol.BoxMsg`): finite, mass in (0, 1000] kg, μ in [0, 5], face x and
 centre y within ``position_abs_max``, width and height in (0, 10] m. A command: a non-empty
 ``lease`` and ``instance``, ``period`` in (0, ``PERIOD_MAX``]. A setpoint: a non-empty
-``source``. A state: a non-empty ``instance``.
+``source``; its optional orientation ``q`` finite, entries ≤ 1e6, norm > 1e-9 (the controller
+normalises it), its angular velocity ``w`` finite with norm ≤ ``angular_speed_max``. A state: a
+non-empty ``instance``.
 """
 
 from __future__ import annotations
@@ -25,13 +29,26 @@ import msgspec
 from wmm_qp import Mode
 
 from .config import ValidationConfig
-from .protocol import PROTOCOL_VERSION, BoxMsg, CommandMsg, Header, ModeMsg, SetpointMsg, StateMsg
+from .protocol import (
+    PROTOCOL_VERSION,
+    BoxMsg,
+    CommandMsg,
+    Header,
+    ModeMsg,
+    SetpointMsg,
+    StateMsg,
+    TelemetryMsg,
+)
 
 BOX_MASS_MAX = 1000.0  # [kg]
 BOX_MU_MAX = 5.0  # [-]
 BOX_SIZE_MAX = 10.0  # [m] face width, height
 PERIOD_MAX = 0.1  # [s] the longest control period a command may claim
 _HEADER_FIELDS = ("type", "v", "robot", "seq", "stamp")
+QUAT_ABS_MAX = 1e6
+"""A quaternion's entries are bounded (normalised later: |q|² must not overflow)."""
+_SIZED = (StateMsg, CommandMsg, TelemetryMsg)
+"""Messages with joint or wheel vectors: their validator needs the robot's sizes."""
 
 
 class Reject(enum.StrEnum):
@@ -75,12 +92,20 @@ def _finite(name: str, values: Iterable[float]) -> None:
 def _vector(name: str, values: list[float] | None, n: int, abs_max: float) -> None:
     if values is None:
         return
-    if len(values) != n:
-        raise Rejected(Reject.SIZE, f"{name} has {len(values)} entries, expected {n}")
+    _size(name, values, n)
     _finite(name, values)
     for v in values:
         if abs(v) > abs_max:
             raise Rejected(Reject.RANGE, f"|{name}| entry {v:g} exceeds {abs_max:g}")
+
+
+def _size(name: str, values: list[float], n: int) -> None:
+    if len(values) != n:
+        raise Rejected(Reject.SIZE, f"{name} has {len(values)} entries, expected {n}")
+
+
+def _norm(values: list[float]) -> float:
+    return math.sqrt(sum(v * v for v in values))
 
 
 class Validator(Generic[M]):
@@ -90,12 +115,25 @@ class Validator(Generic[M]):
         cls: the expected message type.
         robot: the robot id messages must carry.
         limits: the ranges to check.
+        n_arm: the robot's number of joints (the length of every joint vector); required for
+            the messages that carry joint or wheel vectors (state, cmd, telemetry).
+        n_wheels: the robot's number of wheels (0 for a fixed base); required with ``n_arm``.
+
+    Raises:
+        ValueError: the sizes are missing for a message that needs them, or negative.
     """
 
-    def __init__(self, cls: type[M], robot: str, limits: ValidationConfig) -> None:
+    def __init__(self, cls: type[M], robot: str, limits: ValidationConfig,
+                 n_arm: int | None = None, n_wheels: int | None = None) -> None:
+        if issubclass(cls, _SIZED) and (n_arm is None or n_wheels is None):
+            raise ValueError(f"a {cls.__name__} validator needs the robot's n_arm and n_wheels")
+        if (n_arm is not None and n_arm < 0) or (n_wheels is not None and n_wheels < 0):
+            raise ValueError(f"n_arm and n_wheels must be >= 0, got {n_arm}, {n_wheels}")
         self.cls = cls
         self.robot = robot
         self.limits = limits
+        self.n_arm = -1 if n_arm is None else n_arm
+        self.n_wheels = -1 if n_wheels is None else n_wheels
         self._decoder = msgspec.msgpack.Decoder(cls)
         self.rejected: Counter[str] = Counter()
         self.accepted = 0
@@ -160,25 +198,30 @@ class Validator(Generic[M]):
                 raise Rejected(Reject.RANGE, f"x, y beyond ±{lim.position_abs_max:g} m")
             if not lim.z_min <= msg.x[2] <= lim.z_max:
                 raise Rejected(Reject.RANGE, f"z = {msg.x[2]:g} m outside [{lim.z_min:g}, {lim.z_max:g}]")
-            if msg.xd is not None and math.sqrt(sum(v * v for v in msg.xd)) > lim.speed_max:
+            if msg.xd is not None and _norm(msg.xd) > lim.speed_max:
                 raise Rejected(Reject.RANGE, f"|xd| beyond {lim.speed_max:g} m/s")
+            _vector("q", msg.q, 4, QUAT_ABS_MAX)
+            if msg.q is not None and _norm(msg.q) <= 1e-9:
+                raise Rejected(Reject.RANGE, "q is not a rotation (norm <= 1e-9)")
+            _vector("w", msg.w, 3, math.inf)
+            if msg.w is not None and _norm(msg.w) > lim.angular_speed_max:
+                raise Rejected(Reject.RANGE, f"|w| beyond {lim.angular_speed_max:g} rad/s")
         elif isinstance(msg, ModeMsg):
             if msg.mode not in Mode._value2member_map_:
                 raise Rejected(Reject.MODE, f"unknown mode {msg.mode!r}")
             _vector("direction", msg.direction, 3, 1e6)  # normalised later: |u|² must not overflow
-            if msg.direction is not None and math.sqrt(sum(v * v for v in msg.direction)) < 1e-9:
+            if msg.direction is not None and _norm(msg.direction) < 1e-9:
                 raise Rejected(Reject.RANGE, "direction is zero")
         elif isinstance(msg, StateMsg):
             if not msg.instance:
                 raise Rejected(Reject.SCHEMA, "instance is empty")
             m = lim.state_abs_max
+            na, nw = self.n_arm, self.n_wheels
             _finite("t", [msg.t])
-            for name, n in (("q_base", 3), ("q_arm", 7), ("v_arm", 7), ("wheel_speeds", 4)):
+            for name, n in (("q_base", 3), ("q_arm", na), ("v_arm", na), ("wheel_speeds", nw)):
                 _vector(name, getattr(msg, name), n, m)
-            for name, n in (("base_true", 3), ("ee_true", 3), ("tau", 7), ("contact_force", 3)):
-                vals = getattr(msg, name)
-                if len(vals) != n:
-                    raise Rejected(Reject.SIZE, f"{name} has {len(vals)} entries, expected {n}")
+            for name, n in (("base_true", 3), ("ee_true", 3), ("tau", na), ("contact_force", 3)):
+                _size(name, getattr(msg, name), n)
         elif isinstance(msg, BoxMsg):
             _finite("box", [msg.mass, msg.mu, msg.face_x, msg.center_y, msg.width, msg.height])
             for name, v, ok in (("mass", msg.mass, 0.0 < msg.mass <= BOX_MASS_MAX),
@@ -195,5 +238,13 @@ class Validator(Generic[M]):
             _finite("period", [msg.period])
             if not 0.0 < msg.period <= PERIOD_MAX:
                 raise Rejected(Reject.RANGE, f"period {msg.period:g} s outside (0, {PERIOD_MAX:g}]")
-            _vector("wheel_speeds", msg.wheel_speeds, 4, lim.command_abs_max)
-            _vector("arm_rates", msg.arm_rates, 7, lim.command_abs_max)
+            _vector("wheel_speeds", msg.wheel_speeds, self.n_wheels, lim.command_abs_max)
+            _vector("arm_rates", msg.arm_rates, self.n_arm, lim.command_abs_max)
+        elif isinstance(msg, TelemetryMsg):  # for clients: the daemon's view of one tick
+            _finite("t", [msg.t])
+            if msg.mode not in Mode._value2member_map_:
+                raise Rejected(Reject.MODE, f"unknown mode {msg.mode!r}")
+            _vector("wheel_speeds", msg.wheel_speeds, self.n_wheels, lim.command_abs_max)
+            _vector("arm_rates", msg.arm_rates, self.n_arm, lim.command_abs_max)
+            for name in ("x", "x_d", "xd_d", "ee_true"):  # nan: no target (x_d), no state (ee_true)
+                _size(name, getattr(msg, name), 3)
