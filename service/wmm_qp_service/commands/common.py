@@ -9,13 +9,15 @@ import numpy as np
 
 from wmm_qp import ControllerConfig, RobotConfig, load_controller_config, load_robot_config
 
+from ..config import ServiceConfig
 
-def floats(n: int, name: str):
-    """An argparse type: a comma-separated list of exactly n finite floats."""
+
+def floats(n: int | None, name: str):
+    """An argparse type: a comma-separated list of exactly n finite floats (any number: None)."""
 
     def parse(text: str) -> np.ndarray:
         parts = [p.strip() for p in text.split(",")]
-        if len(parts) != n:
+        if n is not None and len(parts) != n:
             raise argparse.ArgumentTypeError(f"{name} needs {n} comma-separated numbers, got {len(parts)}")
         try:
             values = np.array([float(p) for p in parts])
@@ -29,10 +31,18 @@ def floats(n: int, name: str):
     return parse
 
 
-def add_config_arguments(parser: argparse.ArgumentParser) -> None:
+def add_robot_argument(parser: argparse.ArgumentParser) -> None:
+    """``--robot-config FILE``: the robot description (default: ``wmm_qp.default_robot_file()``)."""
     parser.add_argument(
-        "--robot-config", type=Path, default=None, metavar="FILE", help="robot.toml (default: configs/robot.toml)"
+        "--robot-config", type=Path, default=None, metavar="FILE",
+        help="robot description (configs/robots/*.toml, docs/robots.md; default: "
+             "configs/robots/gen3_mecanum.toml)",
     )
+
+
+def add_config_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--robot-config`` and ``--controller-config``."""
+    add_robot_argument(parser)
     parser.add_argument(
         "--controller-config",
         type=Path,
@@ -42,5 +52,20 @@ def add_config_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def load_robot(args: argparse.Namespace) -> RobotConfig:
+    """The robot description of ``--robot-config`` (a bad file raises :class:`wmm_qp.ConfigError`,
+    which the CLI prints as one line and exit status 2)."""
+    return load_robot_config(getattr(args, "robot_config", None))
+
+
 def load_configs(args: argparse.Namespace) -> tuple[RobotConfig, ControllerConfig]:
-    return load_robot_config(args.robot_config), load_controller_config(args.controller_config)
+    return load_robot(args), load_controller_config(args.controller_config)
+
+
+def robot_service_config(args: argparse.Namespace) -> tuple[RobotConfig, ServiceConfig]:
+    """The robot description and the service config with the command line's overrides, its
+    robot id filled from the robot's name when neither ``--robot`` nor the service config set one."""
+    from ..cli_common import service_config
+
+    robot = load_robot(args)
+    return robot, service_config(args).with_robot(robot)

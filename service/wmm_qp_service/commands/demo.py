@@ -1,9 +1,11 @@
 """``wmm-qp demo``: sim and daemon on loopback, every mode driven, a summary printed.
 
-Scenario (phase lengths scale with --duration; 30 s by default), from the paper's start
-configuration: hold → Cartesian DM enhancement → null-space DM enhancement (the paper's
-Fig. 9 sequence, DM along x) → track a haptic-like stream (jitter, jumps) → hold → track
-the paper's circle (feed-forward velocity) → hold.
+Scenario (phase lengths scale with --duration; 30 s by default), from the robot's start
+configuration (the paper's for the Gen3): hold → Cartesian DM enhancement → null-space DM
+enhancement (the paper's Fig. 9 sequence, DM along x) → track a haptic-like stream (jitter,
+jumps) → hold → track the paper's circle (feed-forward velocity) → hold. The sim and the daemon
+both get ``--robot-config``; a robot whose EE starts outside the DM box of the controller config
+(``dm.ee_box_lower/upper``) holds during the Cartesian DM phase.
 """
 
 from __future__ import annotations
@@ -13,7 +15,11 @@ import json
 import math
 import sys
 import time
+from collections import Counter
+from pathlib import Path
 from typing import Any
+
+from .common import add_robot_argument, load_robot
 
 HELP = "start sim and daemon on loopback, drive every mode, print a summary"
 
@@ -26,6 +32,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rate", type=float, default=500.0, help="[Hz] control rate")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--logs", metavar="DIR", help="keep the processes' logs here")
+    parser.add_argument("--controller-config", type=Path, default=None, metavar="FILE",
+                        help="the daemon's controller.toml (default: configs/controller.toml)")
+    add_robot_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -35,11 +44,19 @@ def run(args: argparse.Namespace) -> int:
     if not 10.0 <= args.rate <= 2000.0:
         print("wmm-qp demo: error: --rate must be in [10, 2000] Hz", file=sys.stderr)
         return 2
+    import wmm_qp as w
+
     from ..processes import Stack, isolated_config, log_folder
 
-    svc = isolated_config()
+    robot = load_robot(args)  # a bad file: one line, exit 2, before anything starts
+    ctl = w.load_controller_config(args.controller_config)
+    ctl.weights_for(robot)
+    svc = isolated_config(robot=robot)
     log_dir = log_folder(args.logs, "demo")
-    stack = Stack(svc, rate_hz=args.rate, log_dir=log_dir)
+    daemon_args = [] if args.controller_config is None else ["--controller-config",
+                                                             str(Path(args.controller_config).resolve())]
+    stack = Stack(svc, rate_hz=args.rate, log_dir=log_dir, robot_file=robot.path,
+                  extra_daemon_args=daemon_args)
     try:
         stack.start()
         summary = _drive(svc, args.duration, args.json)
@@ -51,11 +68,14 @@ def run(args: argparse.Namespace) -> int:
         return 1
     summary["exit_codes"] = codes
     summary["logs"] = str(log_dir)
+    summary["robot"] = {"name": robot.name, "file": str(robot.path), "n_arm": robot.n_arm,
+                        "n_wheels": robot.n_wheels, "base_kind": robot.base.kind, "task": ctl.task.kind}
     if args.json:
         print(json.dumps(_finite_or_none(summary), allow_nan=False))
     else:
         lp = summary["loop"]
-        print(f"demo: {summary['duration_s']:.1f} s at {lp['rate_hz']:g} Hz — ticks {lp['ticks']}, "
+        print(f"demo: {robot.name} ({robot.n_arm} joints, {robot.base.kind} base, {ctl.task.kind} task), "
+              f"{summary['duration_s']:.1f} s at {lp['rate_hz']:g} Hz — ticks {lp['ticks']}, "
               f"deadline misses {lp['deadline_misses']}, tick p50 {lp['tick_p50_us']:.0f} µs, "
               f"p99 {lp['tick_p99_us']:.0f} µs, max {lp['tick_max_us']:.0f} µs")
         print(f"      violations {summary['violations_total']} {summary['violations']}")
@@ -67,6 +87,10 @@ def run(args: argparse.Namespace) -> int:
     ok = (summary["violations_total"] == 0 and not summary["protective_stops"]
           and all(c == 0 for c in codes.values()))
     return 0 if ok else 1
+
+
+def _delta(a: dict[str, int], b: dict[str, int]) -> dict[str, int]:
+    return {k: b[k] - a.get(k, 0) for k in b if b[k] != a.get(k, 0)}
 
 
 def _finite_or_none(v: Any) -> Any:
@@ -98,9 +122,11 @@ def _drive(svc: Any, duration: float, quiet: bool) -> dict[str, Any] | None:
             return None
         ee_err: list[float] = []
         per_phase: list[dict[str, Any]] = []
+        statuses: Counter[str] = Counter()  # controller statuses of the current phase
 
         def drain() -> None:
             for m in c.telemetry():
+                statuses[m.status] += 1
                 if math.isfinite(m.ee_error):
                     ee_err.append(m.ee_error)
 
@@ -111,11 +137,15 @@ def _drive(svc: Any, duration: float, quiet: bool) -> dict[str, Any] | None:
 
         dm_start = info.status.dm
         t_start = time.monotonic()
+        faults0 = dict(info.status.faults)
+        st0 = c.latest_state() or c.wait_state(2.0)
+        viol0 = dict(st0.violations) if st0 is not None else {}
         for name, d in PHASES:
             d *= scale
             mode = name.split("_track")[0] if not name.startswith("track") else "track"
             say(f"demo: {name} for {d:.1f} s")
             c.set_mode(mode)
+            statuses.clear()
             wait(0.05, drain)
             n0 = len(ee_err)
             if name == "track_haptic":
@@ -128,9 +158,17 @@ def _drive(svc: Any, duration: float, quiet: bool) -> dict[str, Any] | None:
                 wait(d, drain)
             drain()
             i = c.info()
+            st = c.latest_state()
+            faults = dict(i.status.faults) if i else faults0
+            viol = dict(st.violations) if st is not None else viol0
             per_phase.append({"phase": name, "duration_s": round(d, 2),
                               "ee_error_max": max(ee_err[n0:], default=None),  # None: untracked
-                              "dm": i.status.dm if i else None})
+                              "dm": i.status.dm if i else None,
+                              "statuses": dict(statuses),
+                              "reason": i.status.reason if i else None,
+                              "new_faults": _delta(faults0, faults),
+                              "new_violations": _delta(viol0, viol)})
+            faults0, viol0 = faults, viol
         final = c.info()
         st = c.latest_state()
         if final is None:

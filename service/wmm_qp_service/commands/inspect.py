@@ -10,6 +10,7 @@ import numpy as np
 import wmm_qp as w
 from wmm_qp.manipulability import dm_cartesian_gradient, dm_gradient, torque_norm_per_newton, yoshikawa_manipulability
 from wmm_qp.pseudoinverse import sigma_min
+from wmm_qp.tasks import rotation_to_quat
 
 from .common import add_config_arguments, floats, load_configs
 
@@ -18,7 +19,8 @@ HELP = "kinematics and directional manipulability at one configuration"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "--arm-q", required=True, type=floats(7, "--arm-q"), metavar="Q1,...,Q7", help="arm joint angles [rad]"
+        "--arm-q", type=floats(None, "--arm-q"), default=None, metavar="Q1,...,Qn",
+        help="joint values [rad or m], one per joint of the robot (default: the robot's start)",
     )
     parser.add_argument(
         "--base-q",
@@ -40,18 +42,31 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     robot, cfg = load_configs(args)
+    if args.arm_q is None:
+        q_arm = np.array(robot.arm.start)
+    elif len(args.arm_q) != robot.n_arm:
+        raise w.InvalidInput("--arm-q", f"needs {robot.n_arm} comma-separated numbers (the joints of "
+                             f"{robot.name}: {', '.join(robot.arm.joints)}), got {len(args.arm_q)}")
+    else:
+        q_arm = args.arm_q
+    W = cfg.weights_for(robot)
     u = cfg.direction if args.direction is None else args.direction
     if np.linalg.norm(u) < 1e-12:
         raise w.InvalidInput("--direction", "must not be the zero vector")
     u = u / np.linalg.norm(u)
     model = w.WmmModel(robot)
-    kin = model.kinematics(args.base_q, args.arm_q, hessian=True)
+    kin = model.kinematics(args.base_q, q_arm, hessian=True)
     assert kin.dJ_arm is not None
-    dm, grad = dm_gradient(kin.J_arm, kin.dJ_arm, u, cfg.W)  # eqs. (8), (9)
+    dm, grad = dm_gradient(kin.J_arm, kin.dJ_arm, u, W)  # eqs. (8), (9)
     grad_x = dm_cartesian_gradient(grad, kin.J_m)  # eq. (10)
-    per_n = torque_norm_per_newton(kin.J_arm, u, cfg.W)
+    per_n = torque_norm_per_newton(kin.J_arm, u, W)
+    _, R = model.ee_pose(args.base_q, q_arm)
     out = {
+        "robot": robot.name,
+        "joints": list(robot.arm.joints),
+        "arm_q": np.asarray(q_arm).tolist(),
         "ee_position": kin.x.tolist(),
+        "ee_orientation": rotation_to_quat(R).tolist(),
         "sigma_min": sigma_min(kin.J_m),
         "dm": dm,
         "dm_gradient": grad.tolist(),
@@ -65,7 +80,9 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(out))
         return 0
     f = lambda v: "[" + ", ".join(f"{x:+.4f}" for x in v) + "]"  # noqa: E731
+    print(f"robot                       {robot.name} ({robot.n_arm} joints, {robot.base.kind} base)")
     print(f"EE position (world)         {f(kin.x)} m")
+    print(f"EE orientation (x,y,z,w)    {f(out['ee_orientation'])}")
     print(
         f"sigma_min(J_m)              {out['sigma_min']:.4f}" + ("  (below threshold: DLS)" if out["singular"] else "")
     )

@@ -10,8 +10,10 @@ HELP = "run the control daemon (Zenoh)"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from ..cli_common import add_service_arguments
+    from .common import add_robot_argument
 
     add_service_arguments(parser)
+    add_robot_argument(parser)
     parser.add_argument("--rate", type=float, help="[Hz] control rate (default: the service config's)")
     parser.add_argument("--controller", choices=("qp", "paper", "traditional"),
                         help="controller kind (default: controller.toml's)")
@@ -25,10 +27,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import wmm_qp as w
 
-    from ..cli_common import service_config, stop_on_signals
+    from ..cli_common import stop_on_signals
     from ..daemon import Daemon, LeaseHeld
+    from .common import robot_service_config
 
-    svc = service_config(args)
+    robot, svc = robot_service_config(args)
     if args.rate is not None:
         if not 0 < args.rate <= 5000:
             print("wmm-qp serve: error: --rate must be in (0, 5000] Hz", file=sys.stderr)
@@ -43,10 +46,11 @@ def run(args: argparse.Namespace) -> int:
                   f"{', '.join(available_solvers())}", file=sys.stderr)
             return 2
         ctl_cfg = ctl_cfg.with_(qp={"solver": args.solver})
-    daemon = Daemon(svc, ctl_cfg, w.load_robot_config(), kind=args.controller, wait_lease=args.wait_lease)
+    daemon = Daemon(svc, ctl_cfg, robot, kind=args.controller, wait_lease=args.wait_lease)
     stop = stop_on_signals()
     print(f"wmm-qp serve: {svc.prefix}/{svc.robot} at {svc.loop.rate_hz:g} Hz "
-          f"({daemon.core.kind}), listening on {svc.zenoh.daemon_endpoint}",
+          f"({daemon.core.kind}, {ctl_cfg.task.kind} task; {robot.n_arm} joints, {robot.base.kind} base "
+          f"with {robot.n_wheels} wheels), listening on {svc.zenoh.daemon_endpoint}",
           file=sys.stderr, flush=True)
     try:
         final = daemon.run(stop)

@@ -10,6 +10,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from .common import add_robot_argument, load_robot
+
 HELP = "run sim + daemon + client for a long time and report drift in time and memory"
 
 
@@ -18,6 +20,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rate", type=float, default=1000.0, help="[Hz] control rate")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--logs", metavar="DIR", help="keep the processes' logs here")
+    add_robot_argument(parser)
 
 
 def rss_kib(pid: int) -> int | None:
@@ -44,9 +47,10 @@ def run(args: argparse.Namespace) -> int:
     from ..processes import Stack, isolated_config, log_folder
     from ..teleop import stream_circle, stream_haptic
 
-    svc = isolated_config()
+    robot = load_robot(args)  # a bad file: one line, exit 2, before anything starts
+    svc = isolated_config(robot=robot)
     log_dir = log_folder(args.logs, "soak")
-    stack = Stack(svc, rate_hz=args.rate, log_dir=log_dir)
+    stack = Stack(svc, rate_hz=args.rate, log_dir=log_dir, robot_file=robot.path)
     out: dict[str, Any] = {}
     try:
         stack.start()
@@ -83,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
         if final is None:
             return 1
         lp = final.status.loop
-        out = {"duration_s": args.duration, "rate_hz": args.rate, "ticks": lp.ticks,
+        out = {"robot": robot.name, "duration_s": args.duration, "rate_hz": args.rate, "ticks": lp.ticks,
                "deadline_misses": lp.deadline_misses, "tick_p50_us": lp.tick_p50_us,
                "tick_p99_us": lp.tick_p99_us, "tick_max_us": lp.tick_max_us,
                "measured_hz": lp.measured_hz, "rss_kib_start": rss0, "rss_kib_end": rss1,

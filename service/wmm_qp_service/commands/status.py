@@ -13,17 +13,19 @@ HELP = "show the daemon's status"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from ..cli_common import add_service_arguments
+    from .common import add_robot_argument
 
     parser.add_argument("--json", action="store_true", help="print one JSON object (status + config)")
     parser.add_argument("--timeout", type=float, default=3.0, help="[s] wait for the daemon")
     add_service_arguments(parser)
+    add_robot_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..cli_common import service_config
     from ..client import Client
+    from .common import robot_service_config
 
-    svc = service_config(args)
+    _, svc = robot_service_config(args)
     with Client(svc, name="status-cli") as c:
         info = c.wait_for_daemon(args.timeout)
         why = c.no_daemon_reason() if info is None and not c.daemon_alive() else ""
@@ -36,7 +38,10 @@ def run(args: argparse.Namespace) -> int:
         return 0
     s, lp = info.status, info.status.loop
     total_viol = sum(s.sim_violations.values())
-    print(f"robot      {svc.prefix}/{svc.robot}   controller {info.config['controller']['kind']}")
+    print(f"robot      {svc.prefix}/{svc.robot}   controller {info.config['controller']['kind']}"
+          f"   task {info.task or '?'}")
+    print(f"           {info.n_arm} joints [{', '.join(info.joints)}]   {info.base_kind or '?'} base, "
+          f"{info.n_wheels} wheels [{', '.join(info.wheels)}]")
     print(f"mode       {s.mode}   state {'ok' if s.state_ok else 'NOT OK'}"
           f"{'   SAFE STOP' if s.safe_stop else ''}   sim {'alive' if s.sim_alive else 'not seen'}")
     print(f"command    {s.controller_status} {s.reason}".rstrip())
@@ -56,4 +61,8 @@ def run(args: argparse.Namespace) -> int:
     if s.x:
         print(f"EE         x {[round(v, 4) for v in s.x]}   x_d {[round(v, 4) for v in s.x_d]}"
               f"   DM {s.dm:.3f}")
+    if s.quat_d:
+        print(f"           orientation target (x, y, z, w) {[round(v, 4) for v in s.quat_d]}")
+    if s.orientation_ignored:
+        print(f"           {s.orientation_ignored} setpoint orientations ignored (position task)")
     return 0

@@ -10,6 +10,7 @@ HELP = "stream setpoints to the daemon: a haptic-like stream or the paper's circ
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from ..cli_common import add_service_arguments
+    from .common import add_robot_argument
 
     parser.add_argument("stream", choices=("haptic", "circle"), nargs="?", default="haptic",
                         help="haptic: jittery, jumpy stream; circle: the paper's circle with "
@@ -20,6 +21,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-mode", action="store_true",
                         help="do not switch the daemon to track mode first")
     add_service_arguments(parser)
+    add_robot_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -27,14 +29,14 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from ..cli_common import service_config
     from ..client import Client
     from ..teleop import stream_circle, stream_haptic
+    from .common import robot_service_config
 
     if not (args.duration > 0 and args.rate > 0):
         print("wmm-qp teleop: error: --duration and --rate must be > 0", file=sys.stderr)
         return 2
-    svc = service_config(args)
+    _, svc = robot_service_config(args)
     with Client(svc, name="teleop") as c:
         info = c.wait_for_daemon(5.0)
         if info is None or not info.status.x:
