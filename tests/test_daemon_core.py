@@ -321,3 +321,21 @@ def test_position_task_ignores_a_setpoints_orientation_and_counts_it(robot: w.Ro
 
     st = core.status(RateLoop(500.0, 0.0), Counter(), {})
     assert st.orientation_ignored == 600 and st.quat_d == []
+
+
+def test_the_status_position_is_finite_during_a_safe_stop(robot: w.RobotConfig) -> None:
+    """Clients start their streams at ``status.x``: a safe stop's command has no EE position
+    (NaN), so the status gives the state's (a demo once streamed NaN setpoints from it)."""
+    from collections import Counter
+
+    from wmm_qp_service.rate_loop import RateLoop
+
+    core, plant = make(robot)
+    assert core.status(RateLoop(500.0, 0.0), Counter(), {}).x == []
+    t, _ = run(core, plant, 0.0, 10)
+    for _ in range(40):  # no state any more: safe stop
+        cmd = core.tick(t)
+        t += DT
+    assert cmd is not None and cmd.status == w.Status.SAFE_STOP and not np.isfinite(cmd.x).all()
+    x = core.status(RateLoop(500.0, 0.0), Counter(), {}).x
+    assert np.allclose(x, core.model.ee_position(plant.q_base, plant.q_arm))

@@ -608,7 +608,7 @@ class ControlCore:
             last_fault=self.last_fault, loop=loop.stats(), rejected=dict(rejected),
             accepted=accepted,
             sim_violations=dict(self.state_msg.violations) if self.state_msg else {},
-            x=cmd.x.tolist() if cmd is not None else [], x_d=_xd(self.ref),
+            x=self._ee_now(), x_d=_xd(self.ref),
             dm=float(cmd.dm) if cmd is not None else math.nan, sim_alive=self.sim_alive,
             faults=dict(self.faults), lease=self.lease, lease_holder=self.lease_holder,
             sim_instance=self.instance, operator=self.operator,
@@ -616,6 +616,19 @@ class ControlCore:
             round_trip_ms=self.round_trip * 1e3, protective_stop=bool(self.protective),
             quat_d=self.orient.quat.tolist() if self.pose else [],
             orientation_ignored=self.orientation_ignored)
+
+    def _ee_now(self) -> list[float]:
+        """[m] the EE position of the last command, or — when it has none (a safe stop's) — of
+        the last state (model, odometry); [] before any state. Never NaN: clients start
+        streams from it."""
+        cmd = self.cmd
+        if cmd is not None and np.isfinite(cmd.x).all():
+            return cmd.x.tolist()
+        st = self.state
+        if st is None:
+            return []
+        x = self.model.ee_position(st.q_base, st.q_arm)
+        return x.tolist() if np.isfinite(x).all() else []
 
     def config_dict(self) -> dict[str, Any]:
         """The running configuration as plain data (for the ``info`` queryable)."""

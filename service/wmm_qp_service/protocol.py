@@ -209,7 +209,9 @@ class StatusMsg(_Msg, tag="status"):
         rejected: rejected messages, by reason.
         accepted: accepted messages, by key (state, setpoint, mode).
         sim_violations: the sim's referee counts, by kind (from the last state).
-        x, x_d: [m] EE position (model, odometry) and smoothed target.
+        x, x_d: [m] EE position (model, odometry: of the last command, or of the last state
+            when the command has none, as a safe stop's; never NaN, [] before a state) and
+            smoothed target.
         dm: directional manipulability along the active direction.
         sim_alive: the sim's liveliness token is present.
         faults: faults seen since start, by kind.

@@ -5,7 +5,9 @@ configuration (the paper's for the Gen3): hold → Cartesian DM enhancement → 
 enhancement (the paper's Fig. 9 sequence, DM along x) → track a haptic-like stream (jitter,
 jumps) → hold → track the paper's circle (feed-forward velocity) → hold. The sim and the daemon
 both get ``--robot-config``; a robot whose EE starts outside the DM box of the controller config
-(``dm.ee_box_lower/upper``) holds during the Cartesian DM phase.
+(``dm.ee_box_lower/upper``) holds during the Cartesian DM phase. When a fault ends, the daemon
+holds until a mode message (``watchdog.resume = "manual"``): the demo then resends the phase's
+mode, as an operator would, and counts it (``phases[].resumes``).
 """
 
 from __future__ import annotations
@@ -104,6 +106,14 @@ def _finite_or_none(v: Any) -> Any:
     return v
 
 
+class _Operator:
+    """The demo's operator: the phase's mode, resumed after each fault (manual resume)."""
+
+    mode = "hold"
+    resumes = 0
+    quiet_until = 0.0  # [s, wall] statuses stamped before this predate the last mode message
+
+
 def _drive(svc: Any, duration: float, quiet: bool) -> dict[str, Any] | None:
     import numpy as np
 
@@ -123,16 +133,22 @@ def _drive(svc: Any, duration: float, quiet: bool) -> dict[str, Any] | None:
         ee_err: list[float] = []
         per_phase: list[dict[str, Any]] = []
         statuses: Counter[str] = Counter()  # controller statuses of the current phase
+        op = _Operator()
 
         def drain() -> None:
             for m in c.telemetry():
                 statuses[m.status] += 1
                 if math.isfinite(m.ee_error):
                     ee_err.append(m.ee_error)
+            s = c.latest_status()  # the operator's part: resume after a fault cleared (manual resume)
+            if s is not None and s.resume_needed and s.stamp > op.quiet_until:
+                op.quiet_until = time.time() + 0.2  # one mode message per fault
+                op.resumes += 1
+                c.set_mode(op.mode)
 
         def x_now() -> np.ndarray:
             i = c.info()
-            assert i is not None
+            assert i is not None and i.status.x
             return np.array(i.status.x)
 
         dm_start = info.status.dm
@@ -145,6 +161,7 @@ def _drive(svc: Any, duration: float, quiet: bool) -> dict[str, Any] | None:
             mode = name.split("_track")[0] if not name.startswith("track") else "track"
             say(f"demo: {name} for {d:.1f} s")
             c.set_mode(mode)
+            op.mode, op.resumes, op.quiet_until = mode, 0, time.time() + 0.2
             statuses.clear()
             wait(0.05, drain)
             n0 = len(ee_err)
@@ -164,7 +181,7 @@ def _drive(svc: Any, duration: float, quiet: bool) -> dict[str, Any] | None:
             per_phase.append({"phase": name, "duration_s": round(d, 2),
                               "ee_error_max": max(ee_err[n0:], default=None),  # None: untracked
                               "dm": i.status.dm if i else None,
-                              "statuses": dict(statuses),
+                              "statuses": dict(statuses), "resumes": op.resumes,
                               "reason": i.status.reason if i else None,
                               "new_faults": _delta(faults0, faults),
                               "new_violations": _delta(viol0, viol)})
