@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from core_fixtures import Q0, config, model
+from core_fixtures import Q0, model
+from core_fixtures import config as _config
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
@@ -15,6 +16,12 @@ from wmm_qp.solvers import available_solvers
 from wmm_qp.verify import check_command
 
 SOLVERS = available_solvers()
+
+
+def config() -> w.ControllerConfig:
+    """The shipped controller config without the collision rows: these tests are about bounds (13),
+    the stages and strict priority (the collision rows have their own, tests/test_collision.py)."""
+    return _config().with_(collision={"enabled": False})
 
 
 def advance(qb: np.ndarray, qa: np.ndarray, cmd: w.Command, dt: float) -> tuple[np.ndarray, ...]:
@@ -427,7 +434,7 @@ def test_the_ee_box_holds_whatever_solved_the_stage(path: str, solver: str, monk
     cmd = ctl.step(state, ref)
     box = (cfg.ee_box_lower, cfg.ee_box_upper)
     assert check_command(model().config, ctl.dt, state, cmd, model=model(), ee_box=box) == dict.fromkeys(
-        ("position", "velocity", "acceleration", "wheel", "ee_box"), 0
+        ("position", "velocity", "acceleration", "wheel", "ee_box", "collision"), 0
     )
     x, J = model().ee_position(state.q_base, Q0), model().kinematics(state.q_base, Q0).J
     z_next = x[2] + ctl.dt * (J @ cmd.v)[2]

@@ -136,9 +136,10 @@ def test_mecanum_is_eq_20_and_fixed_has_no_columns() -> None:
 
 def test_a_fixed_base_robot_is_the_arm_alone(tmp_path: Path) -> None:
     src = (ROBOTS / "gen3_mecanum.toml").read_text()
-    text = src[: src.index("[base]")].replace('urdf = "gen3_7dof.urdf"', f'urdf = "{ROBOTS / "gen3_7dof.urdf"}"')
-    p = tmp_path / "gen3_fixed.toml"
-    p.write_text(text + '[base]\nkind = "fixed"\n')
+    src = src.replace('urdf = "gen3_7dof.urdf"', f'urdf = "{ROBOTS / "gen3_7dof.urdf"}"')
+    p = tmp_path / "gen3_fixed.toml"  # the arm on a table 0.8 m above the floor
+    fixed = '[base]\nkind = "fixed"\nfloor_z = -0.8\n\n'
+    p.write_text(src[: src.index("[base]")] + fixed + src[src.index("[collision]") :])
     m = w.WmmModel(w.load_robot_config(p))
     kin = m.kinematics(np.zeros(3), Q0)
     assert kin.J.shape == (3, 7) and m.n_wheels == 0

@@ -4,6 +4,7 @@ Pure computation: no I/O, no transport, no threads. One entry point for every co
 ``controller.step(state, reference) → command``.
 """
 
+from . import scene  # noqa: F401 (wmm_qp.scene, as wmm_qp.model)
 from .config import (
     ControllerConfig,
     RobotConfig,
@@ -16,6 +17,7 @@ from .config import (
 from .controllers import Controller, PaperController, QpController, TraditionalController, make_controller
 from .exceptions import ConfigError, InvalidInput, SolverFailed, SolverNotFound, WmmQpError
 from .model import Kinematics, WmmModel
+from .scene import Scene, load_scene
 from .types import Command, Mode, Reference, RobotState, Status
 
 __version__ = "0.1.0"
@@ -33,6 +35,7 @@ __all__ = [
     "Reference",
     "RobotConfig",
     "RobotState",
+    "Scene",
     "SolverFailed",
     "SolverNotFound",
     "Status",
@@ -44,5 +47,6 @@ __all__ = [
     "default_robot_file",
     "load_controller_config",
     "load_robot_config",
+    "load_scene",
     "make_controller",
 ]

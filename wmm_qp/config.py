@@ -29,6 +29,56 @@ def _ro(a: Any) -> FloatArray:
 
 
 BASE_KINDS = ("mecanum", "omni", "diff_drive", "fixed")
+SHAPE_KINDS = ("box", "sphere", "capsule", "cylinder")
+
+
+@dataclass(frozen=True)
+class ShapeConfig:
+    """A collision primitive fixed to a link (or to the base, or to the world for obstacles).
+
+    Attributes:
+        name: its name (reported with every collision it is part of).
+        link: the URDF link it is attached to ("base" for the base frame, "" for the world).
+        kind: "box", "sphere", "capsule" or "cylinder" (capsules and cylinders along their local z).
+        size: [m] box edge lengths (x, y, z); for the others [radius, length, 0] (a sphere's length 0).
+        xyz, rpy: [m], [rad] its pose in the link's frame.
+    """
+
+    name: str
+    link: str
+    kind: str
+    size: FloatArray
+    xyz: FloatArray
+    rpy: FloatArray
+
+    @property
+    def radius(self) -> float:
+        return float(self.size[0])
+
+    @property
+    def length(self) -> float:
+        return float(self.size[1])
+
+
+@dataclass(frozen=True)
+class RobotCollisionConfig:
+    """The robot's collision geometry (the robot file's ``[collision]`` table, docs/robots.md).
+
+    Attributes:
+        from_urdf: take the URDF's collision elements (meshes as their convex hulls).
+        urdf: another URDF of the same robot whose collision elements to take (e.g. one with
+            primitives), or None (the arm's own URDF).
+        shapes: primitives added to (or, without ``from_urdf``, replacing) the URDF's.
+        exclude: pairs of link names that are never checked against each other (besides the
+            adjacent links, which are excluded anyway).
+        ignore_links: links whose URDF collision elements are dropped (e.g. a hand's fingers).
+    """
+
+    from_urdf: bool = False
+    urdf: Path | None = None
+    shapes: tuple[ShapeConfig, ...] = ()
+    exclude: tuple[tuple[str, str], ...] = ()
+    ignore_links: tuple[str, ...] = ()
 TASK_KINDS = ("position", "pose")
 
 
@@ -93,6 +143,8 @@ class BaseConfig:
         track_width: [m] diff_drive: distance between the two wheels.
         wheel_speed_max: [rad/s] symmetric wheel speed limit, per wheel.
         wheel_acceleration_max: [rad/s²] symmetric wheel acceleration limit, per wheel.
+        floor_z: [m] world z of the floor (the world origin is the base frame's, on the base).
+        body: the base's collision box (base frame), or None.
     """
 
     kind: str
@@ -103,6 +155,8 @@ class BaseConfig:
     track_width: float = 0.0
     wheel_speed_max: FloatArray = field(default_factory=lambda: _ro([]))
     wheel_acceleration_max: FloatArray = field(default_factory=lambda: _ro([]))
+    floor_z: float = -math.inf
+    body: ShapeConfig | None = None
 
     @property
     def n_wheels(self) -> int:
@@ -124,6 +178,7 @@ class RobotConfig:
     base: BaseConfig
     name: str = "wmm"
     path: Path | None = None
+    collision: RobotCollisionConfig = field(default_factory=RobotCollisionConfig)
 
     @property
     def n_arm(self) -> int:
@@ -209,6 +264,26 @@ class QpConfig:
 
 
 @dataclass(frozen=True)
+class CollisionParams:
+    """The velocity dampers (DESIGN.md §7, docs/model.md): ḋ ≥ −ξ (d − d_s)/(d_i − d_s) for every
+    monitored pair closer than d_i.
+
+    Attributes:
+        enabled: add the damper rows to every QP stage.
+        influence_distance: [m] d_i, where a pair's row starts to act.
+        safety_distance: [m] d_s, the distance the pair settles at (robot vs robot, robot vs obstacles).
+        floor_margin: [m] d_s for every link vs the floor.
+        gain: [m/s] ξ, the approach speed a pair may keep at d_i.
+    """
+
+    enabled: bool = True
+    influence_distance: float = 0.15
+    safety_distance: float = 0.03
+    floor_margin: float = 0.03
+    gain: float = 0.5
+
+
+@dataclass(frozen=True)
 class ControllerConfig:
     """Gains and parameters of the paper, and the QP's settings.
 
@@ -246,6 +321,7 @@ class ControllerConfig:
     damping_max: float = 0.05
     qp: QpConfig = field(default_factory=QpConfig)
     task: TaskConfig = field(default_factory=TaskConfig)
+    collision: CollisionParams = field(default_factory=CollisionParams)
     path: Path | None = field(default=None, compare=False)
 
     @property
@@ -254,11 +330,11 @@ class ControllerConfig:
         return 1.0 / self.rate_hz
 
     def with_(self, **changes: Any) -> ControllerConfig:
-        """A copy with some fields changed (``qp`` and ``task`` may be given as dicts of their fields)."""
-        if isinstance(changes.get("qp"), dict):
-            changes["qp"] = replace(self.qp, **changes["qp"])
-        if isinstance(changes.get("task"), dict):
-            changes["task"] = replace(self.task, **changes["task"])
+        """A copy with some fields changed (``qp``, ``task`` and ``collision`` may be given as dicts
+        of their fields)."""
+        for name in ("qp", "task", "collision"):
+            if isinstance(changes.get(name), dict):
+                changes[name] = replace(getattr(self, name), **changes[name])
         return replace(self, **changes)
 
     def weights_for(self, robot: RobotConfig) -> FloatArray:
@@ -435,7 +511,7 @@ def load_robot_config(path: Path | str | None = None) -> RobotConfig:
 
     path = Path(path) if path is not None else default_robot_file()
     r = TomlTable(path, read_toml(path))
-    r.unknown({"name", "arm", "base"})
+    r.unknown({"name", "arm", "base", "collision"})
     a = r.table("arm")
     a.unknown(
         {
@@ -512,7 +588,88 @@ def load_robot_config(path: Path | str | None = None) -> RobotConfig:
         torque_weight=weight,
         start=start,
     )
-    return RobotConfig(arm=arm, base=_load_base(r.table("base")), name=r.string("name", "wmm"), path=path)
+    base = _load_base(r.table("base"))
+    collision = _load_collision(r.table("collision", required=False), path, full, chain.joints)
+    return RobotConfig(arm=arm, base=base, name=r.string("name", "wmm"), path=path, collision=collision)
+
+
+def load_shape(t: TomlTable, name: str, link: str, kinds: tuple[str, ...] = SHAPE_KINDS) -> ShapeConfig:
+    """A primitive of a robot or scene file (keys kind, size | radius + length, xyz, rpy)."""
+    kind = t.string("kind", choices=kinds)
+    extra = {"box": {"size"}, "sphere": {"radius"}, "capsule": {"radius", "length", "from", "to"},
+             "cylinder": {"radius", "length"}, "plane": {"normal", "offset"}}[kind]
+    t.unknown({"kind", "name", "link", "xyz", "rpy", *extra})
+    if kind == "capsule" and (t.has("from") or t.has("to")):  # a capsule between two points of the link
+        p0, p1 = t.vector("from", 3), t.vector("to", 3)
+        axis = p1 - p0
+        length = float(np.linalg.norm(axis))
+        if length < 1e-9:
+            raise ConfigError(t.path, t._key("to"), "must differ from 'from'")
+        z = axis / length
+        ref = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        x = np.cross(ref, z)
+        x /= np.linalg.norm(x)
+        R = np.column_stack([x, np.cross(z, x), z])
+        import pinocchio as pin
+
+        rpy = pin.rpy.matrixToRpy(R)
+        return ShapeConfig(name, link, kind, _ro([t.number("radius", positive=True), length, 0.0]),
+                           _ro(0.5 * (p0 + p1)), _ro(rpy))
+    if kind == "box":
+        size = t.vector("size", 3, positive=True)
+    elif kind == "plane":
+        n = t.vector("normal", 3)
+        if np.linalg.norm(n) < 1e-9:
+            raise ConfigError(t.path, t._key("normal"), "must not be the zero vector")
+        size = _ro([*(n / np.linalg.norm(n))])
+        return ShapeConfig(name, link, kind, size, _ro([0.0, 0.0, t.number("offset")]), _ro([0.0, 0.0, 0.0]))
+    else:
+        radius = t.number("radius", positive=True)
+        length = t.number("length", positive=True) if kind != "sphere" else 0.0
+        size = _ro([radius, length, 0.0])
+    return ShapeConfig(
+        name=name,
+        link=link,
+        kind=kind,
+        size=size,
+        xyz=t.vector("xyz", 3, [0.0, 0.0, 0.0]),
+        rpy=t.vector("rpy", 3, [0.0, 0.0, 0.0]),
+    )
+
+
+def _load_collision(c: TomlTable, path: Path, full: Any, joints: tuple[str, ...]) -> RobotCollisionConfig:
+    from .model import urdf as urdf_io
+
+    c.unknown({"from_urdf", "urdf", "shapes", "exclude", "ignore_links"})
+    other = urdf_io.resolve_urdf(path, c.string("urdf"), "collision.urdf") if c.has("urdf") else None
+    shapes = []
+    raw = c.get("shapes", [])
+    if not isinstance(raw, list) or not all(isinstance(x, dict) for x in raw):
+        raise ConfigError(path, "collision.shapes", "must be a list of tables")
+    for i, item in enumerate(raw):
+        t = TomlTable(path, item, f"collision.shapes[{i}].")
+        link = t.string("link")
+        if link != "base" and not full.existFrame(link):
+            raise ConfigError(path, f"collision.shapes[{i}].link", f"the URDF has no link named {link!r}")
+        shapes.append(load_shape(t, t.string("name", f"{link}_{i}"), link))
+    names = [s.name for s in shapes]
+    if len(set(names)) != len(names):
+        raise ConfigError(path, "collision.shapes", "shape names must be unique")
+    exclude = c.get("exclude", [])
+    if not isinstance(exclude, list) or not all(
+        isinstance(p, list) and len(p) == 2 and all(isinstance(x, str) for x in p) for p in exclude
+    ):
+        raise ConfigError(path, "collision.exclude", "must be a list of [link, link] pairs")
+    ignore = c.get("ignore_links", [])
+    if not isinstance(ignore, list) or not all(isinstance(x, str) for x in ignore):
+        raise ConfigError(path, "collision.ignore_links", "must be a list of link names")
+    return RobotCollisionConfig(
+        from_urdf=c.boolean("from_urdf", False),
+        urdf=other,
+        shapes=tuple(shapes),
+        exclude=tuple((a, b) for a, b in exclude),
+        ignore_links=tuple(ignore),
+    )
 
 
 _BASE_KEYS = {
@@ -528,11 +685,19 @@ def _load_base(b: TomlTable) -> BaseConfig:
     kind = b.string("kind", "mecanum", BASE_KINDS)
     geometry = _BASE_KEYS[kind]
     limits = ("wheel_speed_max", "wheel_acceleration_max") if kind != "fixed" else ()
-    b.unknown({"kind", *geometry, *limits})
+    b.unknown({"kind", "floor_z", "body", *geometry, *limits})
     n = _N_WHEELS[kind]
     values = {k: b.number(k, positive=True) for k in geometry}
+    if not b.has("floor_z"):
+        raise ConfigError(b.path, b._key("floor_z"), "missing: the world z of the floor [m] (the world origin is "
+                          "the base frame's)")
+    body = None
+    if b.has("body"):
+        body = load_shape(b.table("body"), "base_body", "base", ("box",))
     return BaseConfig(
         kind=kind,
+        floor_z=b.number("floor_z", hi=0.0),
+        body=body,
         **values,
         wheel_speed_max=b.per_joint("wheel_speed_max", n, positive=True) if n else _ro([]),
         wheel_acceleration_max=b.per_joint("wheel_acceleration_max", n, positive=True) if n else _ro([]),
@@ -549,7 +714,7 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
 
     path = Path(path) if path is not None else default_config_dir() / "controller.toml"
     r = TomlTable(path, read_toml(path))
-    r.unknown({"rate_hz", "controller", "state_latency", "gains", "dm", "singularity", "qp", "task"})
+    r.unknown({"rate_hz", "controller", "state_latency", "gains", "dm", "singularity", "qp", "task", "collision"})
     d = ControllerConfig()
     g = r.table("gains", required=False)
     g.unknown({"K_x", "alpha", "k_C", "k_N"})
@@ -573,6 +738,13 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
             "eps_abs",
         }
     )
+    col = r.table("collision", required=False)
+    col.unknown({"enabled", "influence_distance", "safety_distance", "floor_margin", "gain"})
+    d_s = col.number("safety_distance", d.collision.safety_distance, lo=0.0)
+    d_floor = col.number("floor_margin", d.collision.floor_margin, lo=0.0)
+    d_i = col.number("influence_distance", d.collision.influence_distance, positive=True)
+    if d_i <= max(d_s, d_floor):
+        raise ConfigError(path, "collision.influence_distance", "must be > safety_distance and floor_margin")
     t = r.table("task", required=False)
     t.unknown({"kind", "K_R", "orientation_weight", "angular_speed_max", "angular_recovery_speed"})
     W = dm.get("W", None)
@@ -620,6 +792,13 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
             orientation_weight=t.number("orientation_weight", d.task.orientation_weight, positive=True),
             angular_speed_max=t.number("angular_speed_max", d.task.angular_speed_max, positive=True),
             angular_recovery_speed=t.number("angular_recovery_speed", d.task.angular_recovery_speed, positive=True),
+        ),
+        collision=CollisionParams(
+            enabled=col.boolean("enabled", d.collision.enabled),
+            influence_distance=d_i,
+            safety_distance=d_s,
+            floor_margin=d_floor,
+            gain=col.number("gain", d.collision.gain, positive=True),
         ),
         path=path,
     )

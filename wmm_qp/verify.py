@@ -18,7 +18,16 @@ It asks of a command only what is physically possible from the state:
   braking at A cannot keep it in — no further out than full braking takes it. The box comes from
   the controller's config (like the limits from the robot's), the rule is re-derived here.
 
-Tolerance: 1e-9 (absolute, in rad/s; for ee_box in m/s, i.e. 1e-9·Δt on the position).
+* collision (with a :class:`CollisionJudge`: every monitored pair of the robot description, self,
+  floor and the scene's obstacles, and the fence): the distance after one tick, computed from the
+  geometry at the predicted configuration (q + Δt·v_m, the base moved by Δt·P(ψ) v_b; no Jacobian,
+  no linearisation), stays at or above the safety distance, or — if the pair is already closer —
+  no closer than it is, or — if even full braking at A cannot achieve that — no closer than full
+  braking takes it; the base's origin stays inside the fence polygon and the EE inside the fence
+  box the same way.
+
+Tolerance: 1e-9 (absolute, in rad/s; for ee_box in m/s, i.e. 1e-9·Δt on the position); for
+collision 1e-5 m (the second-order term of one tick's motion the linear rows do not see).
 """
 
 from __future__ import annotations
@@ -28,12 +37,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .config import FloatArray, RobotConfig
+from .config import CollisionParams, FloatArray, RobotConfig
 from .model.wmm import WmmModel
+from .scene import Scene
 from .types import AT_REST, Command, Mode, Reference, RobotState
 
-KINDS = ("position", "velocity", "acceleration", "wheel", "ee_box")
+KINDS = ("position", "velocity", "acceleration", "wheel", "ee_box", "collision")
 TOL = 1e-9
+COLLISION_TOL = 1e-5  # [m]
 
 
 def check_command(
@@ -45,6 +56,7 @@ def check_command(
     *,
     model: WmmModel | None = None,
     ee_box: tuple[FloatArray, FloatArray] | None = None,
+    collision: CollisionJudge | None = None,
 ) -> dict[str, int]:
     """Number of joints (or wheels, or EE axes) whose command violates each kind of hard bound.
 
@@ -80,6 +92,8 @@ def check_command(
     out["wheel"] = int(np.sum(bad_w))
     if model is not None and ee_box is not None:
         out["ee_box"] = check_ee_box(model, dt, state, cmd, ee_box[0], ee_box[1], tol)
+    if collision is not None:
+        out["collision"] = collision.check(dt, state, cmd)
     return out
 
 
@@ -111,6 +125,97 @@ def check_ee_box(
     return int(np.sum(boxed & bad))
 
 
+class CollisionJudge:
+    """The collision rule of the module docstring for one robot, scene and safety distances.
+
+    Args:
+        model: the robot.
+        scene: its obstacles and fence.
+        safety_distance, floor_margin: [m] d_s of robot pairs (and obstacles), and of the floor.
+    """
+
+    def __init__(self, model: WmmModel, scene: Scene, safety_distance: float, floor_margin: float) -> None:
+        import coal
+
+        from .model.collision import coal_shape, robot_geometry, shape_pose
+
+        self.model, self.scene = model, scene
+        self.geo = robot_geometry(model.config, model.arm)
+        self.d_s, self.d_floor = safety_distance, floor_margin
+        self._coal = coal
+        self._floor = coal.Halfspace(np.array([0.0, 0.0, 1.0]), self.geo.floor_z)  # solid: z ≤ floor_z
+        self.obstacles = [(o.name, coal_shape(o), shape_pose(o)) for o in scene.obstacles]
+        self.last = ""  # the pair of the last violation
+
+    def distances(self, q_base: FloatArray, q_arm: FloatArray) -> dict[str, float]:
+        """Every monitored pair's distance [m] (and the fence's margins) at one configuration."""
+        import pinocchio as pin
+
+        coal, geo = self._coal, self.geo
+        M = geo.placements(q_arm)  # base frame
+        c, s = np.cos(q_base[2]), np.sin(q_base[2])
+        wb = pin.SE3(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), np.array([q_base[0], q_base[1], 0.0]))
+        W = [wb * m for m in M]
+        T = [coal.Transform3s(m.rotation, m.translation) for m in W]
+        req, out = coal.DistanceRequest(), {}
+        b = geo.bodies
+        for i, j in geo.self_pairs:
+            res = coal.DistanceResult()
+            out[f"{b[i].name}/{b[j].name}"] = coal.distance(b[i].shape, T[i], b[j].shape, T[j], req, res)
+        for i in geo.floor_bodies:
+            out[f"{b[i].name}/floor"] = coal.distance(b[i].shape, T[i], self._floor, coal.Transform3s(), req,
+                                                      coal.DistanceResult())
+        for name, shape, pose in self.obstacles:
+            To = coal.Transform3s(pose.rotation, pose.translation)
+            for i in range(len(b)):
+                out[f"{b[i].name}/{name}"] = coal.distance(b[i].shape, T[i], shape, To, req, coal.DistanceResult())
+        fence = self.scene.fence
+        A, cc = fence.half_planes()
+        for k in range(A.shape[0]):
+            out[f"fence:base edge {k}"] = float(cc[k] - A[k] @ q_base[:2])
+        x = self.model.ee_position(q_base, q_arm)
+        for ax in range(3):
+            if np.isfinite(fence.ee_upper[ax]):
+                out[f"fence:ee {'xyz'[ax]}+"] = float(fence.ee_upper[ax] - x[ax])
+            if np.isfinite(fence.ee_lower[ax]):
+                out[f"fence:ee {'xyz'[ax]}-"] = float(x[ax] - fence.ee_lower[ax])
+        return out
+
+    def _margin(self, name: str) -> float:
+        if name.startswith("fence:"):
+            return 0.0
+        return self.d_floor if name.endswith("/floor") else self.d_s
+
+    def _after(self, dt: float, state: RobotState, wheels: FloatArray, arm_rates: FloatArray) -> dict[str, float]:
+        q_b = state.q_base + dt * (self.model.base.P(float(state.q_base[2])) @ wheels)
+        return self.distances(q_b, state.q_arm + dt * arm_rates)
+
+    def check(self, dt: float, state: RobotState, cmd: Command, tol: float = COLLISION_TOL) -> int:
+        """The number of pairs (and fence margins) the command violates (module docstring)."""
+        cfg = self.model.config
+        a, aw = cfg.arm.acceleration_max * dt, cfg.base.wheel_acceleration_max * dt
+        v0 = state.v_arm
+        w0 = np.zeros(cfg.base.n_wheels) if state.wheel_speeds is AT_REST else state.wheel_speeds
+        w, v = np.asarray(cmd.wheel_speeds, dtype=float), np.asarray(cmd.arm_rates, dtype=float)
+        if not (np.isfinite(w).all() and np.isfinite(v).all()):
+            return 1
+        now = self.distances(state.q_base, state.q_arm)
+        nxt = self._after(dt, state, w, v)
+        brake = None
+        bad = 0
+        for name, d1 in nxt.items():
+            floor = min(now[name], self._margin(name))
+            if d1 >= floor - tol:
+                continue
+            if brake is None:
+                brake = self._after(dt, state, w0 - np.clip(w0, -aw, aw), v0 - np.clip(v0, -a, a))
+            if d1 >= brake[name] - tol:
+                continue
+            bad += 1
+            self.last = f"{name}: {now[name]:.4f} -> {d1:.4f} m"
+        return bad
+
+
 def _stop_position(q: np.ndarray, v: np.ndarray, a_dt: np.ndarray, dt: float) -> np.ndarray:
     """Where a joint ends if it holds v for dt, then brakes by a_dt per tick (held dt each) to 0."""
     speed = np.abs(v)
@@ -129,7 +234,13 @@ class Sample:
 
 
 def sample_states(
-    model: WmmModel, n: int, seed: int, modes: tuple[Mode, ...] = tuple(Mode), pose: bool = False
+    model: WmmModel,
+    n: int,
+    seed: int,
+    modes: tuple[Mode, ...] = tuple(Mode),
+    pose: bool = False,
+    judge: CollisionJudge | None = None,
+    influence: float = 0.15,
 ) -> Iterator[Sample]:
     """Random states and references covering the corners the bounds must survive.
 
@@ -139,6 +250,10 @@ def sample_states(
     Gen3 stretched straight, and the same family on any arm). References: small, huge,
     discontinuous (a random jump each sample), in every mode; with ``pose`` also a target
     orientation (a random rotation of up to ~π about a random axis) and angular feed-forward.
+    With a collision ``judge``, three more cases: near a self-collision or the floor (arm
+    configurations drawn until a monitored pair is within ``influence`` of touching), near an
+    obstacle (the base placed so that the EE is within ``influence`` of one) and at the fence
+    (the base's origin within ``influence`` of a fence edge, moving out).
     """
     rng = np.random.default_rng(seed)
     arm, base = model.config.arm, model.config.base
@@ -147,7 +262,7 @@ def sample_states(
     vmax, wmax = arm.velocity_max, base.wheel_speed_max
     n_a, n_w = arm.n, base.n_wheels
     bending = np.arange(1, n_a, 2)
-    cases = (
+    cases: tuple[str, ...] = (
         "inside",
         "at_limit",
         "beyond_limit",
@@ -156,6 +271,8 @@ def sample_states(
         "near_singular",
         "singular",
     )
+    if judge is not None:
+        cases += ("near_self", "near_obstacle", "at_fence")
     for i in range(n):
         case = cases[i % len(cases)]
         q = rng.uniform(lo, hi)
@@ -181,6 +298,32 @@ def sample_states(
             eps = 0.0 if case == "singular" else 0.05
             q[bending] = np.clip(rng.uniform(-eps, eps, bending.size), lo[bending], hi[bending])
         q_base = np.array([*rng.uniform(-2, 2, 2), rng.uniform(-np.pi, np.pi)])
+        if judge is not None and case == "near_self":
+            for _ in range(200):  # until a self or floor pair is within the influence distance
+                d = judge.distances(q_base, q)
+                if min(v for k, v in d.items() if not k.startswith("fence:") and "/" in k) < influence:
+                    break
+                q = rng.uniform(lo, hi)
+        elif judge is not None and case == "near_obstacle" and judge.scene.obstacles:
+            o = judge.scene.obstacles[int(rng.integers(len(judge.scene.obstacles)))]
+            p_ee = model.arm.position(q)  # base frame
+            yaw = float(rng.uniform(-np.pi, np.pi))
+            heading = rng.normal(size=2)
+            heading /= np.linalg.norm(heading)
+            reach = float(np.max(o.size)) if o.kind == "box" else o.radius + 0.5 * o.length
+            target = np.asarray(o.xyz[:2]) + heading * (reach + rng.uniform(0.0, influence))
+            c_, s_ = np.cos(yaw), np.sin(yaw)
+            ee = np.array([c_ * p_ee[0] - s_ * p_ee[1], s_ * p_ee[0] + c_ * p_ee[1]])  # Rz(ψ) p, x-y
+            q_base = np.array([target[0] - ee[0], target[1] - ee[1], yaw])
+        elif judge is not None and case == "at_fence":
+            A, _ = judge.scene.fence.half_planes()
+            if A.shape[0]:
+                k = int(rng.integers(A.shape[0]))
+                edge = judge.scene.fence.base[k]
+                nxt = judge.scene.fence.base[(k + 1) % A.shape[0]]
+                point = edge + rng.uniform(0, 1) * (nxt - edge) - A[k] * rng.uniform(0.0, influence)
+                q_base = np.array([point[0], point[1], rng.uniform(-np.pi, np.pi)])
+                w = rng.choice([-1.0, 1.0], n_w) * wmax * rng.uniform(0.3, 1.0)
         state = RobotState(q_base=q_base, q_arm=q, v_arm=v, wheel_speeds=w)
         x = model.ee_position(q_base, q)
         scale = rng.choice([1e-3, 0.05, 10.0])  # small, ordinary, huge
@@ -217,6 +360,7 @@ def verify_controller(
     seed: int,
     progress: object = None,
     ee_box: tuple[FloatArray, FloatArray] | None = None,
+    scene: Scene | None = None,
 ) -> VerifyReport:
     """Run one step of ``controller`` for each of n random states in every mode; referee each.
 
@@ -228,6 +372,10 @@ def verify_controller(
         progress: optional callable(i, n) called after each state.
         ee_box: (lower, upper) [m] of eq. (17), refereed in DM_CARTESIAN; default: the box of the
             controller's ``config`` (``ee_box_lower``, ``ee_box_upper``), if it has one.
+        scene: obstacles and fence: when given, every command is also refereed for collisions
+            (:class:`CollisionJudge`, the safety distances of the controller's ``config.collision``
+            or the defaults) and states near collisions are sampled; a QP controller is given the
+            scene, the baselines are not (they have no collision rows: the referee sees them collide).
     """
     rep = VerifyReport(by_mode={m.value: dict.fromkeys(KINDS, 0) for m in Mode})
     dt = float(controller.dt)  # type: ignore[attr-defined]
@@ -236,14 +384,22 @@ def verify_controller(
         if hasattr(cfg, "ee_box_lower") and hasattr(cfg, "ee_box_upper"):
             ee_box = (cfg.ee_box_lower, cfg.ee_box_upper)  # type: ignore[union-attr]
     modes = tuple(Mode)
-    task = getattr(getattr(controller, "config", None), "task", None)
+    cfg = getattr(controller, "config", None)
+    task = getattr(cfg, "task", None)
     pose = getattr(task, "kind", "position") == "pose"
-    for k, s in enumerate(sample_states(model, n, seed, modes, pose=pose)):
+    judge = None
+    params = getattr(cfg, "collision", None) or CollisionParams()
+    if scene is not None:
+        judge = CollisionJudge(model, scene, params.safety_distance, params.floor_margin)
+        if hasattr(controller, "set_scene"):
+            controller.set_scene(scene)
+    samples = sample_states(model, n, seed, modes, pose=pose, judge=judge, influence=params.influence_distance)
+    for k, s in enumerate(samples):
         cmd = controller.step(s.state, s.reference)  # type: ignore[attr-defined]
         rep.steps += 1
         rep.statuses[cmd.status.value] = rep.statuses.get(cmd.status.value, 0) + 1
         box = ee_box if s.reference.mode == Mode.DM_CARTESIAN else None
-        res = check_command(model.config, dt, s.state, cmd, model=model, ee_box=box)
+        res = check_command(model.config, dt, s.state, cmd, model=model, ee_box=box, collision=judge)
         total = sum(res.values())
         if total:
             rep.violations += total
@@ -252,9 +408,11 @@ def verify_controller(
                 rep.by_kind[kind] += c
                 rep.by_mode[s.reference.mode.value][kind] += c
             if len(rep.examples) < 3:
-                rep.examples.append(
-                    {"case": s.case, "mode": s.reference.mode.value, "violations": {k: c for k, c in res.items() if c}}
-                )
+                ex: dict[str, object] = {"case": s.case, "mode": s.reference.mode.value,
+                                         "violations": {k: c for k, c in res.items() if c}}
+                if res["collision"] and judge is not None:
+                    ex["pair"] = judge.last
+                rep.examples.append(ex)
         if (k + 1) % len(modes) == 0:
             rep.samples += 1
             if progress is not None:

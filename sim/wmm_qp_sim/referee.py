@@ -38,7 +38,7 @@ from wmm_qp.config import FloatArray, RobotConfig
 
 from .config import RefereeConfig
 
-VIOLATION_KINDS = ("position", "velocity", "acceleration", "wheel_speed", "wheel_acceleration")
+VIOLATION_KINDS = ("position", "velocity", "acceleration", "wheel_speed", "wheel_acceleration", "collision")
 
 
 class Referee:

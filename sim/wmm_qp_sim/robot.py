@@ -22,6 +22,7 @@ import numpy as np
 import wmm_qp
 from wmm_qp.config import FloatArray
 
+from .collision import CollisionReferee
 from .config import BoxConfig, SimConfig
 from .contact import Box
 from .referee import Referee
@@ -125,10 +126,13 @@ class SimRobot:
         seed: seed of the slip/drift noise; None = ``config.seed``.
         ramp: the drives ramp the executed rates towards the command at the acceleration
             limits (see the module docstring); False: each command is executed at once.
+        scene: the obstacles the referee checks the robot against (None: none; self and floor
+            collisions are checked anyway).
+        collisions: check collisions at all (``collision`` violations, :mod:`.collision`).
     """
 
     def __init__(self, model: wmm_qp.WmmModel, config: SimConfig, seed: int | None = None,
-                 ramp: bool = False) -> None:
+                 ramp: bool = False, scene: wmm_qp.scene.Scene | None = None, collisions: bool = True) -> None:
         self.model = model
         self.config = config
         self.seed = config.seed if seed is None else seed
@@ -148,7 +152,17 @@ class SimRobot:
         self._v_tol = self.v_max * (1.0 + tol.rtol) + tol.atol
         self._w_tol = self.w_max * (1.0 + tol.rtol) + tol.atol
         self.ramp = ramp
+        self.collision: CollisionReferee | None = None
+        if collisions:
+            self.collision = CollisionReferee(model, config.referee.collision_distance)
+            if scene is not None:
+                self.collision.set_obstacles(scene.obstacles)
         self.reset()
+
+    def set_obstacles(self, obstacles: list[wmm_qp.config.ShapeConfig]) -> None:
+        """The obstacles the referee checks against (live obstacles replace the scene's)."""
+        if self.collision is not None:
+            self.collision.set_obstacles(obstacles)
 
     def reset(
         self,
@@ -167,6 +181,8 @@ class SimRobot:
         self.slip.rng = self.rng
         self.slip.reset()
         self.referee.reset()
+        if self.collision is not None:
+            self.collision.reset()
         self.t = 0.0
         start = self.model.config.arm.start if q_arm is None else q_arm
         self.q_arm = np.array(start, dtype=float).reshape(self.n_arm)
@@ -225,6 +241,11 @@ class SimRobot:
         self._integrate(dt)
         self.t += dt
         self.referee.check_positions(self.q_arm)
+        if self.collision is not None:
+            hits = self.collision.check(self.base_true, self.model.arm.pin_q(self.q_arm).copy())
+            if hits:
+                self.referee.counts["collision"] += hits
+                self.referee.last_event = f"collision: {self.collision.closest} at {self.collision.min_distance:.4f} m"
         return self.state()
 
     def _receive(self, command: SimCommand, dt: float) -> None:

@@ -71,12 +71,15 @@ import numpy as np
 
 from .._jit import jit
 from ..config import ControllerConfig, FloatArray
+from ..limits.collision import CollisionRows, Rows
 from ..linalg3 import solve_spd, solve_sym3
 from ..model.arm import IntArray
+from ..model.collision import robot_geometry
 from ..model.wmm import WmmModel
 from ..pseudoinverse import weight_matrix_diag
+from ..scene import Scene
 from ..solvers import INF, QPBackend, QPProblem, available_solvers, make_backend
-from ..types import Command, Mode, Reference, RobotState, Status
+from ..types import AT_REST, Command, Mode, Reference, RobotState, Status
 from .base import Controller, TickContext
 
 SLACK_ACCEPT = 1e-7  # [m/s] slack below this counts as "the task is met"
@@ -350,6 +353,11 @@ class QpController(Controller):
         self._return_gain = RETURN_WEIGHT * self._w_inv[self.n_wheels :] / RETURN_TIME  # see return_term
         self._last_problem: QPProblem | None = None
         self.last_stage = ""
+        self.collision: CollisionRows | None = None  # the dampers and the fence (limits/collision.py)
+        if config.collision.enabled:
+            geometry = robot_geometry(self.robot, model.arm)
+            self.collision = CollisionRows(geometry, model.base.M, config.collision, config.state_latency)
+        self.last_rows: Rows | None = None  # the collision rows of the last tick
 
     @property
     def solver(self) -> str:
@@ -477,19 +485,52 @@ class QpController(Controller):
             self._templates[key] = p
         return p
 
-    def build_arm_first(self, ctx: TickContext, xdot: FloatArray) -> tuple[QPProblem, FloatArray]:
-        """Stage 1: the arm alone, wheels held at the admissible speed nearest 0."""
-        p = self._template(self.n_arm, 0)
+    def set_scene(self, scene: Scene) -> None:
+        """The obstacles and the fence the collision rows keep the robot away from / inside."""
+        if self.collision is not None:
+            self.collision.set_scene(scene)
+
+    def set_obstacles(self, obstacles: list) -> None:  # type: ignore[type-arg]
+        """Replace the obstacle set (live obstacles; the fence stays)."""
+        if self.collision is not None:
+            self.collision.set_obstacles(obstacles)
+
+    def collision_rows(self, ctx: TickContext, state: RobotState) -> Rows | None:
+        """The dampers' and the fence's rows this tick (None without collision checking)."""
+        if self.collision is None:
+            return None
+        wheels = self._rest_wheels if state.wheel_speeds is AT_REST else state.wheel_speeds
+        v_prev = np.concatenate((wheels, state.v_arm))  # the bounds' centre (the daemon's last command)
+        J = ctx.kin.J[:3] if self.pose else ctx.kin.J
+        rows = self.collision.rows(ctx.kin.q_base, ctx.kin.x, J, v_prev, ctx.lo, ctx.hi)
+        return rows
+
+    def build_arm_first(
+        self, ctx: TickContext, xdot: FloatArray, rows: Rows | None = None
+    ) -> tuple[QPProblem, FloatArray]:
+        """Stage 1: the arm alone, wheels held at the admissible speed nearest 0 (the collision
+        rows with the held wheels' share moved to their bounds)."""
+        k = 0 if rows is None else rows.l.shape[0]
+        p = self._template(self.n_arm, k)
         w_hold = np.empty(self.n_wheels)
         arm = self.robot.arm
         _fill_stage(ctx.kin.J, xdot, ctx.lo, ctx.hi, self._w_inv[self.n_wheels :], p.H, p.A, p.b, p.lb, p.ub, w_hold)
         p.g[: self.n_arm] = 0.0
         _add_return_term(ctx.kin.q_arm, arm.position_lower, arm.position_upper, self._return_gain, p.g)
+        if k:
+            assert rows is not None
+            p.C[:, : self.n_arm] = rows.C[:, self.n_wheels :]
+            p.l[:] = rows.l - rows.C[:, : self.n_wheels] @ w_hold
+            p.u[:] = INF
         return p, w_hold
 
-    def build(self, ctx: TickContext, xdot: FloatArray, mode: Mode) -> QPProblem:
+    def build(self, ctx: TickContext, xdot: FloatArray, mode: Mode, rows: Rows | None = None) -> QPProblem:
         """Stage 2: the whole robot (see the module docstring)."""
         C, l, u = self.ee_box_rows(ctx, mode, ctx.lo, ctx.hi)
+        if rows is not None and rows.l.shape[0]:
+            C = np.vstack((C, rows.C))
+            l = np.concatenate((l, rows.l))
+            u = np.concatenate((u, np.full(rows.l.shape[0], INF)))
         p = self._template(self.n_v, C.shape[0])
         cost = self.cost_diagonal(ctx, mode)
         _fill_stage(ctx.kin.J, xdot, ctx.lo, ctx.hi, cost, p.H, p.A, p.b, p.lb, p.ub, _NO_HOLD)
@@ -504,6 +545,18 @@ class QpController(Controller):
             p.l[:] = l
             p.u[:] = u
         return p
+
+    @staticmethod
+    def _cut_reason(rows: Rows | None, v: FloatArray) -> str:
+        """Why the task was cut: the collision or fence rows the command sits on, else the bounds."""
+        if rows is not None and rows.l.shape[0]:
+            slack = rows.C @ v - rows.l
+            active = np.flatnonzero(slack <= 1e-9 * np.maximum(1.0, np.abs(rows.l)))
+            if active.size:
+                k = active[np.argmin(rows.distances[active])]
+                more = f" (+{active.size - 1} more)" if active.size > 1 else ""
+                return f"collision: {rows.names[k]} at {rows.distances[k]:.3f} m{more} (task cut)"
+        return "the bounds cut the task (best effort)"
 
     # ------------------------------------------------------------------ solving
     def closed_form(self, problem: QPProblem) -> FloatArray | None:
@@ -585,26 +638,34 @@ class QpController(Controller):
         mode = reference.mode
         ctx = self.context(state, reference, need_gradient=self.needs_gradient(mode))
         xdot = self.reference_velocity(ctx, reference)
+        rows = self.last_rows = self.collision_rows(ctx, state)
         if self.config.qp.arm_first and mode in (Mode.TRACK, Mode.HOLD):
-            p, w_hold = self.build_arm_first(ctx, xdot)
+            p, w_hold = self.build_arm_first(ctx, xdot, rows)
             z = self._solve(self._arm, p)
+            if z is not None and p.n_in:
+                _hold_ee_box(p.C, p.l, p.u, p.lb, p.ub, z, self.n_arm)  # the collision rows, whatever solved
             if z is not None and (self._closed_form_hit or task_residual(p, z) <= SLACK_ACCEPT):
                 self.last_stage = "arm"
                 return self.finish(ctx, np.concatenate([w_hold, z[: self.n_arm]]), xdot, alpha=0.0)
-        problem = self.build(ctx, xdot, mode)
+        problem = self.build(ctx, xdot, mode, rows)
         z = self._solve(self._full, problem)
         if z is None:
             self.last_stage = "failed"
             return self.safe_stop(state, f"qp ({self.solver}): the solver failed")
         self.last_stage = "full"
         status, reason = Status.OK, ""
-        if problem.n_in:  # the EE box (DM_CARTESIAN, eq. (17)), re-checked whatever solved the stage
+        if problem.n_in:  # the EE box (eq. (17)) and collision rows, re-checked whatever solved the stage
+            e = problem.C[:, : self.n_v] @ z[: self.n_v]
+            left = np.flatnonzero((e > problem.u + EE_BOX_TOL) | (e < problem.l - EE_BOX_TOL))
             out = _hold_ee_box(problem.C, problem.l, problem.u, problem.lb, problem.ub, z, self.n_v)
             if out > 0.0:
                 self.ee_box_corrections += 1
                 status = Status.SATURATED
-                reason = f"EE box: the solution left it by {out / self.dt:.3g} m/s; projected back onto it"
+                n_box = problem.n_in - (0 if rows is None else rows.l.shape[0])
+                k = int(left[0]) if left.size else 0
+                what = "EE box" if k < n_box or rows is None else f"collision row {rows.names[k - n_box]}"
+                reason = f"{what}: the solution left it by {out / self.dt:.3g} m/s; projected back onto it"
         if status == Status.OK and not self._closed_form_hit and task_residual(problem, z) > 1e-6:
-            status, reason = Status.SATURATED, "the bounds cut the task (best effort)"
+            status, reason = Status.SATURATED, self._cut_reason(rows, z[: self.n_v])
         alpha = self.config.qp.dm_alpha if mode == Mode.DM_NULLSPACE else self.config.qp.alpha
         return self.finish(ctx, z[: self.n_v], xdot, status=status, reason=reason, alpha=alpha)

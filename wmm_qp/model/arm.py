@@ -59,7 +59,8 @@ class ArmModel:
                 raise ConfigError(where, "arm.joints", f"the URDF has no joint named {name!r}")
         if not full.existFrame(config.ee_frame):
             raise ConfigError(where, "arm.ee_frame", f"the URDF has no frame named {config.ee_frame!r}")
-        self.model = urdf_io.reduced_model(full, config.joints, dict(config.locked), mount_placement(config))
+        self.mount = mount_placement(config)
+        self.model = urdf_io.reduced_model(full, config.joints, dict(config.locked), self.mount)
         self.data = self.model.createData()
         self.frame_id = self.model.getFrameId(config.ee_frame)
         ids = [self.model.getJointId(n) for n in config.joints]

@@ -1,0 +1,225 @@
+"""The robot's collision geometry and the pairs to monitor, built once at start-up (DESIGN.md §7).
+
+Bodies come from the URDF's collision elements (``[collision] from_urdf``; meshes as their convex
+hulls, so distances and closest points come from coal's GJK), from primitives in the robot file
+(``[collision] shapes``; the Gen3's URDF has none) and from the base's box (``[base] body``). Each
+body is fixed to a joint of the arm's reduced model (0: fixed to the base), at a placement in that
+joint's frame; the base frame is the reduced model's world (the mount is folded in).
+
+Pairs, decided here once and never per tick:
+
+* robot vs robot: every two bodies except those on the same joint, on adjacent joints (a joint and
+  its parent: they touch by construction), both fixed to the base, named in ``[collision] exclude``,
+  or within ``TOUCH_DISTANCE`` (3 cm) of each other in at least 95 % of 200 random configurations
+  inside the joint limits (seeded: every process decides the same) — touching by construction,
+  like a capsule over a joint and the next-but-one link's. Every exclusion is listed in
+  ``excluded`` with its reason;
+* robot vs the floor (the plane z = ``[base] floor_z``): every body that moves with the arm;
+* robot vs obstacles (a scene's, in the world frame): every body, the base's too.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+from ..config import FloatArray, RobotConfig, ShapeConfig
+from . import urdf as urdf_io
+from .arm import ArmModel
+
+
+def coal_shape(shape: ShapeConfig) -> coal.CollisionGeometry:
+    """The coal geometry of a primitive (capsules and cylinders along their local z)."""
+    if shape.kind == "box":
+        return coal.Box(*(float(v) for v in shape.size))
+    if shape.kind == "sphere":
+        return coal.Sphere(shape.radius)
+    if shape.kind == "capsule":
+        return coal.Capsule(shape.radius, shape.length)
+    if shape.kind == "cylinder":
+        return coal.Cylinder(shape.radius, shape.length)
+    if shape.kind == "plane":  # size = unit normal n, xyz[2] = offset c: n·p ≤ c is free, n·p > c solid
+        return coal.Halfspace(-np.asarray(shape.size, dtype=float), -float(shape.xyz[2]))  # coal: solid where n'·p ≤ d
+    raise ValueError(f"unknown shape kind {shape.kind!r}")
+
+
+def shape_pose(shape: ShapeConfig) -> pin.SE3:
+    """A primitive's pose in its link's frame (identity for a plane: its offset is in the shape)."""
+    if shape.kind == "plane":
+        return pin.SE3.Identity()
+    return pin.SE3(pin.rpy.rpyToMatrix(np.asarray(shape.rpy, dtype=float)), np.asarray(shape.xyz, dtype=float))
+
+
+@dataclass
+class Body:
+    """One collision object of the robot.
+
+    Attributes:
+        name: its name (a URDF geometry's, or the robot file's).
+        link: the link it belongs to ("base" for the base's own).
+        joint: the reduced model's joint that carries it (0: fixed to the base).
+        placement: its pose in that joint's frame (joint 0: the base frame).
+        shape: the coal geometry.
+        center, radius: a bounding sphere in the body's own frame (the broad phase).
+    """
+
+    name: str
+    link: str
+    joint: int
+    placement: pin.SE3
+    shape: coal.CollisionGeometry
+    center: FloatArray = field(default_factory=lambda: np.zeros(3))
+    radius: float = 0.0
+
+    def __post_init__(self) -> None:
+        self.shape.computeLocalAABB()
+        self.center = np.asarray(self.shape.aabb_center, dtype=float).copy()
+        self.radius = float(self.shape.aabb_radius)
+
+
+TOUCH_DISTANCE = 0.03
+"""[m] two bodies this close in nearly every configuration touch by construction: never monitored."""
+TOUCH_SAMPLES, TOUCH_FRACTION = 200, 0.95
+
+
+class RobotGeometry:
+    """The robot's bodies and the pairs of them (and of them and the floor) to monitor.
+
+    Args:
+        robot: the robot description.
+        arm: its arm model (whose reduced Pinocchio model the bodies are attached to).
+    """
+
+    def __init__(self, robot: RobotConfig, arm: ArmModel) -> None:
+        self.robot, self.arm = robot, arm
+        self.bodies: list[Body] = []
+        self._from_urdf(robot, arm)
+        model = arm.model
+        for s in robot.collision.shapes:
+            if s.link == "base":
+                joint, where = 0, pin.SE3.Identity()
+            else:
+                if not model.existFrame(s.link):  # a link of a locked part: merged into its joint's frame
+                    raise ValueError(f"collision shape {s.name!r}: no frame {s.link!r} in the reduced model")
+                f = model.frames[model.getFrameId(s.link)]
+                joint, where = int(f.parentJoint), f.placement
+            self.bodies.append(Body(s.name, s.link, joint, where * shape_pose(s), coal_shape(s)))
+        if robot.base.body is not None:
+            b = robot.base.body
+            self.bodies.append(Body(b.name, "base", 0, shape_pose(b), coal_shape(b)))
+        self.floor_z = float(robot.base.floor_z)
+        self.excluded: list[tuple[str, str, str]] = []  # (a, b, why)
+        self.self_pairs = self._self_pairs(robot)
+        self.floor_bodies = [i for i, b in enumerate(self.bodies) if b.joint > 0] if np.isfinite(self.floor_z) else []
+
+    # ------------------------------------------------------------------ building
+    def _from_urdf(self, robot: RobotConfig, arm: ArmModel) -> None:
+        c = robot.collision
+        if not c.from_urdf:
+            return
+        urdf = c.urdf if c.urdf is not None else robot.arm.urdf
+        full = pin.buildModelFromUrdf(str(urdf))
+        dirs = urdf_io.package_dirs(urdf)
+        geom = pin.buildGeomFromUrdf(full, str(urdf), pin.GeometryType.COLLISION, package_dirs=dirs)
+        keep = {full.getJointId(n) for n in robot.arm.joints}
+        lock = [j for j in range(1, full.njoints) if j not in keep]
+        q = urdf_io.lock_configuration(full, dict(robot.arm.locked))
+        _, reduced_geom = pin.buildReducedModel(full, geom, lock, q)
+        mount = arm.mount
+        for g in reduced_geom.geometryObjects:
+            link = full.frames[g.parentFrame].name if g.parentFrame < len(full.frames) else g.name
+            if link in c.ignore_links:
+                continue
+            shape = g.geometry
+            if isinstance(shape, coal.BVHModelBase):
+                shape.buildConvexRepresentation(False)
+                shape = shape.convex
+            placement = g.placement if g.parentJoint > 0 else mount * g.placement
+            self.bodies.append(Body(g.name, link, int(g.parentJoint), placement, shape))
+
+    def _self_pairs(self, robot: RobotConfig) -> list[tuple[int, int]]:
+        parents = self.arm.model.parents
+        exclude = {frozenset(p) for p in robot.collision.exclude}
+        candidates = []
+        for i, a in enumerate(self.bodies):
+            for j in range(i + 1, len(self.bodies)):
+                b = self.bodies[j]
+                why = ""
+                if a.joint == b.joint:
+                    why = "same joint" if a.joint else "both fixed to the base"
+                elif parents[a.joint] == b.joint or parents[b.joint] == a.joint:
+                    why = "adjacent joints"
+                elif frozenset((a.link, b.link)) in exclude:
+                    why = "excluded in the robot file"
+                if why:
+                    self.excluded.append((a.name, b.name, why))
+                else:
+                    candidates.append((i, j))
+        if not candidates:
+            return []
+        arm = robot.arm
+        lo = np.where(np.isfinite(arm.position_lower), arm.position_lower, -np.pi)
+        hi = np.where(np.isfinite(arm.position_upper), arm.position_upper, np.pi)
+        rng = np.random.default_rng(0)
+        close = np.zeros(len(candidates))
+        for _ in range(TOUCH_SAMPLES):
+            M = self.placements(rng.uniform(lo, hi))
+            c = [M[k].act(b.center) for k, b in enumerate(self.bodies)]
+            for k, (i, j) in enumerate(candidates):
+                a, b = self.bodies[i], self.bodies[j]
+                if np.linalg.norm(c[i] - c[j]) - a.radius - b.radius >= TOUCH_DISTANCE:
+                    continue  # the bounding spheres are apart: so are the bodies
+                close[k] += distance(a.shape, M[i], b.shape, M[j])[0] < TOUCH_DISTANCE
+        pairs = []
+        for k, (i, j) in enumerate(candidates):
+            if close[k] >= TOUCH_FRACTION * TOUCH_SAMPLES:
+                share = 100.0 * close[k] / TOUCH_SAMPLES
+                self.excluded.append((self.bodies[i].name, self.bodies[j].name,
+                                      f"within {TOUCH_DISTANCE} m in {share:.0f} % of random configurations"))
+            else:
+                pairs.append((i, j))
+        return pairs
+
+    # ------------------------------------------------------------------ evaluation
+    def placements(self, q_arm: FloatArray) -> list[pin.SE3]:
+        """Every body's pose in the base frame at q_arm (runs forward kinematics)."""
+        model, data = self.arm.model, self.arm.data
+        pin.forwardKinematics(model, data, self.arm.pin_q(q_arm))
+        return self.placements_after_fk()
+
+    def placements_after_fk(self) -> list[pin.SE3]:
+        """Every body's pose in the base frame from the arm's current forward kinematics."""
+        oMi = self.arm.data.oMi
+        return [oMi[b.joint] * b.placement if b.joint else b.placement for b in self.bodies]
+
+    def pair_names(self, i: int, j: int) -> str:
+        return f"{self.bodies[i].name}/{self.bodies[j].name}"
+
+
+def robot_geometry(robot: RobotConfig, arm: ArmModel) -> RobotGeometry:
+    """The robot's geometry, built once per arm model (the pair selection samples configurations:
+    ~0.1–1 s) and shared by every controller and referee of that model."""
+    geo = getattr(arm, "_collision_geometry", None)
+    if geo is None or geo.robot is not robot:
+        geo = RobotGeometry(robot, arm)
+        arm._collision_geometry = geo  # type: ignore[attr-defined]
+    return geo
+
+
+def transform(M: pin.SE3) -> coal.Transform3s:
+    return coal.Transform3s(M.rotation, M.translation)
+
+
+_REQ = coal.DistanceRequest()
+
+
+def distance(
+    a: coal.CollisionGeometry, Ma: pin.SE3, b: coal.CollisionGeometry, Mb: pin.SE3
+) -> tuple[float, FloatArray, FloatArray]:
+    """(d, p_a, p_b): the signed distance of two shapes and their closest points (frame of Ma, Mb)."""
+    res = coal.DistanceResult()
+    d = coal.distance(a, transform(Ma), b, transform(Mb), _REQ, res)
+    return float(d), np.asarray(res.getNearestPoint1(), dtype=float), np.asarray(res.getNearestPoint2(), dtype=float)
