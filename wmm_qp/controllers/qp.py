@@ -517,19 +517,24 @@ class QpController(Controller):
         _fill_stage(ctx.kin.J, xdot, ctx.lo, ctx.hi, self._w_inv[self.n_wheels :], p.H, p.A, p.b, p.lb, p.ub, w_hold)
         p.g[: self.n_arm] = 0.0
         _add_return_term(ctx.kin.q_arm, arm.position_lower, arm.position_upper, self._return_gain, p.g)
-        if k:
+        if k:  # l ≤ C_arm v_m + C_w w_hold, the damper relaxed to what the arm alone can do (limits/collision.py)
             assert rows is not None
-            p.C[:, : self.n_arm] = rows.C[:, self.n_wheels :]
-            p.l[:] = rows.l - rows.C[:, : self.n_wheels] @ w_hold
+            Ca, held = rows.C[:, self.n_wheels :], rows.C[:, : self.n_wheels] @ w_hold
+            best = np.sum(np.where(Ca > 0.0, Ca * p.ub[: self.n_arm], Ca * p.lb[: self.n_arm]), axis=1)
+            p.C[:, : self.n_arm] = Ca
+            p.l[:] = np.minimum(rows.damper, best + held) - held
             p.u[:] = INF
         return p, w_hold
 
-    def build(self, ctx: TickContext, xdot: FloatArray, mode: Mode, rows: Rows | None = None) -> QPProblem:
-        """Stage 2: the whole robot (see the module docstring)."""
+    def build(
+        self, ctx: TickContext, xdot: FloatArray, mode: Mode, rows: Rows | None = None, brake: bool = False
+    ) -> QPProblem:
+        """Stage 2: the whole robot (see the module docstring); ``brake``: the collision rows relaxed
+        to admit the braking command (the retry when the rows together are infeasible)."""
         C, l, u = self.ee_box_rows(ctx, mode, ctx.lo, ctx.hi)
         if rows is not None and rows.l.shape[0]:
             C = np.vstack((C, rows.C))
-            l = np.concatenate((l, rows.l))
+            l = np.concatenate((l, rows.l_brake if brake else rows.l))
             u = np.concatenate((u, np.full(rows.l.shape[0], INF)))
         p = self._template(self.n_v, C.shape[0])
         cost = self.cost_diagonal(ctx, mode)
@@ -649,6 +654,9 @@ class QpController(Controller):
                 return self.finish(ctx, np.concatenate([w_hold, z[: self.n_arm]]), xdot, alpha=0.0)
         problem = self.build(ctx, xdot, mode, rows)
         z = self._solve(self._full, problem)
+        if z is None and rows is not None and rows.l.shape[0]:  # the rows together infeasible: admit braking
+            problem = self.build(ctx, xdot, mode, rows, brake=True)
+            z = self._solve(self._full, problem)
         if z is None:
             self.last_stage = "failed"
             return self.safe_stop(state, f"qp ({self.solver}): the solver failed")

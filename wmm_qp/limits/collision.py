@@ -20,12 +20,16 @@ One row per pair of links (the closest pair of their bodies) and per link and ob
 ``MAX_ROWS`` (the closest) per tick: nearly parallel rows of one link's several shapes would only
 slow the solvers.
 
-Priority: the acceleration bounds (13) win. Each row is relaxed, where it must be, to admit the
-braking command v₀ = clip(0, lb, ub) (the command nearest zero inside the bounds): l ← min(l, C v₀).
-So no collision row can make a QP stage infeasible, and braking is always admitted; where the
-damper and the braking disagree, the robot brakes as hard as (13) allows and the damper's rate is
-reached as soon as the bounds admit it. The influence distance must therefore exceed the distance
-the robot needs to brake (docs/model.md gives the numbers).
+Priority: the acceleration bounds (13) win. Each row is relaxed, where the bounds cannot meet it,
+to the most separating rate they admit: l ← min(l, max_{lb ≤ v ≤ ub} C_k v) — the robot then
+separates (or stops approaching) as hard as (13) allows. Each row alone is then feasible; should
+the rows together not be (two contacts pulling apart), the stage is solved again with every row
+relaxed to admit the braking command v₀ = clip(0, lb, ub) (the command nearest zero inside the
+bounds), l ← min(l, C v₀), which no set of rows can exclude: no collision row ever makes a stage
+infeasible, braking is always admitted. (Relaxing to C v₀ alone is not enough: a stage may then keep
+approaching at the braking command's rate tick after tick without ever braking — found by
+``tests/test_collision.py``, the arm folded into its base.) The influence distance must exceed the
+distance the robot needs to stop (docs/model.md gives the numbers).
 """
 
 from __future__ import annotations
@@ -54,7 +58,9 @@ class Rows:
     """The collision and fence rows of one tick: l ≤ C v (no upper bound)."""
 
     C: FloatArray
-    l: FloatArray
+    l: FloatArray  # the damper, relaxed to the most separating rate the bounds admit
+    l_brake: FloatArray = field(default_factory=lambda: np.zeros(0))  # relaxed to admit the braking command
+    damper: FloatArray = field(default_factory=lambda: np.zeros(0))  # the damper's own bound
     names: list[str] = field(default_factory=list)  # one per row: "a/b" or "fence:..."
     distances: FloatArray = field(default_factory=lambda: np.zeros(0))  # [m], per row
     min_distance: float = math.inf  # the closest monitored pair this tick (also beyond d_i)
@@ -172,20 +178,27 @@ class CollisionRows:
         out = Rows(np.zeros((0, n_v)), np.zeros(0))
 
         keyed: dict[tuple[str, str], int] = {}  # (link, link or obstacle): its row (the closest bodies')
+        brakes: list[float] = []
+        dampers: list[float] = []
 
         def add(row: FloatArray, d: float, d_s: float, name: str, key: tuple[str, str] | None = None) -> None:
             approach = max(0.0, -float(row @ v_prev))
             d_eff = d - self.latency * approach
-            lo = min(-p.gain * (d_eff - d_s) / (d_i - d_s), float(row @ v0))  # always admit braking
+            damper = -p.gain * (d_eff - d_s) / (d_i - d_s)
+            best = float(np.sum(np.where(row > 0.0, row * ub, row * lb)))  # the most separating rate in (13)
+            lo, lo_brake = min(damper, best), min(damper, float(row @ v0))
             if key is not None:
                 k = keyed.get(key)
                 if k is not None:  # two bodies of the same links: keep the closer pair's row only
                     if d < dists[k]:
-                        C_rows[k], bounds[k], names[k], dists[k] = row, lo, name, d
+                        C_rows[k], bounds[k], brakes[k], names[k], dists[k] = row, lo, lo_brake, name, d
+                        dampers[k] = damper
                     return
                 keyed[key] = len(C_rows)
             C_rows.append(row)
             bounds.append(lo)
+            brakes.append(lo_brake)
+            dampers.append(damper)
             names.append(name)
             dists.append(d)
 
@@ -247,8 +260,9 @@ class CollisionRows:
         self._fence_rows(q_base, x_ee, J_ee, add, n_v)
         if C_rows:
             keep = np.argsort(dists)[:MAX_ROWS]  # the closest pairs, if more than MAX_ROWS are near
-            out.C, out.l = np.array(C_rows)[keep], np.array(bounds)[keep]
+            out.C, out.l, out.l_brake = np.array(C_rows)[keep], np.array(bounds)[keep], np.array(brakes)[keep]
             out.names, out.distances = [names[k] for k in keep], np.array(dists)[keep]
+            out.damper = np.array(dampers)[keep]
         return out
 
     def _placement(self, k: int) -> pin.SE3:

@@ -1,0 +1,206 @@
+"""Collision safety (issue 13): the dampers and the fence as hard rows, in closed loop with the
+sim's independent collision referee — one test per constraint kind, each able to fail (the same
+drive without the rows collides)."""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import replace
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+import pytest
+from wmm_qp_sim import SimCommand, SimRobot, load_sim_config
+
+import wmm_qp as w
+from wmm_qp.config import default_config_dir
+from wmm_qp.scene import Scene, load_scene
+from wmm_qp.verify import CollisionJudge, verify_controller
+
+ROBOTS = default_config_dir() / "robots"
+D_S = w.load_controller_config().collision.safety_distance
+REFEREE = load_sim_config().referee.collision_distance
+
+
+@cache
+def model(name: str = "gen3_mecanum.toml") -> w.WmmModel:
+    return w.WmmModel(w.load_robot_config(ROBOTS / name))
+
+
+def run(
+    ctl: w.Controller, reference: w.Reference, steps: int, scene: Scene | None = None, moves: object = None
+) -> tuple[SimRobot, Counter[str]]:
+    """Controller and sim in process; the sim's referee checks every step. ``moves(k)`` may return
+    a new obstacle list at tick k (given to both, as the daemon and the sim would get it over Zenoh)."""
+    cfg = replace(load_sim_config(), firmware=False)
+    sim = SimRobot(ctl.model, cfg, seed=1, scene=scene)
+    sim.reset()
+    if scene is not None and hasattr(ctl, "set_scene"):
+        ctl.set_scene(scene)
+    reasons: Counter[str] = Counter()
+    for k in range(steps):
+        if moves is not None and (obstacles := moves(k)) is not None:  # type: ignore[operator]
+            sim.set_obstacles(obstacles)
+            if hasattr(ctl, "set_obstacles"):
+                ctl.set_obstacles(obstacles)
+        cmd = ctl.step(sim.robot_state(), reference)
+        reasons[cmd.reason.split(" at ")[0]] += 1
+        sim.step(SimCommand(cmd.wheel_speeds, cmd.arm_rates, period=ctl.dt, seq=k), ctl.dt)
+    return sim, reasons
+
+
+def qp(name: str = "gen3_mecanum.toml", **collision: object) -> w.Controller:
+    cfg = w.load_controller_config()
+    if collision:
+        cfg = cfg.with_(collision=collision)
+    return w.make_controller("qp", model(name), cfg)
+
+
+def start_x(name: str = "gen3_mecanum.toml") -> np.ndarray:
+    m = model(name)
+    return m.ee_position(np.zeros(3), m.config.arm.start)
+
+
+def assert_safe(sim: SimRobot) -> None:
+    counts = sim.referee.counts
+    assert sum(counts.values()) == 0, (counts, sim.referee.last_event)
+    assert sim.collision is not None and sim.collision.min_distance >= REFEREE
+
+
+def test_the_ee_commanded_into_the_floor_stops_at_the_floor_margin() -> None:
+    ctl = qp()
+    goal = start_x() + [0.2, 0.0, -1.2]  # 0.85 m below the floor
+    sim, reasons = run(ctl, w.Reference("track", x_d=goal), 2500)
+    assert_safe(sim)
+    floor = model().config.base.floor_z
+    margin = w.load_controller_config().collision.floor_margin
+    x = model().ee_position(sim.base_odom, sim.q_arm)
+    assert x[2] > floor + margin  # the flange (its capsule's radius above the floor margin)
+    assert x[2] < floor + margin + 0.1  # and it did go down to it
+    assert any("collision:" in r and ("floor" in r or "base_body" in r) for r in reasons), reasons
+
+
+def test_the_same_drive_without_the_rows_collides() -> None:
+    """The referee can fail: the floor drive of the test above with the rows switched off."""
+    sim, _ = run(qp(enabled=False), w.Reference("track", x_d=start_x() + [0.2, 0.0, -1.2]), 2500)
+    assert sim.referee.counts["collision"] > 0
+
+
+def test_the_arm_folded_into_the_base_stops_at_the_safety_distance() -> None:
+    ctl = qp()
+    goal = np.array([0.05, 0.0, -0.15])  # inside the platform, just below the arm's base
+    sim, reasons = run(ctl, w.Reference("track", x_d=goal), 3000)
+    assert_safe(sim)
+    assert sim.collision is not None and sim.collision.min_distance < D_S + 0.01  # it went there
+    assert any("collision:" in r for r in reasons), reasons
+
+
+WALL = """
+[[obstacles]]
+id = "wall"
+kind = "box"
+size = [0.1, 4.0, 1.5]
+xyz = [1.5, 0.0, 0.2]
+"""
+
+
+def test_a_wall_in_the_base_path_stops_the_robot_at_the_safety_distance(tmp_path: Path) -> None:
+    p = tmp_path / "wall.toml"
+    p.write_text(WALL)
+    scene = load_scene(p)
+    ctl = qp()
+    goal = start_x() + [3.0, 0.0, 0.0]  # beyond the wall: the base must drive
+    sim, reasons = run(ctl, w.Reference("track", x_d=goal), 5000, scene=scene)
+    assert_safe(sim)
+    assert sim.base_true[0] > 0.3  # it drove towards the wall
+    assert sim.collision is not None and sim.collision.min_distance < D_S + 0.02  # up to the wall
+    assert any("wall" in r for r in reasons), reasons
+    unsafe, _ = run(qp(enabled=False), w.Reference("track", x_d=goal), 5000, scene=scene)
+    assert unsafe.referee.counts["collision"] > 0  # without the rows it drives through
+
+
+def test_an_obstacle_moved_into_the_arm_is_avoided() -> None:
+    """A sphere moved towards the resting arm at 5 cm/s (live obstacles): the robot gives way,
+    the referee sees no collision."""
+    x0 = start_x()
+
+    def moves(k: int) -> list[w.config.ShapeConfig] | None:
+        if k % 10:
+            return None
+        centre = x0 + [0.0, 0.6 - 0.05 * k * 0.002, 0.0]  # from 0.6 m to the left, at 5 cm/s
+        shape = w.config.ShapeConfig("ball", "", "sphere", np.array([0.08, 0.0, 0.0]), centre, np.zeros(3))
+        return [shape]
+
+    ctl = qp()
+    sim, reasons = run(ctl, w.Reference("track", x_d=x0), 6000, moves=moves)  # 12 s: the ball passes x0
+    assert_safe(sim)
+    assert np.linalg.norm(model().ee_position(sim.base_odom, sim.q_arm) - x0) > 0.05  # it gave way
+    assert any("ball" in r for r in reasons), reasons
+
+
+FENCE = """
+[fence]
+base = [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]]
+ee_lower = [-1.5, -1.5, -0.3]
+ee_upper = [1.5, 1.5, 1.2]
+"""
+
+
+def test_a_setpoint_20_m_away_ends_at_the_fence(tmp_path: Path) -> None:
+    p = tmp_path / "fence.toml"
+    p.write_text(FENCE)
+    scene = load_scene(p)
+    ctl = qp()
+    sim, _ = run(ctl, w.Reference("track", x_d=start_x() + [20.0, 0.0, 0.0]), 5000, scene=scene)
+    assert_safe(sim)
+    assert scene.fence.contains_base(sim.base_true)
+    assert sim.base_true[0] > 0.3  # the base drove, the arm stretched
+    x = model().ee_position(sim.base_odom, sim.q_arm)
+    assert 1.5 - 1e-3 < x[0] <= 1.5 + 1e-6  # the EE went to the fence's EE box, and not beyond
+    p.write_text(FENCE.replace("ee_upper = [1.5", "ee_upper = [9.0"))  # now the base polygon stops it
+    sim, _ = run(qp(), w.Reference("track", x_d=start_x() + [20.0, 0.0, 0.0]), 5000, scene=load_scene(p))
+    assert_safe(sim)
+    assert 0.8 < sim.base_true[0] <= 1.0 + 1e-3
+
+
+def test_the_rows_never_make_a_stage_infeasible_and_verify_sees_no_collision(tmp_path: Path) -> None:
+    """Random states near self-collisions, obstacles and the fence: every command is refereed on the
+    geometry at the predicted configuration; the baselines (no rows) collide in the same run."""
+    p = tmp_path / "scene.toml"
+    p.write_text(WALL + FENCE.replace("-1.0", "-2.5").replace("1.0,", "2.5,").replace("1.0]", "2.5]"))
+    scene = load_scene(p)
+    rep = verify_controller(qp(), model(), 60, 1, scene=scene)
+    assert rep.violations == 0, rep.examples
+    assert rep.statuses.get("safe_stop", 0) == 0, rep.statuses
+    assert sum(rep.by_case.get(c, 0) for c in ("near_self", "near_obstacle", "at_fence")) == 0
+    base = verify_controller(w.make_controller("traditional", model(), w.load_controller_config()), model(), 60, 1,
+                             scene=scene)
+    assert base.by_kind["collision"] > 0
+
+
+def test_the_judge_sees_a_command_into_an_obstacle() -> None:
+    """The referee's own rule on a hand-made command: a base driving at full speed into a sphere
+    1 cm away is a collision; braking is not."""
+    m = model()
+    x0 = start_x()
+    ball = w.config.ShapeConfig("ball", "", "sphere", np.array([0.05, 0.0, 0.0]), x0 + [0.0, 0.0, 0.09 + D_S],
+                                np.zeros(3))  # 4 cm above the flange capsule
+    judge = CollisionJudge(m, Scene(obstacles=(ball,)), D_S, D_S)
+    state = w.RobotState(np.zeros(3), m.config.arm.start)
+    kin = m.kinematics(np.zeros(3), m.config.arm.start)
+    up = np.linalg.pinv(kin.J) @ np.array([0.0, 0.0, 5.0])  # 5 m/s up, into the ball
+    cmd = w.Command(wheel_speeds=up[:4], arm_rates=up[4:])
+    assert judge.check(0.01, state, cmd) > 0
+    assert judge.check(0.01, state, w.Command(wheel_speeds=np.zeros(4), arm_rates=np.zeros(7))) == 0
+
+
+@pytest.mark.parametrize("name", ["panda_diffdrive.toml", "ur5_omni.toml", "tiago.toml"])
+def test_every_robot_with_urdf_geometry_stops_at_the_floor(name: str) -> None:
+    m = model(name)
+    ctl = qp(name)
+    sim, _ = run(ctl, w.Reference("track", x_d=start_x(name) + [0.1, 0.0, -1.5]), 2500)
+    assert_safe(sim)
+    assert not math.isinf(sim.collision.min_distance)  # type: ignore[union-attr]
+    assert m.ee_position(sim.base_odom, sim.q_arm)[2] < start_x(name)[2] - 0.1  # it went down
