@@ -182,11 +182,8 @@ class CollisionRows:
         dampers: list[float] = []
 
         def add(row: FloatArray, d: float, d_s: float, name: str, key: tuple[str, str] | None = None) -> None:
-            approach = max(0.0, -float(row @ v_prev))
-            d_eff = d - self.latency * approach
-            damper = -p.gain * (d_eff - d_s) / (d_i - d_s)
-            best = float(np.sum(np.where(row > 0.0, row * ub, row * lb)))  # the most separating rate in (13)
-            lo, lo_brake = min(damper, best), min(damper, float(row @ v0))
+            damper, best, brake = _row_bounds(row, v_prev, v0, lb, ub, d, d_s, d_i, p.gain, self.latency)
+            lo, lo_brake = min(damper, best), min(damper, brake)
             if key is not None:
                 k = keyed.get(key)
                 if k is not None:  # two bodies of the same links: keep the closer pair's row only
@@ -298,6 +295,22 @@ class CollisionRows:
                 d = sign * (bound - x[ax])
                 if d < d_i:
                     add(-sign * np.asarray(J[ax], dtype=float), d, 0.0, f"fence:ee {'xyz'[ax]}")  # type: ignore[operator]
+
+
+@jit
+def _row_bounds(
+    row: FloatArray, v_prev: FloatArray, v0: FloatArray, lb: FloatArray, ub: FloatArray,
+    d: float, d_s: float, d_i: float, gain: float, latency: float,
+) -> tuple[float, float, float]:
+    """(the damper's bound, the most separating rate in lb ≤ v ≤ ub, the braking command's rate)."""
+    prev = best = brake = 0.0
+    for i in range(row.shape[0]):
+        c = row[i]
+        prev += c * v_prev[i]
+        brake += c * v0[i]
+        best += c * ub[i] if c > 0.0 else c * lb[i]
+    d_eff = d - latency * max(0.0, -prev)  # the approach during the state's age
+    return -gain * (d_eff - d_s) / (d_i - d_s), best, brake
 
 
 @jit
