@@ -216,3 +216,14 @@ def test_a_bad_robot_file_is_one_line(capsys: pytest.CaptureFixture[str], tmp_pa
     assert main(["experiment", "circle", "--robot-config", str(bad), "--duration", "1"]) == 2
     err = capsys.readouterr().err
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1 and str(bad) in err and "base.kind" in err
+
+
+@pytest.mark.integration
+@pytest.mark.slow
+def test_circle_realtime_on_another_robot(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    """--realtime with --robot-config: both processes get the robot file and run under its name."""
+    r = run_json(capsys, "circle", "--realtime", "--robot-config", str(ROBOTS / "ur5_omni.toml"), "--duration", "2",
+                 "--process-logs", str(tmp_path / "logs"))  # fmt: skip
+    assert r["robot"] == "ur5_omni" and r["realtime"]["exit_codes"] == {"sim": 0, "daemon": 0}
+    assert r["realtime"]["ticks"] > 200 and sum(r["violations"].values()) == 0
+    assert r["ee_error_max"]["x"] < 0.02 and r["ee_error_max"]["y"] < 0.02

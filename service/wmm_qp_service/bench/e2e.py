@@ -37,6 +37,8 @@ from typing import Any
 import msgspec
 import numpy as np
 
+from wmm_qp import RobotConfig
+
 RATES: tuple[float, ...] = (500.0, 1000.0)
 SETPOINT_HZ = 100.0  # [Hz]
 STARTUP_TIMEOUT = 60.0  # [s]
@@ -54,7 +56,7 @@ def run_rate(
     rate_hz: float,
     ticks: int,
     log_dir: Path | None = None,
-    robot_file: Path | None = None,
+    robot: RobotConfig | None = None,
     controller_file: Path | None = None,
 ) -> dict[str, Any]:
     """One rate: start the stack, track the circle for ``ticks`` ticks, measure, stop.
@@ -63,7 +65,8 @@ def run_rate(
         rate_hz: [Hz] daemon rate.
         ticks: control ticks to measure (duration = ticks / rate_hz).
         log_dir: the processes' logs (None: a temporary folder).
-        robot_file: the robot file of the sim and the daemon (None: their default).
+        robot: the robot; the sim and the daemon load its file and run under its name (None:
+            their default).
         controller_file: the daemon's controller config (None: its default).
 
     Returns:
@@ -76,7 +79,7 @@ def run_rate(
     from ..protocol import StateMsg
 
     log_dir = log_dir or Path(tempfile.mkdtemp(prefix=f"wmm-qp-e2e-{rate_hz:g}-"))
-    svc = isolated_config()
+    svc = isolated_config(robot=robot)
     duration = ticks / rate_hz
     out: dict[str, Any] = {
         "rate_hz": rate_hz,
@@ -84,10 +87,10 @@ def run_rate(
         "loadavg_before": [round(x, 2) for x in os.getloadavg()],
         "logs": str(log_dir),
     }
-    robot_args = [] if robot_file is None else ["--robot-config", str(robot_file)]
     ctl_args = [] if controller_file is None else ["--controller-config", str(controller_file)]
-    stack = Stack(svc, rate_hz=rate_hz, log_dir=log_dir, extra_daemon_args=robot_args + ctl_args,
-                  extra_sim_args=robot_args)  # fmt: skip
+    stack = Stack(svc, rate_hz=rate_hz, log_dir=log_dir, extra_daemon_args=ctl_args,
+                  robot_file=None if robot is None else robot.path)  # fmt: skip
+    svc = stack.svc
     try:
         stack.start()
         with Client(svc, name="bench-e2e", telemetry=True) as c:
@@ -170,14 +173,14 @@ def run_rate(
 def run(
     ticks: int,
     rates: tuple[float, ...] = RATES,
-    robot_file: Path | None = None,
+    robot: RobotConfig | None = None,
     controller_file: Path | None = None,
 ) -> dict[str, Any]:
     """Every rate in turn: {"available", "<rate>": figures of :func:`run_rate`}."""
     out: dict[str, Any] = {"available": True}
     for r in rates:
         print(f"e2e: {r:g} Hz for {ticks} ticks ({ticks / r:.0f} s)", file=sys.stderr, flush=True)
-        res = run_rate(r, ticks, robot_file=robot_file, controller_file=controller_file)
+        res = run_rate(r, ticks, robot=robot, controller_file=controller_file)
         out[f"{r:g}"] = res
         out["available"] = out["available"] and bool(res.get("available"))
     return out

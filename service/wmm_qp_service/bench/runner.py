@@ -115,18 +115,9 @@ def run_bench(
         out["robots"] = run_robots(cfg, solvers, ticks, max_seconds)
     if "e2e" in sections:
         print("e2e: daemon + sim over Zenoh", file=sys.stderr, flush=True)
-        out["e2e"] = e2e.run(ticks, robot_file=None if _is_default(robot) else robot.path,
-                             controller_file=controller_file)  # fmt: skip
+        out["e2e"] = e2e.run(ticks, robot=robot, controller_file=controller_file)
     out["targets"] = targets(out)
     return out
-
-
-def _is_default(robot: w.RobotConfig) -> bool:
-    """The robot was read from the default robot file (which the processes load by themselves)."""
-    try:
-        return robot.path is None or robot.path.resolve() == w.default_robot_file().resolve()
-    except OSError:
-        return False
 
 
 def targets(r: dict[str, Any]) -> dict[str, Any]:

@@ -111,8 +111,7 @@ def run(args: argparse.Namespace) -> int:
 
         rt_runs = run_push_realtime(setup, args.controller, args.solver, args.duration or push.DEFAULT_DM_DURATION,
                                  slip=not args.no_slip, seed=args.seed, rate_hz=args.rate, progress=tty,
-                                 log_dir=args.process_logs, robot_file=args.robot_config,
-                                 controller_file=args.controller_config)  # fmt: skip
+                                 log_dir=args.process_logs, controller_file=args.controller_config)  # fmt: skip
         result["realtime"] = {name: r.pop("realtime") for name, r in rt_runs.items()}
         reasons = [r.pop("controller_reasons") for r in rt_runs.values()]
         result |= rt_runs
@@ -216,7 +215,6 @@ def _realtime(args: argparse.Namespace, s: Any, tty: bool) -> Any:
         rate_hz=args.rate,
         progress=tty,
         log_dir=args.process_logs,
-        robot_file=args.robot_config,
         controller_file=args.controller_config,
     )
 

@@ -34,7 +34,7 @@ import msgspec
 import numpy as np
 import zenoh
 
-from wmm_qp.config import FloatArray
+from wmm_qp.config import FloatArray, RobotConfig
 from wmm_qp.exceptions import WmmQpError
 from wmm_qp.manipulability import directional_manipulability
 
@@ -198,7 +198,7 @@ class StackOptions:
         slip: the sim's base slip on or off.
         seed: the sim's slip seed (None: the sim config's).
         log_dir: the processes' logs go here.
-        robot_file: the robot file both processes load (None: their default, the Gen3).
+        robot: the robot; both processes load its file and run under its name (None: their default).
         controller_file: the daemon's controller config (None: its default).
     """
 
@@ -208,7 +208,7 @@ class StackOptions:
     slip: bool
     seed: int | None
     log_dir: Path
-    robot_file: Path | None = None
+    robot: RobotConfig | None = None
     controller_file: Path | None = None
 
 
@@ -218,14 +218,13 @@ def _on_stack(opts: StackOptions, drive: Callable[[Client, Recorder], Any]) -> t
     Returns:
         (what ``drive`` returned, the closed recorder, the service-side figures).
     """
-    svc = isolated_config()
-    robot_args = [] if opts.robot_file is None else ["--robot-config", str(opts.robot_file)]
-    daemon_args = ["--controller", opts.controller, *(["--solver", opts.solver] if opts.solver else []), *robot_args,
+    svc = isolated_config(robot=opts.robot)
+    daemon_args = ["--controller", opts.controller, *(["--solver", opts.solver] if opts.solver else []),
                    *([] if opts.controller_file is None else ["--controller-config", str(opts.controller_file)])]
-    sim_args = (_sim_config_file(opts.slip, opts.log_dir) + ([] if opts.seed is None else ["--seed", str(opts.seed)])
-                + robot_args)  # fmt: skip
+    sim_args = _sim_config_file(opts.slip, opts.log_dir) + ([] if opts.seed is None else ["--seed", str(opts.seed)])
     stack = Stack(svc, rate_hz=opts.rate_hz, log_dir=opts.log_dir, extra_daemon_args=daemon_args,
-                  extra_sim_args=sim_args)  # fmt: skip
+                  extra_sim_args=sim_args, robot_file=None if opts.robot is None else opts.robot.path)  # fmt: skip
+    svc = stack.svc
     try:
         stack.start()
         with Client(svc, name="experiment", telemetry=True) as c:
@@ -269,12 +268,11 @@ def _on_stack(opts: StackOptions, drive: Callable[[Client, Recorder], Any]) -> t
 
 
 def _options(name: str, setup: Setup, controller: str, solver: str | None, slip: bool, seed: int | None,
-             rate_hz: float | None, log_dir: Path | None, robot_file: Path | None = None,
-             controller_file: Path | None = None) -> StackOptions:
+             rate_hz: float | None, log_dir: Path | None, controller_file: Path | None = None) -> StackOptions:
     log_dir = log_dir or Path(tempfile.mkdtemp(prefix=f"wmm-qp-rt-{name}-"))
     log_dir.mkdir(parents=True, exist_ok=True)
     return StackOptions(controller, solver, float(rate_hz or setup.ctl_cfg.rate_hz), slip, seed, log_dir,
-                        robot_file, controller_file)
+                        setup.robot, controller_file)
 
 
 def run_realtime(
@@ -290,14 +288,14 @@ def run_realtime(
     rate_hz: float | None = None,
     progress: bool = True,
     log_dir: Path | None = None,
-    robot_file: Path | None = None,
     controller_file: Path | None = None,
 ) -> RealtimeResult:
     """Run ``circle`` or ``dm`` through the daemon and the sim over Zenoh, in real time.
 
     Args:
         name: "circle" or "dm" (the push: :func:`run_push_realtime`).
-        setup: the model and configs (for the DM along u and the log layout).
+        setup: the robot, the model and configs (for the DM along u and the log layout); the
+            sim and the daemon load the setup's robot file and run under its name.
         controller: the daemon's controller kind.
         solver: the daemon's QP backend (None: the config's).
         duration: [s] scenario length (real time).
@@ -307,8 +305,6 @@ def run_realtime(
         rate_hz: [Hz] control rate (None: the controller config's).
         progress: a progress bar on stderr (when it is a terminal).
         log_dir: keep the processes' logs here (None: a temporary folder).
-        robot_file: the robot file the sim and the daemon load (None: their default); the same
-            robot as ``setup``'s.
         controller_file: the daemon's controller config (None: its default).
 
     Returns:
@@ -316,7 +312,7 @@ def run_realtime(
     """
     if name not in ("circle", "dm"):
         raise RealtimeError(f"no realtime scenario {name!r} here (push: run_push_realtime)")
-    opts = _options(name, setup, controller, solver, slip, seed, rate_hz, log_dir, robot_file, controller_file)
+    opts = _options(name, setup, controller, solver, slip, seed, rate_hz, log_dir, controller_file)
     u = DIRECTIONS[direction] if name == "dm" else np.asarray(setup.ctl_cfg.direction, dtype=float)
     bar = Progress(f"{name} (realtime)", progress) if progress else None
 
@@ -420,15 +416,14 @@ def run_push_realtime(
     rate_hz: float | None = None,
     progress: bool = True,
     log_dir: Path | None = None,
-    robot_file: Path | None = None,
     controller_file: Path | None = None,
 ) -> dict[str, dict[str, Any]]:
     """The box push through the daemon and the sim over Zenoh: with and without DM first.
 
     Args:
         setup_factory: () → a fresh :class:`Setup` (model, configs).
-        controller, solver, slip, seed, rate_hz, progress, log_dir, robot_file, controller_file: as
-            :func:`run_realtime`.
+        controller, solver, slip, seed, rate_hz, progress, log_dir, controller_file: as
+            :func:`run_realtime` (the robot is the setup's).
         dm_duration: [s] DM enhancement before the push (with_dm); below 20 s it also speeds
             the push up in proportion, as in-process.
 
@@ -441,7 +436,7 @@ def run_push_realtime(
     for name in ("with_dm", "without_dm"):
         setup = setup_factory()
         opts = _options(f"push-{name}", setup, controller, solver, slip, seed, rate_hz,
-                        None if log_dir is None else log_dir / name, robot_file, controller_file)  # fmt: skip
+                        None if log_dir is None else log_dir / name, controller_file)  # fmt: skip
         bar = Progress(f"push {name} (realtime)", progress) if progress else None
 
         def drive(c: Client, rec: Recorder, with_dm: bool = name == "with_dm",
