@@ -144,7 +144,7 @@ def test_a_protective_stop_of_the_sim_breaks_the_stream(robot: w.RobotConfig) ->
     core.on_state(plant.msg(protective_stop=True, protective_reason="refused command: joint 4"), t)
     assert core.tick(t) is None
     assert core.last_fault.startswith("the robot stopped following the commands (protective stop: refused")
-    plant.v_arm, plant.wheels = np.zeros(7), np.zeros(4)
+    plant.v_arm, plant.wheels = np.zeros(robot.n_arm), np.zeros(robot.n_wheels)
     t += DT
     core.on_state(plant.msg(protective_stop=True, protective_reason="refused command: joint 4"), t)
     before = core.stream_start
@@ -172,7 +172,7 @@ def test_commands_lost_long_enough_for_the_robots_timeout_break_the_stream(robot
         assert core.tick(t) is None
         t += DT
     assert "its command timeout" in core.last_fault
-    plant.v_arm, plant.wheels = np.zeros(7), np.zeros(4)
+    plant.v_arm, plant.wheels = np.zeros(robot.n_arm), np.zeros(robot.n_wheels)
     for _ in range(300):
         core.on_state(plant.msg(stale_stop=plant.cmd_seq == applied, cmd_seq=plant.cmd_seq), t)
         core.on_setpoint(setpoint(x0 + np.array([0.2, 0.0, 0.0]), t), t)
@@ -456,7 +456,7 @@ def test_after_its_own_stall_the_daemon_waits_for_the_robots_stop(robot: w.Robot
     plant.v_arm, plant.wheels = 0.5 * plant.v_arm, 0.5 * plant.wheels
     core.on_state(plant.msg(stale_stop=True), t + DT)
     assert core.tick(t + DT) is None
-    plant.v_arm, plant.wheels = np.zeros(7), np.zeros(4)  # at rest
+    plant.v_arm, plant.wheels = np.zeros(robot.n_arm), np.zeros(robot.n_wheels)  # at rest
     t += 2 * DT
     core.on_state(plant.msg(stale_stop=True), t)
     cmd = core.tick(t)

@@ -89,7 +89,7 @@ def drill(
     states: deque[tuple[int, StateMsg]] = deque()
     cmds: deque[tuple[int, SimCommand]] = deque()
     tick_us, t_us, seq = 300, 0, 0
-    w_foreign = np.zeros(4)
+    w_foreign = np.zeros(robot.n_wheels)
     hold_x = None
     pushed = math.nan
     v_max = np.asarray(robot.arm.velocity_max)
@@ -119,9 +119,9 @@ def drill(
                 shift = np.array([push_speed * (push_time - 0.5), 0.0, 0.0])
                 sim.base_odom, sim.base_true = sim.base_odom + shift, sim.base_true + shift
         elif t_us < push_end:  # the push: foreign wheels-only commands, every step, within limits
-            target = w_push if t_us < push_end - 500_000 else np.zeros(4)
+            target = w_push if t_us < push_end - 500_000 else np.zeros(robot.n_wheels)
             w_foreign = w_foreign + np.clip(target - w_foreign, -w_step, w_step)
-            new = SimCommand(w_foreign.copy(), np.zeros(7))
+            new = SimCommand(w_foreign.copy(), np.zeros(robot.n_arm))
         st = sim.step(new, SIM_DT_US * 1e-6)
         t_us = nxt
         seq += 1

@@ -99,14 +99,14 @@ def test_a_client_publishing_cmd_meets_the_robots_own_protection(service_stack: 
     with Client(stack.svc, name="rogue") as c:
         ready(c)
         st: StateMsg = until(lambda: c.wait_state(2.0))
-        arm = [0.0] * 7
+        arm = [0.0] * robot.n_arm
         arm[3] = 100.0
         seq = 10**6
         end = time.monotonic() + 1.5
         while time.monotonic() < end:
             seq += 1
             c.put_raw("cmd", encode(CommandMsg(robot=stack.svc.robot, seq=seq, stamp=time.time(),
-                                               wheel_speeds=[100.0] * 4, arm_rates=arm, lease=st.lease,
+                                               wheel_speeds=[100.0] * robot.n_wheels, arm_rates=arm, lease=st.lease,
                                                instance=st.instance, period=0.0005, stream=1)))
             time.sleep(0.0005)
         after: StateMsg = until(lambda: c.wait_state(2.0))

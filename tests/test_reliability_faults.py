@@ -31,8 +31,8 @@ def _core_run(loss: float, burst: tuple[int, int] | None, n: int = 1500) -> tupl
     core = ControlCore(ServiceConfig(), w.load_controller_config(), robot)
     dt = core.dt
     rng = np.random.default_rng(3)
-    q_base, q_arm = np.zeros(3), np.array(w.load_robot_config().arm.start)
-    v_arm, wheels = np.zeros(7), np.zeros(4)
+    q_base, q_arm = np.zeros(3), np.array(robot.arm.start)
+    v_arm, wheels = np.zeros(robot.n_arm), np.zeros(robot.n_wheels)
     x0 = core.model.ee_position(q_base, q_arm)
     cmds = []
     for k in range(n):
@@ -41,7 +41,7 @@ def _core_run(loss: float, burst: tuple[int, int] | None, n: int = 1500) -> tupl
         if k == 0 or not lost:
             core.on_state(StateMsg(robot="wmm", seq=k + 1, stamp=t, t=t, q_base=q_base.tolist(),
                                    q_arm=q_arm.tolist(), v_arm=v_arm.tolist(), wheel_speeds=wheels.tolist(),
-                                   base_true=q_base.tolist(), ee_true=[0.0] * 3, tau=[0.0] * 7,
+                                   base_true=q_base.tolist(), ee_true=[0.0] * 3, tau=[0.0] * robot.n_arm,
                                    contact_force=[0.0] * 3, instance="sim"), t)
         if k == 1:
             core.on_mode(ModeMsg(robot="wmm", seq=1, stamp=t, mode="track"))

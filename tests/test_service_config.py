@@ -40,3 +40,28 @@ def test_negative_z_min_is_allowed(tmp_path: Path) -> None:
     p = tmp_path / "service.toml"
     p.write_text("[validation]\nz_min = -0.3\n")
     assert load_service_config(p).validation.z_min == -0.3
+
+
+def test_the_robot_id_is_the_robot_files_name_unless_set(tmp_path: Path) -> None:
+    """Each robot file has its own keys: an open robot id (no `robot` in service.toml, no
+    --robot) is the robot description's name; one the service config sets is kept."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from service_robots import gen3_file
+    from wmm_qp_service.config import ServiceConfig, default_robot_id
+
+    import wmm_qp as w
+
+    robot = w.load_robot_config(gen3_file(tmp_path, "diff_drive"))
+    p = tmp_path / "service.toml"
+    p.write_text("prefix = \"lab\"\n")
+    open_id = load_service_config(p)
+    assert open_id.robot == "" and open_id.with_robot(robot).robot == "gen3_diff_drive"
+    p.write_text("robot = \"cell-3\"\n")
+    assert load_service_config(p).with_robot(robot).robot == "cell-3"
+    assert ServiceConfig().resolved().robot == default_robot_id() == w.load_robot_config().name == "wmm"
+    bad = w.load_robot_config(gen3_file(tmp_path, "fixed", name="two words"))
+    with pytest.raises(ConfigError) as e:
+        ServiceConfig().with_robot(bad)
+    assert e.value.key == "name" and "two words" in str(e.value)

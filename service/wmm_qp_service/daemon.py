@@ -17,7 +17,6 @@ from __future__ import annotations
 import contextlib
 import gc
 import math
-import os
 import sys
 import threading
 import time
@@ -43,7 +42,7 @@ from .protocol import (
     TelemetryMsg,
     encode,
 )
-from .rate_loop import RateLoop
+from .rate_loop import RateLoop, realtime_priority
 from .smoother import OrientationTarget, SetpointSmoother, VelocityEstimator
 from .transport import ROLE_DAEMON, open_session
 from .validation import Validator
@@ -118,21 +117,6 @@ class LeaseHeld(Exception):
         super().__init__(f"robot {robot} is already controlled by daemon {holder} "
                          f"(its lease token {robot}/lease/{holder} is alive); stop that daemon first, "
                          f"or start this one with --wait-lease to take over when it ends")
-
-
-def realtime_priority(priority: int) -> str:
-    """Put the calling thread under SCHED_FIFO at ``priority`` (Linux); say what happened.
-
-    A real-time thread is not preempted by ordinary processes, so a loaded machine delays its
-    ticks far less. The loop sleeps most of each period, so it does not starve the others.
-    """
-    if priority <= 0:
-        return "normal scheduling"
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))  # 0 = this thread
-    except (AttributeError, OSError) as e:  # not Linux, or not permitted
-        return f"normal scheduling (SCHED_FIFO {priority} refused: {getattr(e, 'strerror', e)})"
-    return f"SCHED_FIFO {priority}"
 
 
 def _xd(ref: w.Reference) -> list[float]:

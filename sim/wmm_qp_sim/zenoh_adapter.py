@@ -40,7 +40,7 @@ import zenoh
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.keys import Keys
 from wmm_qp_service.protocol import BoxMsg, CommandMsg, StateMsg, encode
-from wmm_qp_service.rate_loop import RateLoop
+from wmm_qp_service.rate_loop import RateLoop, realtime_priority
 from wmm_qp_service.transport import ROLE_SIM, open_session
 from wmm_qp_service.validation import Validator
 
@@ -66,11 +66,14 @@ class SimNode:
         state_loss: fault injection: probability in [0, 1) that a state is not published.
         state_delay: [s] fault injection: publish each state this long after it was computed.
         fault_seed: seed of the state-loss draws.
+        rt_priority: SCHED_FIFO priority of the step loop's thread (0: normal scheduling), set
+            in :meth:`run` after the session opened (Zenoh's own threads keep theirs).
     """
 
     def __init__(self, svc: ServiceConfig, sim_cfg: SimConfig, robot: w.RobotConfig,
                  seed: int | None = None, ramp: bool = True, spin_s: float = 0.0,
-                 state_loss: float = 0.0, state_delay: float = 0.0, fault_seed: int = 0) -> None:
+                 state_loss: float = 0.0, state_delay: float = 0.0, fault_seed: int = 0,
+                 rt_priority: int = 0) -> None:
         svc = svc.with_robot(robot)
         self.svc = svc
         self.cfg = sim_cfg
@@ -95,6 +98,8 @@ class SimNode:
         self._fault_rng = np.random.default_rng(fault_seed)
         self._delayed: deque[tuple[float, bytes]] = deque()
         self.states_dropped = 0
+        self.rt_priority = rt_priority
+        self.scheduling = "not started"  # set by run(): the step loop's scheduling policy
 
     @property
     def holder(self) -> str:
@@ -188,6 +193,8 @@ class SimNode:
             token = session.liveliness().declare_token(k.alive("sim"))
             lease_sub = session.liveliness().declare_subscriber(k.lease_all, zenoh.handlers.FifoChannel(64),
                                                                 history=True)
+            self.scheduling = realtime_priority(self.rt_priority)
+            print(f"wmm-qp sim: step loop: {self.scheduling}", file=sys.stderr, flush=True)
             dt = self.cfg.dt
             st = self.sim.state()
             counted, said = 0, 0

@@ -17,6 +17,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sim-config", metavar="TOML", help="sim config (default: configs/sim.toml)")
     parser.add_argument("--seed", type=int, help="slip/drift noise seed (default: the sim config's)")
     parser.add_argument("--rate", type=float, help="[Hz] sim rate (default: the sim config's)")
+    parser.add_argument("--rt-priority", type=int, metavar="N",
+                        help="SCHED_FIFO priority of the step loop, 0 = normal scheduling "
+                             "(default: the service config's loop.rt_priority, as the daemon's)")
     parser.add_argument("--no-ramp", action="store_true",
                         help="apply each command at once (no drive acceleration ramp)")
     f = parser.add_argument_group("fault injection (reliability tests)")
@@ -44,8 +47,12 @@ def run(args: argparse.Namespace) -> int:
         print("wmm-qp sim: error: --state-loss must be in [0, 1) and --state-delay-ms in [0, 10000)",
               file=sys.stderr)
         return 2
+    prio = svc.loop.rt_priority if args.rt_priority is None else args.rt_priority
+    if not 0 <= prio <= 99:
+        print("wmm-qp sim: error: --rt-priority must be in [0, 99]", file=sys.stderr)
+        return 2
     node = SimNode(svc, sim_cfg, robot, seed=args.seed, ramp=not args.no_ramp,
-                   state_loss=args.state_loss, state_delay=args.state_delay_ms * 1e-3)
+                   state_loss=args.state_loss, state_delay=args.state_delay_ms * 1e-3, rt_priority=prio)
     stop = stop_on_signals()
     print(f"wmm-qp sim: {svc.prefix}/{svc.robot} at {sim_cfg.rate_hz:g} Hz ({robot.n_arm} joints, "
           f"{robot.base.kind} base with {robot.n_wheels} wheels), listening on {svc.zenoh.sim_endpoint}",
