@@ -40,11 +40,8 @@ class LoopConfig:
         spin_us: [µs] the loop sleeps until this long before the deadline, then spins.
         status_hz: [Hz] status publication rate.
         telemetry_every: publish telemetry every N ticks (0 = never).
-        rt_priority: SCHED_FIFO priority of the control thread (1–99; 0 = normal scheduling),
-            and of the sim's step loop (a robot's firmware runs real-time too: a sim starved by
-            a loaded machine receives the daemon's commands in bursts, which its referee judges
-            over its own clock). Needs CAP_SYS_NICE (root); without it each says so and runs
-            normally.
+        rt_priority: SCHED_FIFO priority of the control thread (1–99; 0 = normal scheduling).
+            Needs CAP_SYS_NICE (root); without it the daemon says so and runs normally.
         queries_per_tick: ``info`` queries answered per tick at most (the others wait in
             their FIFO for the next ticks), so a burst of queries cannot stall the loop.
     """

@@ -20,7 +20,8 @@ def realtime_priority(priority: int) -> str:
 
     A real-time thread is not preempted by ordinary processes, so a loaded machine delays its
     ticks far less. The loop sleeps most of each period, so it does not starve the others. The
-    daemon's control thread and the sim's step loop use it (``loop.rt_priority``).
+    daemon's control thread uses it (``loop.rt_priority``), the sim's step loop on request
+    (``wmm-qp sim --rt-priority``).
     """
     if priority <= 0:
         return "normal scheduling"

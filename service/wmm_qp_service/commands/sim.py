@@ -17,9 +17,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sim-config", metavar="TOML", help="sim config (default: configs/sim.toml)")
     parser.add_argument("--seed", type=int, help="slip/drift noise seed (default: the sim config's)")
     parser.add_argument("--rate", type=float, help="[Hz] sim rate (default: the sim config's)")
-    parser.add_argument("--rt-priority", type=int, metavar="N",
-                        help="SCHED_FIFO priority of the step loop, 0 = normal scheduling "
-                             "(default: the service config's loop.rt_priority, as the daemon's)")
+    parser.add_argument("--rt-priority", type=int, default=0, metavar="N",
+                        help="SCHED_FIFO priority of the step loop (default 0: normal scheduling; "
+                             "on a machine with few cores a real-time sim next to the real-time "
+                             "daemon starves both processes' transport threads)")
     parser.add_argument("--no-ramp", action="store_true",
                         help="apply each command at once (no drive acceleration ramp)")
     f = parser.add_argument_group("fault injection (reliability tests)")
@@ -47,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
         print("wmm-qp sim: error: --state-loss must be in [0, 1) and --state-delay-ms in [0, 10000)",
               file=sys.stderr)
         return 2
-    prio = svc.loop.rt_priority if args.rt_priority is None else args.rt_priority
+    prio = args.rt_priority
     if not 0 <= prio <= 99:
         print("wmm-qp sim: error: --rt-priority must be in [0, 99]", file=sys.stderr)
         return 2
