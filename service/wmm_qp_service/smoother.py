@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from ruckig import ControlInterface, InputParameter, OutputParameter, Result, Ruckig, Synchronization
 
 FloatArray = NDArray[np.float64]
@@ -203,7 +203,7 @@ def quat_exp(rotation_vector: FloatArray) -> FloatArray:
     return np.array([s * t[0], s * t[1], s * t[2], math.cos(0.5 * angle)])
 
 
-def quat_normalised(q: FloatArray) -> FloatArray:
+def quat_normalised(q: ArrayLike) -> FloatArray:
     """q / |q|, with w ≥ 0 (the same rotation)."""
     q = np.asarray(q, dtype=float)
     q = q / float(np.linalg.norm(q))
@@ -231,12 +231,12 @@ class OrientationTarget:
         """The target does not turn."""
         return not self.omega.any()
 
-    def reset(self, quat: FloatArray) -> None:
+    def reset(self, quat: ArrayLike) -> None:
         """Latch the current EE orientation, at rest."""
         self.quat = quat_normalised(quat)
         self.omega = np.zeros(3)
 
-    def set_target(self, quat: FloatArray | None, omega: FloatArray | None = None) -> None:
+    def set_target(self, quat: ArrayLike | None, omega: ArrayLike | None = None) -> None:
         """A new sample: orientation (None: keep the current target) turning at ω (None: 0)."""
         if quat is not None:
             self.quat = quat_normalised(quat)
