@@ -133,3 +133,56 @@ def test_stream_tracked_mode_change_smooth_and_malformed_rejected(service_stack:
 
 # Killing the sim / the daemon (safe stop, the sim's own stop, restarts): extended with
 # measured figures in tests/test_reliability_faults.py.
+
+
+@pytest.mark.parametrize("base", ["diff_drive", "fixed"])
+def test_a_stack_of_another_robot(tmp_path: Any, base: str) -> None:
+    """The sim and the daemon of a Gen3 on another base (both given its robot file): the robot id
+    is the file's name, the info reply names its joints and wheels, a state of the Mecanum robot's
+    sizes is rejected (size), a setpoint is tracked, and the referee counts nothing."""
+    from service_robots import gen3_file
+    from wmm_qp_service.processes import Stack, isolated_config
+
+    path = gen3_file(tmp_path, base)
+    robot = w.load_robot_config(path)
+    model = w.WmmModel(robot)
+    stack = Stack(isolated_config(robot=robot), rate_hz=500.0, log_dir=tmp_path, robot_file=path)
+    assert stack.svc.robot == f"gen3_{base}"
+    try:
+        stack.start()
+        with Client(stack.svc, name="test") as c:
+            info = ready(c)
+            assert info.robot == robot.name and info.base_kind == base and info.task == "position"
+            assert info.joints == list(robot.arm.joints) and info.n_arm == 7
+            assert info.wheels == list(model.base.wheel_names) and info.n_wheels == robot.n_wheels
+            st = until(lambda: c.wait_state(2.0))
+            assert len(st.wheel_speeds) == robot.n_wheels and len(st.q_arm) == 7
+            # a state with the Mecanum robot's 4 wheel speeds: rejected, never used
+            forged = StateMsg(robot=stack.svc.robot, seq=1, stamp=0.0, t=0.0, q_base=[0.0] * 3,
+                              q_arm=list(st.q_arm), v_arm=[0.0] * 7, wheel_speeds=[0.0] * 4,
+                              base_true=[0.0] * 3, ee_true=[0.0] * 3, tau=[0.0] * 7,
+                              contact_force=[0.0] * 3, instance="forged")
+            size0 = info.status.rejected.get("size", 0)
+            for _ in range(50):
+                c.put_raw("state", encode(forged))
+                time.sleep(0.001)
+            until(lambda: (i := c.info()) is not None and i.status.rejected.get("size", 0) > size0)
+            x0 = np.array(info.status.x)
+            target = x0 + np.array([0.03, 0.02, 0.0])
+            c.set_mode("track")
+            until(lambda: c.info().status.mode == "track")
+            t0 = time.monotonic()
+            while time.monotonic() - t0 < TIMEOUT:
+                c.send_setpoint(target)
+                time.sleep(0.01)
+                if (st := c.latest_state()) is not None and np.linalg.norm(np.array(st.ee_true) - target) < 0.005:
+                    break
+                if (s := c.latest_status()) is not None and s.resume_needed:  # a stall on a loaded machine
+                    c.set_mode("track")
+            st = c.wait_state(2.0)
+            assert st is not None and np.linalg.norm(np.array(st.ee_true) - target) < 0.01
+            assert sum(st.violations.values()) == 0, st.violations
+            assert not st.protective_stops
+    finally:
+        codes = stack.stop()
+    assert codes == {"sim": 0, "daemon": 0}
