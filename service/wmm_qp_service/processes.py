@@ -48,7 +48,7 @@ def log_folder(path: str | Path | None, tag: str) -> Path:
     return folder
 
 
-def _service_args(svc: ServiceConfig, robot_file: Path | None) -> list[str]:
+def _service_args(svc: ServiceConfig, robot_file: Path | None = None) -> list[str]:
     out = ["--prefix", svc.prefix, "--robot", svc.robot,
            "--daemon-endpoint", svc.zenoh.daemon_endpoint, "--sim-endpoint", svc.zenoh.sim_endpoint]
     return out + (["--robot-config", str(robot_file)] if robot_file is not None else [])
