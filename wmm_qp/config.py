@@ -42,6 +42,8 @@ class ShapeConfig:
         kind: "box", "sphere", "capsule" or "cylinder" (capsules and cylinders along their local z).
         size: [m] box edge lengths (x, y, z); for the others [radius, length, 0] (a sphere's length 0).
         xyz, rpy: [m], [rad] its pose in the link's frame.
+        exempt: an obstacle's links that may touch it ("ee": the bodies that move with the EE frame,
+            e.g. the push experiment's box, which only the EE may touch).
     """
 
     name: str
@@ -50,6 +52,7 @@ class ShapeConfig:
     size: FloatArray
     xyz: FloatArray
     rpy: FloatArray
+    exempt: tuple[str, ...] = ()
 
     @property
     def radius(self) -> float:

@@ -8,6 +8,7 @@ A scene file (``configs/scenes/default.toml`` is the default; ``--scene FILE`` o
     size = [0.1, 4.0, 1.0]       # box: edge lengths [m]; sphere: radius; capsule, cylinder: radius, length
     xyz = [2.5, 0.0, 0.2]        # world frame [m]
     rpy = [0.0, 0.0, 0.0]        # [rad]
+    exempt = []                  # links that may touch it; "ee": those moving with the EE frame
     # a plane: normal = [nx, ny, nz], offset = c — the half-space n·p ≤ c is free, beyond it solid
 
     [fence]
@@ -22,7 +23,7 @@ outside the EE box is clamped to it by the daemon.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -106,7 +107,12 @@ def load_scene(path: Path | str | None = None) -> Scene:
         oid = o.get("id", f"obstacle_{i}")
         if not isinstance(oid, str) or not oid:
             raise ConfigError(path, f"obstacles[{i}].id", "must be a non-empty string")
-        obstacles.append(load_shape(t, oid, "", OBSTACLE_KINDS))
+        exempt = t.get("exempt", [])
+        if not isinstance(exempt, list) or not all(isinstance(x, str) for x in exempt):
+            raise ConfigError(path, f"obstacles[{i}].exempt", "must be a list of link names (or \"ee\")")
+        t.data.pop("exempt", None)
+        shape = load_shape(t, oid, "", OBSTACLE_KINDS)
+        obstacles.append(replace(shape, exempt=tuple(exempt)))
     ids = [o.name for o in obstacles]
     if len(set(ids)) != len(ids):
         raise ConfigError(path, "obstacles", "obstacle ids must be unique")

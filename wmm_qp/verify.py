@@ -144,7 +144,11 @@ class CollisionJudge:
         self.d_s, self.d_floor = safety_distance, floor_margin
         self._coal = coal
         self._floor = coal.Halfspace(np.array([0.0, 0.0, 1.0]), self.geo.floor_z)  # solid: z ≤ floor_z
-        self.obstacles = [(o.name, coal_shape(o), shape_pose(o)) for o in scene.obstacles]
+        from .limits.collision import exempt_mask
+
+        self.obstacles = [
+            (o.name, coal_shape(o), shape_pose(o), exempt_mask(self.geo, o.exempt)) for o in scene.obstacles
+        ]
         self.last = ""  # the pair of the last violation
 
     def distances(self, q_base: FloatArray, q_arm: FloatArray) -> dict[str, float]:
@@ -165,9 +169,9 @@ class CollisionJudge:
         for i in geo.floor_bodies:
             out[f"{b[i].name}/floor"] = coal.distance(b[i].shape, T[i], self._floor, coal.Transform3s(), req,
                                                       coal.DistanceResult())
-        for name, shape, pose in self.obstacles:
+        for name, shape, pose, checked in self.obstacles:
             To = coal.Transform3s(pose.rotation, pose.translation)
-            for i in range(len(b)):
+            for i in np.flatnonzero(checked):
                 out[f"{b[i].name}/{name}"] = coal.distance(b[i].shape, T[i], shape, To, req, coal.DistanceResult())
         fence = self.scene.fence
         A, cc = fence.half_planes()

@@ -43,13 +43,15 @@ class CollisionReferee:
             self.gmodel.addCollisionPair(pin.CollisionPair(i, j))
         self.gdata = pin.GeometryData(self.gmodel)
         self._floor = coal.Halfspace(np.array([0.0, 0.0, 1.0]), self.geo.floor_z)  # solid: z ≤ floor_z
-        self.obstacles: list[tuple[str, coal.CollisionGeometry, pin.SE3]] = []
+        self.obstacles: list[tuple[str, coal.CollisionGeometry, pin.SE3, FloatArray]] = []
         self.counts: Counter[str] = Counter()
         self.min_distance = math.inf
         self.closest = ""
 
     def set_obstacles(self, obstacles: tuple[ShapeConfig, ...] | list[ShapeConfig]) -> None:
-        self.obstacles = [(o.name, coal_shape(o), shape_pose(o)) for o in obstacles]
+        from wmm_qp.limits.collision import exempt_mask
+
+        self.obstacles = [(o.name, coal_shape(o), shape_pose(o), exempt_mask(self.geo, o.exempt)) for o in obstacles]
 
     def reset(self) -> None:
         self.counts.clear()
@@ -75,9 +77,11 @@ class CollisionReferee:
             d = coal.distance(self.geo.bodies[i].shape, coal.Transform3s(M.rotation, M.translation),
                               self._floor, coal.Transform3s(), req, res)
             bad += self._judge(d, f"{self.geo.bodies[i].name}/floor")
-        for name, shape, pose in self.obstacles:
+        for name, shape, pose, checked in self.obstacles:
             To = coal.Transform3s(pose.rotation, pose.translation)
             for i, b in enumerate(self.geo.bodies):
+                if not checked[i]:
+                    continue
                 M = world_base * self.gdata.oMg[i]
                 res = coal.DistanceResult()
                 d = coal.distance(b.shape, coal.Transform3s(M.rotation, M.translation), shape, To, req, res)

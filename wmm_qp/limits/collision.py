@@ -75,15 +75,26 @@ class _Obstacle:
     center: FloatArray
     radius: float
     plane: bool
+    checked: FloatArray  # bool per body: the bodies this obstacle is checked against
 
 
-def _obstacle(s: ShapeConfig) -> _Obstacle:
+def exempt_mask(geometry: RobotGeometry, exempt: tuple[str, ...]) -> FloatArray:
+    """True for the bodies an obstacle is checked against: all but those on its ``exempt`` links
+    ("ee": every body on the EE frame's joint)."""
+    ee_joint = geometry.arm.model.frames[geometry.arm.frame_id].parentJoint
+    return np.array(
+        [not (b.link in exempt or ("ee" in exempt and b.joint == ee_joint)) for b in geometry.bodies], dtype=bool
+    )
+
+
+def _obstacle(s: ShapeConfig, geometry: RobotGeometry) -> _Obstacle:
     shape = coal_shape(s)
     plane = s.kind == "plane"
     if not plane:
         shape.computeLocalAABB()
     center = np.zeros(3) if plane else np.asarray(shape.aabb_center, dtype=float).copy()
-    return _Obstacle(s.name, shape, shape_pose(s), center, math.inf if plane else float(shape.aabb_radius), plane)
+    radius = math.inf if plane else float(shape.aabb_radius)
+    return _Obstacle(s.name, shape, shape_pose(s), center, radius, plane, exempt_mask(geometry, s.exempt))
 
 
 class CollisionRows:
@@ -126,7 +137,7 @@ class CollisionRows:
 
     def set_obstacles(self, obstacles: tuple[ShapeConfig, ...] | list[ShapeConfig]) -> None:
         """Replace the obstacle set (atomically: the next tick sees the new set only)."""
-        self.obstacles = [_obstacle(s) for s in obstacles]
+        self.obstacles = [_obstacle(s, self.geo) for s in obstacles]
 
     # ------------------------------------------------------------------ per tick
     def _dist(self, a: coal.CollisionGeometry, Ta: coal.Transform3s, b: coal.CollisionGeometry,
@@ -247,10 +258,10 @@ class CollisionRows:
                 Mo = base_world * o.world  # the obstacle in the base frame
                 To = transform(Mo)
                 if o.plane:
-                    near = np.arange(len(bodies))
+                    near = np.flatnonzero(o.checked)
                 else:
-                    near = np.flatnonzero(np.linalg.norm(centers - Mo.act(o.center), axis=1) - self._radii - o.radius
-                                          <= d_i)
+                    gap = np.linalg.norm(centers - Mo.act(o.center), axis=1) - self._radii - o.radius
+                    near = np.flatnonzero((gap <= d_i) & o.checked)
                 for i in near:
                     pair(int(i), o.shape, To, None, p.safety_distance, f"{bodies[i].name}/{o.name}", True,
                          (bodies[i].link, o.name))
