@@ -166,9 +166,7 @@ def test_a_bad_robot_file_is_one_line_naming_file_and_key(tmp_path, capsys: pyte
 
 @pytest.mark.parametrize("case", [
     "missing_package",
-    pytest.param("urdf_does_not_parse", marks=pytest.mark.xfail(
-        reason="urdfdom prints its parse error to fd 2 before Pinocchio raises (core: "
-               "wmm_qp/model/urdf.py load_full_model should silence it)", strict=False)),
+    "urdf_does_not_parse",  # urdfdom writes its own errors to fd 2: load_full_model silences them
 ])
 def test_a_bad_robot_file_through_the_console_script(tmp_path, case: str) -> None:  # type: ignore[no-untyped-def]
     """The whole process's stderr (a C++ parser may write to it directly): one line."""

@@ -35,7 +35,7 @@ def run(
     """Controller and sim in process; the sim's referee checks every step. ``moves(k)`` may return
     a new obstacle list at tick k (given to both, as the daemon and the sim would get it over Zenoh)."""
     cfg = replace(load_sim_config(), firmware=False)
-    sim = SimRobot(ctl.model, cfg, seed=1, scene=scene)
+    sim = SimRobot(ctl.model, cfg, seed=1, scene=scene, collisions=True)
     sim.reset()
     if scene is not None and hasattr(ctl, "set_scene"):
         ctl.set_scene(scene)
@@ -52,9 +52,8 @@ def run(
 
 
 def qp(name: str = "gen3_mecanum.toml", **collision: object) -> w.Controller:
-    cfg = w.load_controller_config()
-    if collision:
-        cfg = cfg.with_(collision=collision)
+    """The shipped QP controller with the collision rows on (``enabled=False`` turns them off)."""
+    cfg = w.load_controller_config().with_(collision={"enabled": True, **collision})
     return w.make_controller("qp", model(name), cfg)
 
 
@@ -196,11 +195,53 @@ def test_the_judge_sees_a_command_into_an_obstacle() -> None:
     assert judge.check(0.01, state, w.Command(wheel_speeds=np.zeros(4), arm_rates=np.zeros(7))) == 0
 
 
-@pytest.mark.parametrize("name", ["panda_diffdrive.toml", "ur5_omni.toml", "tiago.toml"])
-def test_every_robot_with_urdf_geometry_stops_at_the_floor(name: str) -> None:
+@pytest.mark.parametrize("name, d_i", [("panda_diffdrive.toml", 0.15), ("ur5_omni.toml", 0.15), ("tiago.toml", 0.3)])
+def test_every_robot_with_urdf_geometry_stops_at_the_floor(name: str, d_i: float) -> None:
+    """TIAGo's joints accelerate at 1 rad/s² (docs/robots.md): it needs a longer influence distance
+    to stop in (with 0.15 m its hand stops 8 mm from its base: a collision for the referee)."""
     m = model(name)
-    ctl = qp(name)
+    ctl = qp(name, influence_distance=d_i)
     sim, _ = run(ctl, w.Reference("track", x_d=start_x(name) + [0.1, 0.0, -1.5]), 2500)
     assert_safe(sim)
     assert not math.isinf(sim.collision.min_distance)  # type: ignore[union-attr]
     assert m.ee_position(sim.base_odom, sim.q_arm)[2] < start_x(name)[2] - 0.1  # it went down
+
+
+def test_the_compiled_distances_agree_with_coal() -> None:
+    """The hot path's own distances (capsule, sphere, box, plane) against coal's, on random poses."""
+    import coal
+    import pinocchio as pin
+
+    from wmm_qp.limits import _distance as D  # noqa: N812
+
+    rng = np.random.default_rng(5)
+    req = coal.DistanceRequest()
+
+    def pose() -> pin.SE3:
+        return pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(scale=0.3, size=3))
+
+    def coal_d(a: object, Ma: pin.SE3, b: object, Mb: pin.SE3) -> float:
+        return coal.distance(a, coal.Transform3s(Ma.rotation, Ma.translation), b,
+                             coal.Transform3s(Mb.rotation, Mb.translation), req, coal.DistanceResult())
+
+    p, q, n = np.empty(3), np.empty(3), np.empty(3)
+    for _ in range(300):
+        r1, r2, l1 = rng.uniform(0.02, 0.1, 3)
+        h = rng.uniform(0.05, 0.3, 3)
+        Ma, Mb = pose(), pose()
+        a0, a1 = Ma.act(np.array([0, 0, -l1 / 2])), Ma.act(np.array([0, 0, l1 / 2]))
+        d = D.swept_swept(a0, a1, r1, Mb.translation, Mb.translation, r2, p, q, n)  # capsule-sphere
+        assert d == pytest.approx(coal_d(coal.Capsule(r1, l1), Ma, coal.Sphere(r2), Mb), abs=1e-7)
+        if d > 0:
+            np.testing.assert_allclose(p - q, d * n, atol=1e-9)
+        d = D.swept_box(a0, a1, r1, Mb.translation, Mb.rotation, h / 2, p, q, n)  # capsule-box
+        ref = coal_d(coal.Capsule(r1, l1), Ma, coal.Box(*h), Mb)
+        if ref > 0:  # coal's penetration depths are GJK/EPA's; the separated case is exact
+            assert d == pytest.approx(ref, abs=1e-6)
+        else:
+            assert d <= 1e-9
+        floor = coal.Halfspace(np.array([0.0, 0.0, 1.0]), -0.2)
+        d = D.swept_plane(a0, a1, r1, np.array([0.0, 0.0, -1.0]), 0.2, p, q, n)
+        assert d == pytest.approx(coal_d(coal.Capsule(r1, l1), Ma, floor, pin.SE3.Identity()), abs=1e-7)
+        d = D.box_plane(Mb.translation, Mb.rotation, h / 2, np.array([0.0, 0.0, -1.0]), 0.2, p, q, n)
+        assert d == pytest.approx(coal_d(coal.Box(*h), Mb, floor, pin.SE3.Identity()), abs=1e-7)

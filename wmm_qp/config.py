@@ -272,14 +272,15 @@ class CollisionParams:
     monitored pair closer than d_i.
 
     Attributes:
-        enabled: add the damper rows to every QP stage.
+        enabled: add the damper rows to every QP stage (off by default until the service carries
+            scenes and live obstacles and the rows are fast enough on mesh geometry: issue 13).
         influence_distance: [m] d_i, where a pair's row starts to act.
         safety_distance: [m] d_s, the distance the pair settles at (robot vs robot, robot vs obstacles).
         floor_margin: [m] d_s for every link vs the floor.
         gain: [m/s] ξ, the approach speed a pair may keep at d_i.
     """
 
-    enabled: bool = True
+    enabled: bool = False
     influence_distance: float = 0.15
     safety_distance: float = 0.03
     floor_margin: float = 0.03

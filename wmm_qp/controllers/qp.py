@@ -657,6 +657,9 @@ class QpController(Controller):
         if z is None and rows is not None and rows.l.shape[0]:  # the rows together infeasible: admit braking
             problem = self.build(ctx, xdot, mode, rows, brake=True)
             z = self._solve(self._full, problem)
+            if z is None and problem.g[: self.n_v].any():  # still failing: without the DM and return terms
+                problem.g[: self.n_v] = 0.0
+                z = self._solve(self._full, problem)
         if z is None:
             self.last_stage = "failed"
             return self.safe_stop(state, f"qp ({self.solver}): the solver failed")

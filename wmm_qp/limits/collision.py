@@ -16,9 +16,10 @@ wheels (eq. (5)'s J_b for the point p, eq. (3)'s M); between two bodies of the r
 Fence (the scene's): for each edge of the base polygon, n_eᵀ ṗ_b ≤ ξ (c_e − n_eᵀ p_b − d_s)/(d_i − d_s)
 while the base's origin is within d_i of it, and the EE box the same way on each axis.
 
-One row per pair of links (the closest pair of their bodies) and per link and obstacle, at most
-``MAX_ROWS`` (the closest) per tick: nearly parallel rows of one link's several shapes would only
-slow the solvers.
+At most ``MAX_ROWS`` body pairs (the closest) per tick, and of one pair of links' rows only those
+that are not parallel (cos > 0.995; the more restrictive is kept): nearly parallel rows of one
+link's several shapes would only slow the solvers. Keeping only the closest pair of bodies of two
+links is not enough: another body of the same links went deeper (verify, the Panda's finger).
 
 Priority: the acceleration bounds (13) win. Each row is relaxed, where the bounds cannot meet it,
 to the most separating rate they admit: l ← min(l, max_{lb ≤ v ≤ ub} C_k v) — the robot then
@@ -43,14 +44,18 @@ import pinocchio as pin
 
 from .._jit import jit
 from ..config import CollisionParams, FloatArray, ShapeConfig
-from ..model.collision import Body, RobotGeometry, coal_shape, shape_pose, transform
+from ..model.collision import RobotGeometry, coal_shape, shape_pose, transform
 from ..scene import Fence, Scene
+from ._distance import box_plane, swept_box, swept_plane, swept_swept
+
+IntArray = np.ndarray
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-MAX_ROWS = 24
-"""At most this many rows per tick: one per pair of links (the closest of their bodies) and per
-link and obstacle, the closest first. Further pairs are left out only while MAX_ROWS closer ones
-are within the influence distance."""
+RELAX_MARGIN = 1e-9  # [m/s]
+MAX_ROWS = 48
+"""At most this many body pairs per tick, the closest first (further pairs are left out only while
+MAX_ROWS closer ones are within the influence distance); of those, two rows of one pair of links
+that are parallel (cos > 0.995) become one, the more restrictive."""
 
 
 @dataclass
@@ -67,6 +72,34 @@ class Rows:
     closest: str = ""
 
 
+class Table:
+    """Primitives in arrays, for the compiled distances (``_distance.py``): kind 0 a swept segment
+    [a0, a1] of radius r (sphere, capsule), 1 a box (centre c, rotation R, half extents h), 2 any
+    other shape (coal computes its distances); ``centre`` is each one's bounding-sphere centre."""
+
+    def __init__(self, n: int) -> None:
+        self.kind = np.full(n, 2, dtype=np.int64)
+        self.a0, self.a1, self.c, self.h, self.centre = (np.zeros((n, 3)) for _ in range(5))
+        self.r = np.zeros(n)
+        self.R = np.tile(np.eye(3), (n, 1, 1))
+
+    def set(self, k: int, shape: coal.CollisionGeometry, M: pin.SE3, centre: FloatArray) -> None:
+        """Entry k: ``shape`` at pose M (its frame's), bounding-sphere centre ``centre`` (shape frame)."""
+        self.c[k], self.R[k] = M.translation, M.rotation
+        self.centre[k] = M.act(centre)
+        if isinstance(shape, coal.Capsule):
+            self.kind[k], self.r[k] = 0, shape.radius
+            self.a0[k], self.a1[k] = M.act(np.array([0.0, 0.0, -shape.halfLength])), M.act(
+                np.array([0.0, 0.0, shape.halfLength]))
+        elif isinstance(shape, coal.Sphere):
+            self.kind[k], self.r[k] = 0, shape.radius
+            self.a0[k] = self.a1[k] = M.translation
+        elif isinstance(shape, coal.Box):
+            self.kind[k], self.h[k] = 1, shape.halfSide
+        else:
+            self.kind[k] = 2
+
+
 @dataclass
 class _Obstacle:
     name: str
@@ -76,6 +109,28 @@ class _Obstacle:
     radius: float
     plane: bool
     checked: FloatArray  # bool per body: the bodies this obstacle is checked against
+    normal_w: FloatArray = field(default_factory=lambda: np.zeros(3))  # a plane's, world frame
+    offset_w: float = 0.0
+    placed: Table = field(default_factory=lambda: Table(1))  # in the base frame, this tick
+    centre_b: FloatArray = field(default_factory=lambda: np.zeros(3))
+    normal_b: FloatArray = field(default_factory=lambda: np.zeros(3))
+    offset_b: float = 0.0
+    _M: pin.SE3 = field(default_factory=pin.SE3.Identity)
+
+    def place(self, Rb: FloatArray, tb: FloatArray) -> None:
+        """This tick's pose in the base frame, the base at (Rb, tb) in the world."""
+        if self.plane:  # n·p_w ≤ c  ⇔  (Rbᵀ n)·p_b ≤ c − n·tb
+            self.normal_b, self.offset_b = Rb.T @ self.normal_w, self.offset_w - float(self.normal_w @ tb)
+            self.shape = coal.Halfspace(-self.normal_b, -self.offset_b)  # coal: solid where n'·p ≤ d
+            return
+        self._M = pin.SE3(Rb.T @ self.world.rotation, Rb.T @ (self.world.translation - tb))
+        self.placed.set(0, self.shape, self._M, self.center)
+        self.centre_b = self.placed.centre[0]
+
+    def transform(self) -> coal.Transform3s:
+        if self.plane:
+            return coal.Transform3s()  # a plane obstacle's coal shape is built in the base frame
+        return transform(self._M)
 
 
 def exempt_mask(geometry: RobotGeometry, exempt: tuple[str, ...]) -> FloatArray:
@@ -94,7 +149,10 @@ def _obstacle(s: ShapeConfig, geometry: RobotGeometry) -> _Obstacle:
         shape.computeLocalAABB()
     center = np.zeros(3) if plane else np.asarray(shape.aabb_center, dtype=float).copy()
     radius = math.inf if plane else float(shape.aabb_radius)
-    return _Obstacle(s.name, shape, shape_pose(s), center, radius, plane, exempt_mask(geometry, s.exempt))
+    o = _Obstacle(s.name, shape, shape_pose(s), center, radius, plane, exempt_mask(geometry, s.exempt))
+    if plane:
+        o.normal_w, o.offset_w = np.asarray(s.size, dtype=float), float(s.xyz[2])
+    return o
 
 
 class CollisionRows:
@@ -130,37 +188,37 @@ class CollisionRows:
         self._pairs = np.array(geometry.self_pairs, dtype=int).reshape(-1, 2)
         self._pair_r = self._radii[self._pairs[:, 0]] + self._radii[self._pairs[:, 1]]
         self._floor_idx = np.array(geometry.floor_bodies, dtype=int)
+        self._floor_n, self._floor_o = np.array([0.0, 0.0, -1.0]), -geometry.floor_z  # free: z ≥ floor_z
+        # the compiled path: each body's primitive in its joint's frame, placed each tick
+        self._shapes = Table(len(bodies))
+        for k, b in enumerate(bodies):
+            self._shapes.set(k, b.shape, b.placement, b.center)
+        self._placed = Table(len(bodies))
+        self._placed.kind[:] = self._shapes.kind
+        self._placed.r[:], self._placed.h[:] = self._shapes.r, self._shapes.h
+        self._Hj = np.tile(np.eye(4), (len(self._joints), 1, 1))
+        self._joint_ids = [int(j) for j in self._joints]
+        self._oMi = geometry.arm.data.oMi  # the proxy, once: fetching data.oMi costs ~1 µs each time
+        model = geometry.arm.model  # support[j, k]: joint j moves with the velocity column k
+        self._support = np.zeros((model.njoints, model.nv))
+        for j in range(1, model.njoints):
+            a = j
+            while a > 0:
+                jm = model.joints[a]
+                self._support[j, jm.idx_v : jm.idx_v + jm.nv] = 1.0
+                a = model.parents[a]
+        self._fence_A, self._fence_c = np.zeros((0, 2)), np.zeros(0)
 
     def set_scene(self, scene: Scene) -> None:
         self.set_obstacles(scene.obstacles)
         self.fence = scene.fence
+        self._fence_A, self._fence_c = scene.fence.half_planes()
 
     def set_obstacles(self, obstacles: tuple[ShapeConfig, ...] | list[ShapeConfig]) -> None:
         """Replace the obstacle set (atomically: the next tick sees the new set only)."""
         self.obstacles = [_obstacle(s, self.geo) for s in obstacles]
 
     # ------------------------------------------------------------------ per tick
-    def _dist(self, a: coal.CollisionGeometry, Ta: coal.Transform3s, b: coal.CollisionGeometry,
-              Tb: coal.Transform3s) -> tuple[float, FloatArray, FloatArray]:
-        res = self._res
-        res.clear()
-        d = coal.distance(a, Ta, b, Tb, self._req, res)
-        p_a, p_b = res.getNearestPoint1(), res.getNearestPoint2()
-        return float(d), np.asarray(p_a, dtype=float), np.asarray(p_b, dtype=float)
-
-    def _point_row(self, body: Body, p: FloatArray, n: FloatArray, out: FloatArray, sign: float) -> None:
-        """out[n_w:] += sign · n̂ᵀ J_p (arm columns; p, n̂ in the base frame)."""
-        if body.joint == 0:
-            return
-        data = self.geo.arm.data
-        J = pin.getJointJacobian(self.geo.arm.model, data, body.joint, _LWA)
-        _add_point_row(J, data.oMi[body.joint].translation, p, n, sign, out, self.n_w)
-
-    def _base_row(self, p: FloatArray, n: FloatArray, out: FloatArray) -> None:
-        """out[:n_w] += n̂ᵀ J_b(p) M: the base twist's motion of a robot point p (base frame)."""
-        if self.n_w:
-            _add_base_row(self.M, p, n, out)
-
     def rows(
         self,
         q_base: FloatArray,
@@ -170,142 +228,280 @@ class CollisionRows:
         lb: FloatArray,
         ub: FloatArray,
     ) -> Rows:
-        """The rows at the state the arm's data was last computed at (``kinematics`` ran just before).
+        """The rows at the state the arm's data was last computed at (``kinematics`` ran just before:
+        the arm's forward kinematics and joint Jacobians are current).
 
         Args:
             q_base: [m, m, rad] base pose.
             x_ee: [m] EE position (world), J_ee its 3 × n_v world Jacobian (for the fence's EE box).
             v_prev: the bounds' centre (last command or state rates), for the latency term.
-            lb, ub: the stage's box bounds on v (for the braking command v₀).
+            lb, ub: the stage's box bounds on v (for the relaxations).
         """
-        geo, p = self.geo, self.p
-        d_i = p.influence_distance
+        p, d_i = self.p, self.p.influence_distance
         n_v = self.n_w + self.n_a
-        v0 = np.minimum(np.maximum(0.0, lb), ub)
-        C_rows: list[FloatArray] = []
-        bounds: list[float] = []
-        names: list[str] = []
-        dists: list[float] = []
         out = Rows(np.zeros((0, n_v)), np.zeros(0))
+        sh = self._shapes
+        data = self.geo.arm.data
+        oMi = self._oMi
+        for k, j in enumerate(self._joint_ids):  # the joints that carry bodies: their placements
+            self._Hj[k] = oMi[j].homogeneous
+        _place(self._Hj, self._body_joint, sh, self._placed)
+        pl = self._placed
+        found: list[tuple[float, int, int, FloatArray, FloatArray, FloatArray, float, str, tuple[str, str]]] = []
+        bodies = self.geo.bodies
 
-        keyed: dict[tuple[str, str], int] = {}  # (link, link or obstacle): its row (the closest bodies')
-        brakes: list[float] = []
-        dampers: list[float] = []
-
-        def add(row: FloatArray, d: float, d_s: float, name: str, key: tuple[str, str] | None = None) -> None:
-            damper, best, brake = _row_bounds(row, v_prev, v0, lb, ub, d, d_s, d_i, p.gain, self.latency)
-            lo, lo_brake = min(damper, best), min(damper, brake)
-            if key is not None:
-                k = keyed.get(key)
-                if k is not None:  # two bodies of the same links: keep the closer pair's row only
-                    if d < dists[k]:
-                        C_rows[k], bounds[k], brakes[k], names[k], dists[k] = row, lo, lo_brake, name, d
-                        dampers[k] = damper
-                    return
-                keyed[key] = len(C_rows)
-            C_rows.append(row)
-            bounds.append(lo)
-            brakes.append(lo_brake)
-            dampers.append(damper)
-            names.append(name)
-            dists.append(d)
-
-        bodies = geo.bodies
-        centers = self._centers()  # bounding spheres, base frame (the broad phase, vectorised)
-        cache: dict[int, coal.Transform3s] = {}
-
-        def T(k: int) -> coal.Transform3s:
-            t = cache.get(k)
-            if t is None:
-                t = cache[k] = transform(self._placement(k))
-            return t
-
-        def pair(i: int, b_shape: coal.CollisionGeometry, Tb: coal.Transform3s, other: Body | None,
-                 d_s: float, name: str, world: bool, key: tuple[str, str]) -> None:
-            a = bodies[i]
-            d, pa, pb = self._dist(a.shape, T(i), b_shape, Tb)
+        def take(d: float, i: int, j: int, pa: FloatArray, pb: FloatArray, n: FloatArray, d_s: float,
+                 name: str, key: tuple[str, str]) -> None:
             if d < out.min_distance:
                 out.min_distance, out.closest = d, name
-            if d >= d_i:
-                return
-            n = _normal(self._res)
-            row = np.zeros(n_v)
-            self._point_row(a, pa, n, row, 1.0)
-            if other is not None:
-                self._point_row(other, pb, n, row, -1.0)
-            if world:
-                self._base_row(pa, n, row)
-            add(row, d, d_s, name, key)
+            if d < d_i:
+                found.append((d, i, j, pa.copy(), pb.copy(), n.copy(), d_s, name, key))
 
-        if self._pairs.shape[0]:  # robot vs robot (base frame; the base's motion cancels)
-            gap = np.linalg.norm(centers[self._pairs[:, 0]] - centers[self._pairs[:, 1]], axis=1) - self._pair_r
-            for k in np.flatnonzero(gap <= d_i):
-                i, j = self._pairs[k]
-                pair(int(i), bodies[j].shape, T(int(j)), bodies[j], p.safety_distance,
-                     f"{bodies[i].name}/{bodies[j].name}", False, (bodies[i].link, bodies[j].link))
-        if self._floor_idx.shape[0]:  # robot vs the floor z = floor_z (a plane of the base frame too)
-            gap = centers[self._floor_idx, 2] - self._radii[self._floor_idx] - geo.floor_z
-            for k in np.flatnonzero(gap <= d_i):
-                i = int(self._floor_idx[k])
-                pair(i, self._floor, self._identity, None, p.floor_margin, f"{bodies[i].name}/floor", False,
-                     (bodies[i].link, "floor"))
-        if self.obstacles:
-            c, s = math.cos(q_base[2]), math.sin(q_base[2])
-            world_base = pin.SE3(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]),
-                                 np.array([q_base[0], q_base[1], 0.0]))
-            base_world = world_base.inverse()
+        # robot vs robot (base frame; the base's motion cancels)
+        if self._pairs.shape[0]:
+            gap = np.linalg.norm(pl.centre[self._pairs[:, 0]] - pl.centre[self._pairs[:, 1]], axis=1) - self._pair_r
+            cand = self._pairs[gap <= d_i]
+            if cand.shape[0]:
+                d, P, Q, N, ok = _pair_distances(pl, cand[:, 0], cand[:, 1], pl, self._buf(cand.shape[0]))
+                for k in range(cand.shape[0]):
+                    i, j = int(cand[k, 0]), int(cand[k, 1])
+                    if not ok[k]:
+                        d[k], P[k], Q[k], N[k] = self._coal(bodies[i].shape, self._T(i), bodies[j].shape, self._T(j))
+                    take(float(d[k]), i, j, P[k], Q[k], N[k], p.safety_distance,
+                         f"{bodies[i].name}/{bodies[j].name}", (bodies[i].link, bodies[j].link))
+        # robot vs the floor z = floor_z (the same plane in the base frame)
+        if self._floor_idx.shape[0]:
+            gap = pl.centre[self._floor_idx, 2] - self._radii[self._floor_idx] - self.geo.floor_z
+            cand = self._floor_idx[gap <= d_i]
+            if cand.shape[0]:
+                d, P, Q, N, ok = _plane_distances(pl, cand, self._floor_n, self._floor_o, self._buf(cand.shape[0]))
+                for k in range(cand.shape[0]):
+                    i = int(cand[k])
+                    if not ok[k]:
+                        d[k], P[k], Q[k], N[k] = self._coal(bodies[i].shape, self._T(i), self._floor, self._identity)
+                    take(float(d[k]), i, -1, P[k], Q[k], N[k], p.floor_margin, f"{bodies[i].name}/floor",
+                         (bodies[i].link, "floor"))
+        n_self = len(found)
+        if self.obstacles:  # robot vs obstacles, in the base frame at this base pose
+            c, s_ = math.cos(q_base[2]), math.sin(q_base[2])
+            Rb = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
+            tb = np.array([q_base[0], q_base[1], 0.0])
             for o in self.obstacles:
-                Mo = base_world * o.world  # the obstacle in the base frame
-                To = transform(Mo)
+                o.place(Rb, tb)
                 if o.plane:
-                    near = np.flatnonzero(o.checked)
+                    cand = np.flatnonzero(o.checked)
                 else:
-                    gap = np.linalg.norm(centers - Mo.act(o.center), axis=1) - self._radii - o.radius
-                    near = np.flatnonzero((gap <= d_i) & o.checked)
-                for i in near:
-                    pair(int(i), o.shape, To, None, p.safety_distance, f"{bodies[i].name}/{o.name}", True,
+                    gap = np.linalg.norm(pl.centre - o.centre_b, axis=1) - self._radii - o.radius
+                    cand = np.flatnonzero((gap <= d_i) & o.checked)
+                if not cand.shape[0]:
+                    continue
+                if o.plane:
+                    d, P, Q, N, ok = _plane_distances(pl, cand, o.normal_b, o.offset_b, self._buf(cand.shape[0]))
+                else:
+                    zeros = np.zeros(cand.shape[0], dtype=np.int64)
+                    d, P, Q, N, ok = _pair_distances(pl, cand, zeros, o.placed, self._buf(cand.shape[0]))
+                for k in range(cand.shape[0]):
+                    i = int(cand[k])
+                    if not ok[k]:
+                        d[k], P[k], Q[k], N[k] = self._coal(bodies[i].shape, self._T(i), o.shape, o.transform())
+                    take(float(d[k]), i, -2, P[k], Q[k], N[k], p.safety_distance, f"{bodies[i].name}/{o.name}",
                          (bodies[i].link, o.name))
-        self._fence_rows(q_base, x_ee, J_ee, add, n_v)
-        if C_rows:
-            keep = np.argsort(dists)[:MAX_ROWS]  # the closest pairs, if more than MAX_ROWS are near
-            out.C, out.l, out.l_brake = np.array(C_rows)[keep], np.array(bounds)[keep], np.array(brakes)[keep]
-            out.names, out.distances = [names[k] for k in keep], np.array(dists)[keep]
-            out.damper = np.array(dampers)[keep]
+        fence: list[tuple[FloatArray, float, str]] = []
+        self._fence_rows(q_base, x_ee, J_ee, fence, n_v)
+        if not found and not fence:
+            return out
+        order = sorted(range(len(found)), key=lambda k: found[k][0])[:MAX_ROWS]  # the closest first
+        m = len(order)
+        C = np.zeros((m + len(fence), n_v))
+        if m:
+            sel = [found[k] for k in order]
+            world = np.array([k >= n_self for k in order])
+            ja = np.array([bodies[f[1]].joint for f in sel], dtype=np.int64)
+            jb = np.array([bodies[f[2]].joint if f[2] >= 0 else 0 for f in sel], dtype=np.int64)
+            _point_rows(np.asarray(data.J), self._support, ja, jb, np.array([f[3] for f in sel]),
+                        np.array([f[4] for f in sel]), np.array([f[5] for f in sel]), world, self.M, self.n_w, C)
+        chosen = order
+        dist = np.array([found[k][0] for k in chosen] + [f[1] for f in fence])
+        d_s = np.array([found[k][6] for k in chosen] + [0.0] * len(fence))
+        for k, f in enumerate(fence):
+            C[m + k] = f[0]
+        l, l_brake, damper = _all_bounds(C, v_prev, lb, ub, dist, d_s, d_i, p.gain, self.latency)
+        names = [found[k][7] for k in chosen] + [f[2] for f in fence]
+        keys = [found[k][8] for k in chosen] + [(f[2], "") for f in fence]
+        keep = _distinct_rows(C, l, keys)  # two bodies of one link pair: one row where they are parallel
+        out.C, out.l, out.l_brake, out.damper, out.distances = C[keep], l[keep], l_brake[keep], damper[keep], dist[keep]
+        out.names = [names[k] for k in keep]
         return out
 
-    def _placement(self, k: int) -> pin.SE3:
-        b = self.geo.bodies[k]
-        return self.geo.arm.data.oMi[b.joint] * b.placement if b.joint else b.placement
+    def _buf(self, n: int) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, np.ndarray]:
+        return np.empty(n), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty(n, dtype=np.bool_)
 
-    def _centers(self) -> FloatArray:
-        """Each body's bounding-sphere centre in the base frame (from the arm's current FK)."""
-        oMi = self.geo.arm.data.oMi
-        R = np.empty((len(self._joints), 3, 3))
-        t = np.empty((len(self._joints), 3))
-        for k, j in enumerate(self._joints):
-            M = oMi[int(j)]
-            R[k], t[k] = M.rotation, M.translation
-        return np.einsum("kab,kb->ka", R[self._body_joint], self._local_centers) + t[self._body_joint]
+    def _T(self, i: int) -> coal.Transform3s:
+        """Body i's pose in the base frame as coal's (for the pairs coal computes)."""
+        b = self.geo.bodies[i]
+        return transform(self.geo.arm.data.oMi[b.joint] * b.placement if b.joint else b.placement)
 
-    def _fence_rows(self, q_base: FloatArray, x: FloatArray, J: FloatArray, add: object, n_v: int) -> None:
+    def _coal(self, a: coal.CollisionGeometry, Ta: coal.Transform3s, b: coal.CollisionGeometry,
+              Tb: coal.Transform3s) -> tuple[float, FloatArray, FloatArray, FloatArray]:
+        res = self._res
+        res.clear()
+        d = coal.distance(a, Ta, b, Tb, self._req, res)
+        return float(d), np.asarray(res.getNearestPoint1()), np.asarray(res.getNearestPoint2()), _normal(res)
+
+    def _fence_rows(self, q_base: FloatArray, x: FloatArray, J: FloatArray,
+                    out: list[tuple[FloatArray, float, str]], n_v: int) -> None:
+        """(row, distance, name) of each fence damper within the influence distance (d_s = 0)."""
         f, d_i = self.fence, self.p.influence_distance
-        A, c = f.half_planes()
+        A, c = self._fence_A, self._fence_c
         if A.shape[0] and self.n_w:
             cs, sn = math.cos(q_base[2]), math.sin(q_base[2])
             P2 = np.array([[cs, -sn], [sn, cs]]) @ self.M[:2]  # the base origin's world velocity, eq. (3)
-            for k in range(A.shape[0]):
-                d = float(c[k] - A[k] @ q_base[:2])  # distance to the edge's line, inside ≥ 0
-                if d < d_i:
-                    row = np.zeros(n_v)
-                    row[: self.n_w] = -A[k] @ P2  # ḋ = −n_eᵀ ṗ_b
-                    add(row, d, 0.0, f"fence:base edge {k}")  # type: ignore[operator]
+            gaps = c - A @ q_base[:2]  # distance to each edge's line, inside ≥ 0
+            for k in np.flatnonzero(gaps < d_i):
+                row = np.zeros(n_v)
+                row[: self.n_w] = -A[k] @ P2  # ḋ = −n_eᵀ ṗ_b
+                out.append((row, float(gaps[k]), f"fence:base edge {k}"))
         for ax in range(3):
             for sign, bound in ((1.0, f.ee_upper[ax]), (-1.0, f.ee_lower[ax])):
                 if not math.isfinite(bound):
                     continue
                 d = sign * (bound - x[ax])
                 if d < d_i:
-                    add(-sign * np.asarray(J[ax], dtype=float), d, 0.0, f"fence:ee {'xyz'[ax]}")  # type: ignore[operator]
+                    out.append((-sign * np.asarray(J[ax], dtype=float), float(d), f"fence:ee {'xyz'[ax]}"))
+
+
+@jit
+def _place_kernel(
+    Hj: FloatArray, joint: IntArray, kind: IntArray, a0: FloatArray, a1: FloatArray, c: FloatArray,
+    R: FloatArray, centre: FloatArray, o_a0: FloatArray, o_a1: FloatArray, o_c: FloatArray, o_R: FloatArray,
+    o_centre: FloatArray,
+) -> None:
+    for k in range(joint.shape[0]):
+        j = joint[k]
+        for r in range(3):
+            o_a0[k, r] = Hj[j, r, 3]
+            o_a1[k, r] = Hj[j, r, 3]
+            o_c[k, r] = Hj[j, r, 3]
+            o_centre[k, r] = Hj[j, r, 3]
+            for m in range(3):
+                o_a0[k, r] += Hj[j, r, m] * a0[k, m]
+                o_a1[k, r] += Hj[j, r, m] * a1[k, m]
+                o_c[k, r] += Hj[j, r, m] * c[k, m]
+                o_centre[k, r] += Hj[j, r, m] * centre[k, m]
+                acc = 0.0
+                for q in range(3):
+                    acc += Hj[j, r, q] * R[k, q, m]
+                o_R[k, r, m] = acc
+
+
+def _place(Hj: FloatArray, joint: IntArray, local: Table, out: Table) -> None:
+    """``out`` ← every body placed in the base frame (joint placements Hj, 4×4; joint 0's identity)."""
+    _place_kernel(Hj, joint, local.kind, local.a0, local.a1, local.c, local.R, local.centre,
+                  out.a0, out.a1, out.c, out.R, out.centre)
+
+
+@jit
+def _pairs_kernel(
+    ka: IntArray, a0: FloatArray, a1: FloatArray, ra: FloatArray, ca: FloatArray, Ra: FloatArray, ha: FloatArray,
+    kb: IntArray, b0: FloatArray, b1: FloatArray, rb: FloatArray, cb: FloatArray, Rb: FloatArray, hb: FloatArray,
+    I: IntArray, J: IntArray, d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: np.ndarray,
+) -> None:
+    for k in range(I.shape[0]):
+        i, j = I[k], J[k]
+        ok[k] = True
+        if ka[i] == 0 and kb[j] == 0:
+            d[k] = swept_swept(a0[i], a1[i], ra[i], b0[j], b1[j], rb[j], P[k], Q[k], N[k])
+        elif ka[i] == 0 and kb[j] == 1:
+            d[k] = swept_box(a0[i], a1[i], ra[i], cb[j], Rb[j], hb[j], P[k], Q[k], N[k])
+        elif ka[i] == 1 and kb[j] == 0:
+            d[k] = swept_box(b0[j], b1[j], rb[j], ca[i], Ra[i], ha[i], Q[k], P[k], N[k])
+            N[k] = -N[k]
+        else:
+            ok[k] = False
+
+
+def _pair_distances(A: Table, I: IntArray, J: IntArray, B: Table, buf: tuple) -> tuple:  # type: ignore[type-arg]
+    """Distances of A[I[k]] to B[J[k]] (ok False where coal must compute it: box-box, meshes)."""
+    d, P, Q, N, ok = buf
+    _pairs_kernel(A.kind, A.a0, A.a1, A.r, A.c, A.R, A.h, B.kind, B.a0, B.a1, B.r, B.c, B.R, B.h,
+                  np.asarray(I, dtype=np.int64), np.asarray(J, dtype=np.int64), d, P, Q, N, ok)
+    return d, P, Q, N, ok
+
+
+@jit
+def _planes_kernel(
+    kind: IntArray, a0: FloatArray, a1: FloatArray, r: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
+    I: IntArray, normal: FloatArray, offset: float, d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray,
+    ok: np.ndarray,
+) -> None:
+    for k in range(I.shape[0]):
+        i = I[k]
+        ok[k] = True
+        if kind[i] == 0:
+            d[k] = swept_plane(a0[i], a1[i], r[i], normal, offset, P[k], Q[k], N[k])
+        elif kind[i] == 1:
+            d[k] = box_plane(c[i], R[i], h[i], normal, offset, P[k], Q[k], N[k])
+        else:
+            ok[k] = False
+
+
+def _plane_distances(A: Table, I: IntArray, normal: FloatArray, offset: float, buf: tuple) -> tuple:  # type: ignore[type-arg]
+    """Distances of A[I[k]] to the plane normal·x = offset (free side normal·x ≤ offset)."""
+    d, P, Q, N, ok = buf
+    _planes_kernel(A.kind, A.a0, A.a1, A.r, A.c, A.R, A.h, np.asarray(I, dtype=np.int64),
+                   np.asarray(normal, dtype=float), float(offset), d, P, Q, N, ok)
+    return d, P, Q, N, ok
+
+
+@jit
+def _point_rows(
+    Jw: FloatArray, support: FloatArray, ja: IntArray, jb: IntArray, pa: FloatArray, pb: FloatArray,
+    n: FloatArray, world: np.ndarray, M: FloatArray, n_w: int, C: FloatArray,
+) -> None:
+    """C[k] ← n̂ᵀ(J_{p_a} − J_{p_b}) of each pair, from the joints' world-frame (here: base-frame)
+    Jacobian Jw (6 × nv, Pinocchio's data.J: a point p of joint j moves at J_v + J_ω × p over the
+    columns the joint moves with); for pairs with the world, the base's motion of p_a on the wheels."""
+    for k in range(ja.shape[0]):
+        nk = n[k]
+        for side in range(2):
+            j = ja[k] if side == 0 else jb[k]
+            if j == 0:
+                continue
+            p = pa[k] if side == 0 else pb[k]
+            sign = 1.0 if side == 0 else -1.0
+            c0 = p[1] * nk[2] - p[2] * nk[1]  # p × n̂
+            c1 = p[2] * nk[0] - p[0] * nk[2]
+            c2 = p[0] * nk[1] - p[1] * nk[0]
+            for i in range(Jw.shape[1]):
+                if support[j, i] != 0.0:
+                    C[k, n_w + i] += sign * (
+                        nk[0] * Jw[0, i] + nk[1] * Jw[1, i] + nk[2] * Jw[2, i]
+                        + c0 * Jw[3, i] + c1 * Jw[4, i] + c2 * Jw[5, i]
+                    )
+        if world[k]:
+            p = pa[k]
+            a2 = -nk[0] * p[1] + nk[1] * p[0]
+            for j in range(n_w):
+                C[k, j] += nk[0] * M[0, j] + nk[1] * M[1, j] + a2 * M[2, j]
+
+
+@jit
+def _all_bounds(
+    C: FloatArray, v_prev: FloatArray, lb: FloatArray, ub: FloatArray, d: FloatArray, d_s: FloatArray,
+    d_i: float, gain: float, latency: float,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """(l, l_brake, damper) of every row (see the module docstring)."""
+    m = C.shape[0]
+    l, l_brake, damper = np.empty(m), np.empty(m), np.empty(m)
+    v0 = np.minimum(np.maximum(0.0, lb), ub)
+    for k in range(m):
+        dk, best, brake = _row_bounds(C[k], v_prev, v0, lb, ub, d[k], d_s[k], d_i, gain, latency)
+        damper[k] = dk
+        # a relaxed row would pass through a vertex of the box exactly: 1e-9 m/s below it, so that
+        # no solver's tolerance reads the degenerate (feasible) problem as infeasible
+        l[k] = min(dk, best - RELAX_MARGIN)
+        l_brake[k] = min(dk, brake - RELAX_MARGIN)
+    return l, l_brake, damper
 
 
 @jit
@@ -324,24 +520,23 @@ def _row_bounds(
     return -gain * (d_eff - d_s) / (d_i - d_s), best, brake
 
 
-@jit
-def _add_point_row(J: FloatArray, o: FloatArray, p: FloatArray, n: FloatArray, sign: float, out: FloatArray,
-                   first: int) -> None:
-    """out[first:] += sign·(n̂ᵀJ_v + ((p − o) × n̂)ᵀJ_ω): n̂ᵀ of the velocity of point p on the joint."""
-    r0, r1, r2 = p[0] - o[0], p[1] - o[1], p[2] - o[2]
-    c0, c1, c2 = r1 * n[2] - r2 * n[1], r2 * n[0] - r0 * n[2], r0 * n[1] - r1 * n[0]
-    for i in range(J.shape[1]):
-        out[first + i] += sign * (
-            n[0] * J[0, i] + n[1] * J[1, i] + n[2] * J[2, i] + c0 * J[3, i] + c1 * J[4, i] + c2 * J[5, i]
-        )
+def _distinct_rows(C: FloatArray, l: FloatArray, keys: list[tuple[str, str]]) -> list[int]:
+    """The rows to keep: of two rows of the same pair of links whose directions agree to within
+    cos > 0.995 (one link's several shapes against one obstacle), only the more restrictive."""
+    keep: list[int] = []
+    norms = np.linalg.norm(C, axis=1) + 1e-300
+    for k in range(C.shape[0]):
+        for i, j in enumerate(keep):
+            if keys[j] == keys[k] and float(C[j] @ C[k]) > PARALLEL * norms[j] * norms[k]:
+                if l[k] / norms[k] > l[j] / norms[j]:
+                    keep[i] = k
+                break
+        else:
+            keep.append(k)
+    return keep
 
 
-@jit
-def _add_base_row(M: FloatArray, p: FloatArray, n: FloatArray, out: FloatArray) -> None:
-    """out[:n_w] += n̂ᵀ [[1, 0, −p_y], [0, 1, p_x], [0, 0, 0]] M (eq. (5)'s J_b at p, eq. (3)'s M)."""
-    a0, a1, a2 = n[0], n[1], -n[0] * p[1] + n[1] * p[0]
-    for j in range(M.shape[1]):
-        out[j] += a0 * M[0, j] + a1 * M[1, j] + a2 * M[2, j]
+PARALLEL = 0.995
 
 
 def _normal(res: coal.DistanceResult) -> FloatArray:

@@ -12,9 +12,12 @@ and the ``cmeel.prefix/share`` where PyPI packages such as ``example-robot-data`
 
 from __future__ import annotations
 
+import contextlib
 import math
+import os
 import sys
 import sysconfig
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -100,11 +103,36 @@ def load_full_model(robot_file: Path, urdf: Path) -> pin.Model:
     Raises:
         ConfigError: Pinocchio cannot parse it.
     """
+    import xml.etree.ElementTree as ET
+
+    try:  # not XML at all: say so before urdfdom, which writes its own errors to the process's stderr
+        ET.parse(urdf)
+    except (ET.ParseError, OSError) as e:
+        raise ConfigError(robot_file, "arm.urdf", f"Pinocchio cannot load {urdf}: not valid XML ({e})") from None
     try:
-        return pin.buildModelFromUrdf(str(urdf))
+        with _quiet_stderr():
+            return pin.buildModelFromUrdf(str(urdf))
     except (RuntimeError, ValueError, OSError) as e:
         msg = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
         raise ConfigError(robot_file, "arm.urdf", f"Pinocchio cannot load {urdf}: {msg}") from None
+
+
+@contextlib.contextmanager
+def _quiet_stderr() -> Iterator[None]:
+    """File descriptor 2 to /dev/null meanwhile (urdfdom prints its parse errors there itself; the
+    ConfigError says what went wrong in one line). Start-up only, before any thread writes."""
+    try:
+        saved = os.dup(2)
+    except OSError:
+        yield
+        return
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 2)
+            yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
 
 
 def _kind(model: pin.Model, j: int) -> str | None:
