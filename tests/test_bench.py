@@ -171,3 +171,13 @@ def test_cli_robot_config_and_task(capsys: pytest.CaptureFixture[str]) -> None:
     assert rc == 0
     out = json.loads(capsys.readouterr().out)
     assert out["robot"] == "tiago" and out["task"] == "pose" and set(out["tick_us"]["daqp"]) >= {"p50", "p99"}
+
+
+def test_compare_commits_interleaves_two_trees() -> None:
+    """The same tree twice: both workers follow the same trajectory and agree on every stage."""
+    from wmm_qp_service.bench.compare_commits import HERE, interleave
+
+    r = interleave(HERE, HERE, blocks=2, ticks=20, solvers=["daqp"])
+    row = r["solvers"]["daqp"]
+    assert r["ticks"] == 20 and row["old"]["n"] == row["new"]["n"] == 20
+    assert row["same_run"]["stages"] and row["same_run"]["status"] and row["ratio_p50"] > 0
