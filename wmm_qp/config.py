@@ -571,9 +571,11 @@ def load_robot_config(path: Path | str | None = None) -> RobotConfig:
     start = a.vector("start", n, np.clip(finite_mid, lower, upper))
     outside = np.flatnonzero((start < lower) | (start > upper))
     if outside.size:
-        j = int(outside[0])
+        bad_j = int(outside[0])
         raise ConfigError(
-            path, "arm.start", f"joint {chain.joints[j]!r} at {start[j]} is outside [{lower[j]}, {upper[j]}]"
+            path,
+            "arm.start",
+            f"joint {chain.joints[bad_j]!r} at {start[bad_j]} is outside [{lower[bad_j]}, {upper[bad_j]}]",
         )
     weight = a.vector("torque_weight", n, positive=True) if a.has("torque_weight") else None
     arm = ArmConfig(

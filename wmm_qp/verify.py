@@ -171,7 +171,7 @@ class CollisionJudge:
                                                       coal.DistanceResult())
         for name, shape, pose, checked in self.obstacles:
             To = coal.Transform3s(pose.rotation, pose.translation)
-            for i in np.flatnonzero(checked):
+            for i in (int(k) for k in np.flatnonzero(checked)):
                 out[f"{b[i].name}/{name}"] = coal.distance(b[i].shape, T[i], shape, To, req, coal.DistanceResult())
         fence = self.scene.fence
         A, cc = fence.half_planes()

@@ -490,7 +490,7 @@ class QpController(Controller):
         if self.collision is not None:
             self.collision.set_scene(scene)
 
-    def set_obstacles(self, obstacles: list) -> None:  # type: ignore[type-arg]
+    def set_obstacles(self, obstacles: list) -> None:
         """Replace the obstacle set (live obstacles; the fence stays)."""
         if self.collision is not None:
             self.collision.set_obstacles(obstacles)

@@ -420,7 +420,7 @@ def _pairs_kernel(
             ok[k] = False
 
 
-def _pair_distances(A: Table, I: IntArray, J: IntArray, B: Table, buf: tuple) -> tuple:  # type: ignore[type-arg]
+def _pair_distances(A: Table, I: IntArray, J: IntArray, B: Table, buf: tuple) -> tuple:
     """Distances of A[I[k]] to B[J[k]] (ok False where coal must compute it: box-box, meshes)."""
     d, P, Q, N, ok = buf
     _pairs_kernel(A.kind, A.a0, A.a1, A.r, A.c, A.R, A.h, B.kind, B.a0, B.a1, B.r, B.c, B.R, B.h,
@@ -445,7 +445,7 @@ def _planes_kernel(
             ok[k] = False
 
 
-def _plane_distances(A: Table, I: IntArray, normal: FloatArray, offset: float, buf: tuple) -> tuple:  # type: ignore[type-arg]
+def _plane_distances(A: Table, I: IntArray, normal: FloatArray, offset: float, buf: tuple) -> tuple:
     """Distances of A[I[k]] to the plane normal·x = offset (free side normal·x ≤ offset)."""
     d, P, Q, N, ok = buf
     _planes_kernel(A.kind, A.a0, A.a1, A.r, A.c, A.R, A.h, np.asarray(I, dtype=np.int64),
