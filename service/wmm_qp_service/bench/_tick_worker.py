@@ -33,7 +33,8 @@ def main(solver: str) -> int:
     ctl = w.make_controller("qp", model, cfg.with_(qp={"solver": solver}))
     ctl.warm_up()
     start = getattr(robot.arm, "start", None)
-    q_arm = np.array(start if start is not None else w.PAPER_START_Q_ARM, dtype=float)  # type: ignore[attr-defined]
+    old_start = getattr(w, "PAPER_START_Q_ARM", None)  # a tree from before the robot description
+    q_arm = np.asarray(start if start is not None else old_start, dtype=np.float64)
     n_arm = q_arm.size
     n_wheels = model.base.M.shape[1]
     q_base, v_arm, wheels = np.zeros(3), np.zeros(n_arm), np.zeros(n_wheels)
