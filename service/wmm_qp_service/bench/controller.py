@@ -199,6 +199,62 @@ def _null() -> Iterator[None]:
     yield
 
 
+class CleanCase:
+    """The clean pass of :func:`run_case` in blocks: :meth:`run` times the next ``n`` ticks of the
+    same trajectory, so that several cases can take turns (the ``robots`` section interleaves its
+    cases, so that a slow spell of a shared machine falls on all of them alike)."""
+
+    def __init__(self, robot: w.RobotConfig, cfg: w.ControllerConfig, solver: str, mode: str = "track") -> None:
+        self.robot, self.solver, self.mode = robot, solver, w.Mode(mode)
+        model = w.WmmModel(robot)
+        ctl = w.make_controller("qp", model, cfg.with_(qp={"solver": solver}))
+        assert isinstance(ctl, w.QpController)
+        ctl.warm_up()  # compiled kernels loaded before timing, as the daemon does
+        self.ctl, self.bot = ctl, IdealRobot.at_start(model)
+        self.x0 = self.bot.ee()
+        self.quat0 = self.bot.ee_quat() if ctl.pose else None
+        self.k = 0
+        self.samples: list[int] = []
+        self.stages: dict[str, int] = {}
+        self.status: dict[str, int] = {}
+        self.err2: list[float] = []
+        self.excess = 0.0
+
+    def run(self, n: int) -> None:
+        """The next n ticks."""
+        ctl, bot, m, dt = self.ctl, self.bot, self.mode, self.ctl.dt
+        vmax, wmax = self.robot.arm.velocity_max, self.robot.base.wheel_speed_max
+        for _ in range(n):
+            k = self.k
+            ref = reference_at(m, self.x0, k * dt, self.quat0)
+            state = bot.state()
+            t0 = now_ns()
+            cmd = ctl.step(state, ref)
+            self.samples.append(now_ns() - t0)
+            bot.apply(cmd, dt)
+            self.stages[ctl.last_stage] = self.stages.get(ctl.last_stage, 0) + 1
+            self.status[str(cmd.status)] = self.status.get(str(cmd.status), 0) + 1
+            self.excess = max(
+                self.excess,
+                float(np.max(np.abs(cmd.arm_rates) - vmax)),
+                float(np.max(np.abs(cmd.wheel_speeds) - wmax, initial=-np.inf)),
+            )
+            if k * dt >= 1.0 and m != w.Mode.DM_CARTESIAN:
+                x_d = self.x0 if m == w.Mode.HOLD else circle(self.x0, (k + 1) * dt)[0]
+                self.err2.append(float(np.sum((bot.ee() - x_d) ** 2)))
+            self.k += 1
+
+    def result(self) -> dict[str, Any]:
+        """:func:`run_case`'s clean-pass keys."""
+        return {
+            "tick_us": summarize_ns(self.samples),
+            "stages": self.stages,
+            "status": self.status,
+            "track_rms_m": float(np.sqrt(np.mean(self.err2))) if self.err2 else None,
+            "max_rate_excess": self.excess,
+        }
+
+
 def run(
     robot: w.RobotConfig,
     cfg: w.ControllerConfig,

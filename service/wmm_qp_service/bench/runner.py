@@ -12,6 +12,7 @@ from wmm_qp.solvers import available_solvers
 
 from . import controller, e2e, oneshot, pink_race, scaling
 from .machine import machine_info
+from .stats import now_ns
 
 SECTIONS: tuple[str, ...] = ("controller", "oneshot", "pink", "scaling", "robots", "e2e")
 
@@ -29,15 +30,22 @@ def run_robots(
     ticks: int,
     max_seconds: float,
     files: list[Path] | None = None,
+    blocks: int = 20,
 ) -> dict[str, Any]:
     """Track-mode tick of the controller for every robot × task kind × solver (clean pass only).
 
+    The cases take turns: each runs ``ticks / blocks`` ticks of its trajectory, then the next
+    case, until each has run ``ticks`` (or the wall-clock budget, ``max_seconds`` per case on
+    average, is spent), so that a slow spell of a shared machine falls on every case alike.
+
     Returns:
-        {robot name: {"file", "n_arm", "n_wheels", "base", task kind: {solver: run_case's "tick_us",
-        "stages", "status", "track_rms_m", "max_rate_excess"}}}; a robot file that does not load
-        (an optional package missing) gives {"file", "available": False, "reason"}.
+        {robot name: {"file", "available", "n_arm", "n_wheels", "base", task kind: {solver:
+        run_case's "tick_us", "stages", "status", "track_rms_m", "max_rate_excess"}}}; a robot file
+        that does not load (an optional package missing) gives {"file", "available": False,
+        "reason"}.
     """
     out: dict[str, Any] = {}
+    cases: list[tuple[dict[str, Any], controller.CleanCase]] = []
     for f in files if files is not None else shipped_robots():
         try:
             robot = w.load_robot_config(f)
@@ -50,10 +58,20 @@ def run_robots(
             task_cfg = cfg.with_(task={"kind": kind})
             row[kind] = {}
             for s in solvers:
-                print(f"robots: {robot.name} / {kind} / {s} ({ticks} ticks)", file=sys.stderr, flush=True)
-                r = controller.run_case(robot, task_cfg, s, "track", ticks, breakdown=False, max_seconds=max_seconds)
-                row[kind][s] = r
+                cases.append((row[kind], controller.CleanCase(robot, task_cfg, s)))
         out[robot.name] = row
+    size = max(1, -(-ticks // blocks))
+    deadline = now_ns() + int(max_seconds * 1e9) * max(1, len(cases))
+    done = 0
+    print(f"robots: {len(cases)} cases, {ticks} ticks each in blocks of {size}", file=sys.stderr, flush=True)
+    while done < ticks and now_ns() < deadline:
+        n = min(size, ticks - done)
+        for _, case in cases:
+            case.run(n)
+        done += n
+        print(f"  robots: {done}/{ticks} ticks per case", file=sys.stderr, flush=True)
+    for cell, case in cases:
+        cell[case.solver] = case.result()
     return out
 
 
