@@ -99,15 +99,20 @@ class Probe:
         return self.until(lambda: (i := self.client.info()) is not None and i.status.state_ok and i,
                           timeout)
 
-    def move(self, x0: np.ndarray, seconds: float, radius: float = 0.05) -> None:
-        """Stream a circle of ``radius`` [m] around ``x0`` for ``seconds`` (the robot moves)."""
+    def move(self, x0: np.ndarray, seconds: float, radius: float = 0.05, until_moving: float = 0.0) -> float:
+        """Stream a circle of ``radius`` [m] around ``x0`` for ``seconds`` (the robot moves); with
+        ``until_moving`` > 0 go on streaming (up to that many seconds more) until a fresh state shows
+        the robot moving, and return its largest executed rate [rad/s] (0 if it never moved)."""
         t0 = time.monotonic()
-        while (t := time.monotonic() - t0) < seconds:
+        while (t := time.monotonic() - t0) < seconds + until_moving:
             om = 2.0
             self.client.send_setpoint(x0 + radius * np.array([np.sin(om * t), 1 - np.cos(om * t), 0.0]),
                                       radius * om * np.array([np.cos(om * t), np.sin(om * t), 0.0]))
             self.drain()
+            if until_moving > 0.0 and t >= seconds and self.states and _moving(self.states[-1]) > 1e-3:
+                return _moving(self.states[-1])
             time.sleep(0.01)
+        return _moving(self.states[-1]) if self.states else 0.0
 
     def first_tel(self, pred: Callable[[TelemetryMsg], bool], after: float) -> TelemetryMsg | None:
         """The first telemetry stamped after ``after`` [s, wall] satisfying ``pred``."""
@@ -190,10 +195,10 @@ def daemon_kill_and_restart(p: Probe) -> dict[str, Any]:
     info = p.ready()
     p.client.set_mode("track")
     x0 = np.array(info.status.x)
-    p.move(x0, 1.5)
     p.clear()
-    p.until(lambda: p.states)
-    speed = _moving(p.states[-1])
+    # kill while the stream goes on and a fresh state shows the robot moving (on a loaded machine
+    # the robot could have come to rest between the end of a fixed-length stream and the kill)
+    speed = p.move(x0, 1.5, until_moving=10.0)
     t_kill = time.time()
     p.stack.kill("daemon", signal.SIGKILL)
     det = p.until(lambda: p.first_state(lambda s: s.stale_stop, t_kill))

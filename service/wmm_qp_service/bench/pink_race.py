@@ -204,17 +204,17 @@ def run(
     robot: w.RobotConfig, cfg: w.ControllerConfig, ticks: int, max_seconds: float = 60.0
 ) -> dict[str, Any]:
     """{"ours", "pink", "pink_accel", "ratio_p50", "ratio_p99", "fair"} or {"available": False}."""
-    if not pink_available():
-        return {
-            "available": False,
-            "reason": "pin-pink is not installed: pip install 'wmm-qp[bench]'",
-        }
     base = w.WmmModel(robot).base
-    if not base.holonomic:
+    if not base.holonomic:  # first: this holds whether pink is installed or not
         return {
             "available": False,
             "reason": f"the pink race needs a holonomic base (pink's planar root joint moves sideways); "
             f"{robot.name!r} has a {base.kind} base",
+        }
+    if not pink_available():
+        return {
+            "available": False,
+            "reason": "pin-pink is not installed: pip install 'wmm-qp[bench]'",
         }
     cfg = cfg.with_(task={"kind": "position"})  # pink's task here is position-only: so is ours
     print(f"pink race: ours ({ticks} ticks)", file=sys.stderr, flush=True)
