@@ -307,3 +307,11 @@ def test_diff_drive_never_slides_sideways_and_does_a_sideways_task_with_yaw_and_
     assert np.abs(base_moved[:, 2]).max() > 0.1  # the base turned
     assert np.abs(np.array([c.wheel_speeds.sum() for c in cmds])).max() > 0.1  # and drove forward/back
     assert np.linalg.norm(m.ee_position(sim.base_odom, sim.q_arm) - goal) < 1e-3
+
+
+def test_W_of_eq_8_takes_tau_ref_from_the_rotary_joints() -> None:
+    """TIAGo's torso lift (2000 N) does not set τ_ref: the arm's largest torque (39 N·m) does."""
+    r = robot("tiago.toml")
+    W = r.arm.default_W()
+    assert W[1:].min() == pytest.approx(1.0) and W[1:].max() == pytest.approx(39.0 / 3.0)
+    assert W[0] == pytest.approx(39.0 / 2000.0)

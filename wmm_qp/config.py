@@ -126,10 +126,14 @@ class ArmConfig:
         return len(self.joints)
 
     def default_W(self) -> FloatArray:
-        """W of eq. (8): the robot file's ``torque_weight``, else diag(τ_ref/τ_lim,i), τ_ref = max τ_lim."""
+        """W of eq. (8): the robot file's ``torque_weight``, else diag(τ_ref/τ_lim,i) with τ_ref the
+        largest torque limit of the revolute and continuous joints (a prismatic joint's limit is a
+        force, in N: TIAGo's torso lift's 2000 N would weight every arm joint 50–670×)."""
         if self.torque_weight is not None:
             return self.torque_weight
-        return _ro(float(np.max(self.torque_limit)) / self.torque_limit)
+        rotary = [t for t, kind in zip(self.torque_limit, self.joint_types, strict=True) if kind != "prismatic"]
+        tau_ref = float(np.max(rotary)) if rotary else float(np.max(self.torque_limit))
+        return _ro(tau_ref / self.torque_limit)
 
 
 @dataclass(frozen=True)
