@@ -62,6 +62,13 @@ def start_x(name: str = "gen3_mecanum.toml") -> np.ndarray:
     return m.ee_position(np.zeros(3), m.config.arm.start)
 
 
+def scene_file(tmp_path: Path, text: str, name: str = "scene.toml") -> Scene:
+    """A scene file of ``text`` in tmp_path, loaded."""
+    p = tmp_path / name
+    p.write_text(text)
+    return load_scene(p)
+
+
 def assert_safe(sim: SimRobot) -> None:
     counts = sim.referee.counts
     assert sum(counts.values()) == 0, (counts, sim.referee.last_event)
@@ -106,9 +113,7 @@ xyz = [1.5, 0.0, 0.2]
 
 
 def test_a_wall_in_the_base_path_stops_the_robot_at_the_safety_distance(tmp_path: Path) -> None:
-    p = tmp_path / "wall.toml"
-    p.write_text(WALL)
-    scene = load_scene(p)
+    scene = scene_file(tmp_path, WALL)
     ctl = qp()
     goal = start_x() + [3.0, 0.0, 0.0]  # beyond the wall: the base must drive
     sim, reasons = run(ctl, w.Reference("track", x_d=goal), 5000, scene=scene)
@@ -148,9 +153,7 @@ ee_upper = [1.5, 1.5, 1.2]
 
 
 def test_a_setpoint_20_m_away_ends_at_the_fence(tmp_path: Path) -> None:
-    p = tmp_path / "fence.toml"
-    p.write_text(FENCE)
-    scene = load_scene(p)
+    scene = scene_file(tmp_path, FENCE)
     ctl = qp()
     sim, _ = run(ctl, w.Reference("track", x_d=start_x() + [20.0, 0.0, 0.0]), 5000, scene=scene)
     assert_safe(sim)
@@ -158,8 +161,8 @@ def test_a_setpoint_20_m_away_ends_at_the_fence(tmp_path: Path) -> None:
     assert sim.base_true[0] > 0.3  # the base drove, the arm stretched
     x = model().ee_position(sim.base_odom, sim.q_arm)
     assert 1.5 - 1e-3 < x[0] <= 1.5 + 1e-6  # the EE went to the fence's EE box, and not beyond
-    p.write_text(FENCE.replace("ee_upper = [1.5", "ee_upper = [9.0"))  # now the base polygon stops it
-    sim, _ = run(qp(), w.Reference("track", x_d=start_x() + [20.0, 0.0, 0.0]), 5000, scene=load_scene(p))
+    wide = scene_file(tmp_path, FENCE.replace("ee_upper = [1.5", "ee_upper = [9.0"))  # now the base polygon stops it
+    sim, _ = run(qp(), w.Reference("track", x_d=start_x() + [20.0, 0.0, 0.0]), 5000, scene=wide)
     assert_safe(sim)
     assert 0.8 < sim.base_true[0] <= 1.0 + 1e-3
 
@@ -167,9 +170,7 @@ def test_a_setpoint_20_m_away_ends_at_the_fence(tmp_path: Path) -> None:
 def test_the_rows_never_make_a_stage_infeasible_and_verify_sees_no_collision(tmp_path: Path) -> None:
     """Random states near self-collisions, obstacles and the fence: every command is refereed on the
     geometry at the predicted configuration; the baselines (no rows) collide in the same run."""
-    p = tmp_path / "scene.toml"
-    p.write_text(WALL + FENCE.replace("-1.0", "-2.5").replace("1.0,", "2.5,").replace("1.0]", "2.5]"))
-    scene = load_scene(p)
+    scene = scene_file(tmp_path, WALL + FENCE.replace("-1.0", "-2.5").replace("1.0,", "2.5,").replace("1.0]", "2.5]"))
     rep = verify_controller(qp(), model(), 60, 1, scene=scene)
     assert rep.violations == 0, rep.examples
     assert rep.statuses.get("safe_stop", 0) == 0, rep.statuses

@@ -46,10 +46,6 @@ class Fence:
     ee_lower: FloatArray = field(default_factory=lambda: _ro([-np.inf] * 3))
     ee_upper: FloatArray = field(default_factory=lambda: _ro([np.inf] * 3))
 
-    def clamp_ee(self, x: FloatArray) -> FloatArray:
-        """x clamped into the EE box."""
-        return np.clip(np.asarray(x, dtype=float), self.ee_lower, self.ee_upper)
-
     def half_planes(self) -> tuple[FloatArray, FloatArray]:
         """(A, c): the polygon as A p ≤ c, one row per edge (outward unit normals)."""
         P = self.base

@@ -195,9 +195,6 @@ class RobotGeometry:
         oMi = self.arm.data.oMi
         return [oMi[b.joint] * b.placement if b.joint else b.placement for b in self.bodies]
 
-    def pair_names(self, i: int, j: int) -> str:
-        return f"{self.bodies[i].name}/{self.bodies[j].name}"
-
 
 def robot_geometry(robot: RobotConfig, arm: ArmModel) -> RobotGeometry:
     """The robot's geometry, built once per arm model (the pair selection samples configurations:
