@@ -18,7 +18,7 @@ A scene file (``configs/scenes/default.toml`` is the default; ``--scene FILE`` o
 
 Every obstacle is a hard constraint for every body of the robot (the velocity dampers of
 :mod:`wmm_qp.limits.collision`); the fence is one for the base's origin and the EE, and a setpoint
-outside the EE box is clamped to it by the daemon.
+outside the EE box is not yet clamped to it by the daemon (issue 13).
 """
 
 from __future__ import annotations
