@@ -15,8 +15,8 @@ def service_stack(tmp_path: Path) -> Iterator[Callable[..., object]]:
 
     stacks: list[Stack] = []
 
-    def make(rate_hz: float = 500.0) -> Stack:
-        s = Stack(isolated_config(), rate_hz=rate_hz, log_dir=tmp_path)
+    def make(rate_hz: float = 500.0, **kw: object) -> Stack:
+        s = Stack(isolated_config(), rate_hz=rate_hz, log_dir=tmp_path, **kw)  # type: ignore[arg-type]
         stacks.append(s)
         return s.start()
 

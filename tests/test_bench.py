@@ -73,31 +73,67 @@ def test_cli_json_has_the_required_keys(capsys: pytest.CaptureFixture[str]) -> N
     pytest.importorskip("pink")
     rc = main(
         ["bench", "--json", "--ticks", "5", "--solver", "daqp", "--mode", "track", "--no-breakdown",
-         "--skip", "e2e"]
+         "--skip", "e2e", "--skip", "daemon"]
     )  # fmt: skip
     assert rc == 0
     out = json.loads(capsys.readouterr().out)
     assert set(out["tick_us"]["daqp"]) >= {"p50", "p99"}
     assert set(out["pink_tick_us"]) == {"p50", "p99"}
-    assert "e2e" not in out  # skipped
+    assert "e2e" not in out and "daemon" not in out  # skipped
     assert out["machine"]["nproc"] >= 1
 
 
 @pytest.mark.integration
 @pytest.mark.slow
 def test_e2e_over_zenoh(capsys: pytest.CaptureFixture[str]) -> None:
-    """Both rates through real processes, briefly: the figures exist (no timing asserts)."""
+    """Every case through real processes, briefly: the figures exist (no timing asserts)."""
     assert main(["bench", "--json", "--only", "e2e", "--ticks", "1000"]) == 0
     e2e = json.loads(capsys.readouterr().out)["e2e"]
     assert e2e["available"] is True
-    for rate in ("500", "1000"):
-        r = e2e[rate]
+    for case in ("rate 500", "rate 1000", "state 1000"):
+        r = e2e[case]
         assert r["exit_codes"] == {"sim": 0, "daemon": 0}
         assert r["ticks"] > 100 and r["achieved_hz"] > 0
-        for k in ("tick_us", "state_to_cmd_us", "cmd_to_applied_us"):
-            assert set(r[k]) == {"p50", "p99", "max", "n"} and r[k]["n"] > 0
-        assert r["state_to_cmd_us"]["p50"] > 0  # causal: the command follows its state
+        for k in ("tick_us", "step_us", "state_to_cmd_us", "state_transport_us", "daemon_us", "cmd_to_applied_us"):
+            assert set(r[k]) == {"p50", "p99", "p999", "max", "n"} and r[k]["n"] > 0, k
+        assert r["state_to_cmd_us"]["p50"] > r["daemon_us"]["p50"] > 0  # causal: state, receipt, command
         assert r["misses_per_10k"] is not None and sum(r["violations"].values()) == 0
+        assert 0.0 <= r["applied_next_step"] <= 1.0 and r["tick_over_step_p50"] > 1.0
+        assert set(r["cpu_pct"]) == {"sim", "daemon", "client"}
+        assert r["daemon_loop_end"]["trigger"] == case.split()[0]
+
+
+@pytest.mark.integration
+@pytest.mark.slow
+def test_daemon_breakdown_over_zenoh(capsys: pytest.CaptureFixture[str]) -> None:
+    """The daemon's per-stage breakdown from its real loop: every stage, both triggers."""
+    from wmm_qp_service.tick_stages import STAGES
+
+    assert main(["bench", "--json", "--only", "daemon", "--ticks", "1000"]) == 0
+    d = json.loads(capsys.readouterr().out)["daemon"]
+    assert d["available"] is True
+    for case in ("rate 1000", "state 1000"):
+        b = d[case]["breakdown"]
+        assert b["trigger"] == case.split()[0] and b["ticks"] > 100
+        assert set(b["stages"]) == set(STAGES)
+        assert b["stages"]["step"]["p50"] > 0 and b["tick"]["p50"] >= b["stages"]["step"]["p50"]
+        assert b["tick_over_step_p50"] >= 1.0
+
+
+def test_jitter_section_the_empty_loop_at_both_rates(capsys: pytest.CaptureFixture[str]) -> None:
+    """The machine's floor (issue 15): the daemon's loop with no work, briefly; the counts are
+    consistent (no timing asserts): a tick that wakes more than a period late is a deadline miss
+    at the next wait (but the last tick's), and no tick starts before its deadline."""
+    assert main(["bench", "--json", "--only", "jitter", "--ticks", "60"]) == 0
+    j = json.loads(capsys.readouterr().out)["jitter"]
+    assert set(j) == {"500", "1000"}
+    for rate, r in j.items():
+        assert r["rate_hz"] == float(rate) and r["ticks"] == 60 and r["scheduling"]
+        assert 0 <= r["late_over_a_period"] <= r["deadline_misses"] + 1 and r["deadline_misses"] <= 60
+        assert r["misses_per_10k"] == pytest.approx(1e4 * r["deadline_misses"] / 60, abs=0.01)
+        assert 0.0 <= r["late_us"]["p50"] <= r["late_us"]["p99"] <= r["late_us"]["max"]
+        assert r["seconds"] >= 60 / float(rate) * 0.99  # the loop paced its ticks, it did not burst
+        assert r["steal_s"] is None or r["steal_s"] >= 0.0
 
 
 def test_cli_user_errors_exit_2(capsys: pytest.CaptureFixture[str]) -> None:

@@ -9,6 +9,7 @@ import sys
 import pytest
 from wmm_qp_service.cli import main
 
+from wmm_qp.config import default_config_dir
 from wmm_qp.solvers import available_solvers
 
 START = "0,0.5235987755982988,0,1.5707963267948966,0,-0.5235987755982988,0"
@@ -76,9 +77,12 @@ def test_verify_reports_zero_violations_for_every_qp_solver(solver: str, capsys:
 
 @pytest.mark.parametrize("controller", ["traditional", "paper"])
 def test_verify_finds_violations_in_the_baselines(controller: str, capsys: pytest.CaptureFixture[str]) -> None:
-    code, out, _ = run(capsys, "verify", "--controller", controller, "--samples", "100", "--json")
+    scene = str(default_config_dir() / "scenes" / "default.toml")
+    code, out, _ = run(capsys, "verify", "--controller", controller, "--samples", "100", "--scene", scene, "--json")
     d = json.loads(out)
     assert code == 1 and d["violations"] > 0 and d["by_kind"]["acceleration"] > 0
+    assert d["by_kind"]["collision"] > 0  # no collision rows: the referee sees them collide
+    assert d["scene"].endswith("default.toml")
 
 
 def test_console_script_runs_without_traceback() -> None:

@@ -19,7 +19,7 @@ pytestmark = pytest.mark.integration
 def test_wire_fuzz_short(service_stack: Any) -> None:
     stack = service_stack(500.0)
     with Client(stack.svc, name="fuzzer") as c:
-        assert c.wait_for_daemon(30.0) is not None
+        assert c.wait_for_daemon(90.0) is not None
         end = time.monotonic() + 30.0
         while time.monotonic() < end and not ((i := c.info()) and i.status.state_ok):
             time.sleep(0.1)

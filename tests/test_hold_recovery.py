@@ -72,12 +72,15 @@ def drill(
     teleport: bool = False,
     push_speed: float = PUSH_SPEED,
     push_time: float = PUSH_TIME,
+    collision_rows: bool = False,
 ) -> dict[str, Any]:
-    """Run the drill; returns the referee's counts and what the recovery looked like."""
+    """Run the drill; returns the referee's counts and what the recovery looked like.
+    ``collision_rows``: the daemon's collision rows on (as ``--scene`` turns them on)."""
     robot = w.load_robot_config()
     svc = ServiceConfig()
     svc = replace(svc, loop=replace(svc.loop, rate_hz=rate_hz))
-    core = ControlCore(svc, w.load_controller_config(), robot)
+    config = w.load_controller_config().with_(collision={"enabled": collision_rows})
+    core = ControlCore(svc, config, robot)
     sim_cfg = replace(load_sim_config(), firmware=False)  # the referee judges the daemon, not a firmware stop
     sim = SimRobot(core.model, sim_cfg, ramp=True)
     st = sim.reset()
@@ -168,10 +171,15 @@ def test_the_shipped_hold_recovers_a_large_error_smoothly() -> None:
     target at the recovery speed, the base slow, the arm at a speed limit only briefly, no limit
     violated. The robot is carried ~1 m off at once here (no foreign commands: after those, the
     daemon's first command no longer continues what the robot executes, a referee event, and it
-    re-latches hold where the robot is)."""
-    r = drill(500.0, 3000, after=5.0, teleport=True)
+    re-latches hold where the robot is).
+
+    With the collision rows on: without them (the default) the arm reaches back for the target
+    1 m behind it through the base (shoulder at −2.16 rad), the sim's referee counts ~3,100
+    collision steps and the daemon stops safely, so the recovery never ends."""
+    r = drill(500.0, 3000, after=5.0, teleport=True, collision_rows=True)
     assert r["pushed"] > 0.9
     assert r["violations"]["position"] == 0 and r["violations"]["velocity"] == 0, r
+    assert r["violations"]["collision"] == 0, r
     assert r["base_speed"] <= 0.3, r  # [m/s] (before: 0.84 m/s, 1.05 once (13) held)
     assert r["arm_at_limit"] <= 0.3, r  # [s] an arm joint at ≥ 99 % of its speed limit (before: 1.5 s)
     assert r["ee_error"] <= 0.01, r  # [m] back at the hold target (odometry), ~1 m at 0.25 m/s

@@ -24,7 +24,7 @@ import wmm_qp as w
 pytestmark = pytest.mark.integration
 
 def ready(c: Client) -> Any:
-    assert c.wait_for_daemon(TIMEOUT) is not None, "daemon did not answer"
+    assert c.wait_for_daemon(3 * TIMEOUT) is not None, "daemon did not answer"  # a first start compiles
     return until(lambda: (i := c.info()) is not None and i.status.state_ok
                  and i.status.lease_holder == i.status.lease and i)
 

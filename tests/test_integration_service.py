@@ -34,7 +34,7 @@ def until(pred: Callable[[], Any], timeout: float = TIMEOUT, period: float = 0.0
 
 
 def ready(c: Client) -> Any:
-    assert c.wait_for_daemon(TIMEOUT) is not None, "daemon did not answer"
+    assert c.wait_for_daemon(3 * TIMEOUT) is not None, "daemon did not answer"  # a first start compiles
     return until(lambda: (i := c.info()) is not None and i.status.state_ok and i)
 
 

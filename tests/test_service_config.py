@@ -18,6 +18,7 @@ def test_shipped_service_config_loads() -> None:
 
     assert c.watchdog.command_hold - c.watchdog.state_age_max == pytest.approx(load_sim_config().stale_timeout)
     assert c.watchdog.resume == "manual" and c.loop.queries_per_tick == 1
+    assert c.loop.trigger in ("rate", "state")
 
 
 @pytest.mark.parametrize("text, key", [
@@ -26,7 +27,8 @@ def test_shipped_service_config_loads() -> None:
     ("[zenoh]\nbogus = 1\n", "zenoh.bogus"),
     ("[zenoh]\ndaemon_endpoint = ''\n", "zenoh.daemon_endpoint"),
     ("mystery = 1\n", "mystery"),
-    ("[validation]\nz_min = 3.0\n", "validation.z_min"),
+    ("[validation]\nz_min = 11.0\n", "validation.z_min"),
+    ("[loop]\ntrigger = \"clock\"\n", "loop.trigger"),
 ])
 def test_service_config_errors_name_file_and_key(tmp_path: Path, text: str, key: str) -> None:
     p = tmp_path / "service.toml"

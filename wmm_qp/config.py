@@ -44,6 +44,8 @@ class ShapeConfig:
         xyz, rpy: [m], [rad] its pose in the link's frame.
         exempt: an obstacle's links that may touch it ("ee": the bodies that move with the EE frame,
             e.g. the push experiment's box, which only the EE may touch).
+        velocity: [m/s] an obstacle's velocity (world frame; a moving obstacle's rows make the
+            robot give way at its approach speed), None: at rest.
     """
 
     name: str
@@ -53,6 +55,7 @@ class ShapeConfig:
     xyz: FloatArray
     rpy: FloatArray
     exempt: tuple[str, ...] = ()
+    velocity: FloatArray | None = None  # [m/s] an obstacle's (world frame), None: at rest
 
     @property
     def radius(self) -> float:
@@ -75,6 +78,9 @@ class RobotCollisionConfig:
         exclude: pairs of link names that are never checked against each other (besides the
             adjacent links, which are excluded anyway).
         ignore_links: links whose URDF collision elements are dropped (e.g. a hand's fingers).
+        influence_distance: [m] this robot's d_i when larger than the controller config's
+            ``collision.influence_distance`` (a robot with low accelerations needs more distance
+            to stop inside it), or None.
     """
 
     from_urdf: bool = False
@@ -82,6 +88,7 @@ class RobotCollisionConfig:
     shapes: tuple[ShapeConfig, ...] = ()
     exclude: tuple[tuple[str, str], ...] = ()
     ignore_links: tuple[str, ...] = ()
+    influence_distance: float | None = None
 TASK_KINDS = ("position", "pose")
 
 
@@ -241,6 +248,13 @@ class QpConfig:
             and move the EE by only ~R/4 per rad/s, so with α = 0.2 the base barely helps and
             the arm alone tops out near DM 4.1 along x; α = 0.99 lets the base move so the arm
             can stretch (the paper's 5.88).
+        dm_speed: [rad/s] ρ of the normalised null-space DM preference
+            (manipulability/preference.py): v_n = max(k_N, ρ/sqrt(‖∇H2‖² + g₀²))·∇H2, so the
+            ascent does not crawl where ∇H2 is flat (ρ is capped at the slowest joint's velocity
+            limit); 0 = eq. (19) as printed, k_N ∇H2. The paper's and the traditional
+            controllers always use eq. (19).
+        dm_gradient_floor: [1/rad] g₀ of the normalised preference: below this gradient norm
+            the preference fades out linearly (gain ρ/g₀), so the ascent settles at the optimum.
         arm_first: in track mode, keep the wheels still whenever the arm alone can realise
             the task inside its bounds (a first, arm-only stage).
         slack_l1: weight ρ₁ of the exact penalty ρ₁‖s‖₁ on the task slack: above the task's
@@ -260,6 +274,8 @@ class QpConfig:
     solver: str = "proxsuite"
     alpha: float = 0.2
     dm_alpha: float = 0.99
+    dm_speed: float = 1.0
+    dm_gradient_floor: float = 0.1
     arm_first: bool = True
     slack_l1: float = 1e4
     slack_weight: float = 1e4
@@ -276,8 +292,8 @@ class CollisionParams:
     monitored pair closer than d_i.
 
     Attributes:
-        enabled: add the damper rows to every QP stage (off by default until the service carries
-            scenes and live obstacles and the rows are fast enough on mesh geometry: issue 13).
+        enabled: add the damper rows to every stage of the qp controller (the commands' ``--scene``
+            turns them on).
         influence_distance: [m] d_i, where a pair's row starts to act.
         safety_distance: [m] d_s, the distance the pair settles at (robot vs robot, robot vs obstacles).
         floor_margin: [m] d_s for every link vs the floor.
@@ -650,7 +666,7 @@ def load_shape(t: TomlTable, name: str, link: str, kinds: tuple[str, ...] = SHAP
 def _load_collision(c: TomlTable, path: Path, full: Any, joints: tuple[str, ...]) -> RobotCollisionConfig:
     from .model import urdf as urdf_io
 
-    c.unknown({"from_urdf", "urdf", "shapes", "exclude", "ignore_links"})
+    c.unknown({"from_urdf", "urdf", "shapes", "exclude", "ignore_links", "influence_distance"})
     other = urdf_io.resolve_urdf(path, c.string("urdf"), "collision.urdf") if c.has("urdf") else None
     shapes = []
     raw = c.get("shapes", [])
@@ -679,6 +695,7 @@ def _load_collision(c: TomlTable, path: Path, full: Any, joints: tuple[str, ...]
         shapes=tuple(shapes),
         exclude=tuple((a, b) for a, b in exclude),
         ignore_links=tuple(ignore),
+        influence_distance=c.number("influence_distance", positive=True) if c.has("influence_distance") else None,
     )
 
 
@@ -738,6 +755,8 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
             "solver",
             "alpha",
             "dm_alpha",
+            "dm_speed",
+            "dm_gradient_floor",
             "arm_first",
             "slack_l1",
             "slack_weight",
@@ -787,6 +806,8 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
             solver=q.string("solver", d.qp.solver, SOLVER_NAMES),
             alpha=q.number("alpha", d.qp.alpha, lo=1e-6, hi=1.0 - 1e-6),
             dm_alpha=q.number("dm_alpha", d.qp.dm_alpha, lo=1e-6, hi=1.0 - 1e-6),
+            dm_speed=q.number("dm_speed", d.qp.dm_speed, lo=0.0),
+            dm_gradient_floor=q.number("dm_gradient_floor", d.qp.dm_gradient_floor, positive=True),
             arm_first=q.boolean("arm_first", d.qp.arm_first),
             slack_l1=q.number("slack_l1", d.qp.slack_l1, positive=True),
             slack_weight=q.number("slack_weight", d.qp.slack_weight, positive=True),

@@ -5,10 +5,12 @@ A scene file (``configs/scenes/default.toml`` is the default; ``--scene FILE`` o
     [[obstacles]]
     id = "wall"
     kind = "box"                 # box | sphere | capsule | cylinder | plane
-    size = [0.1, 4.0, 1.0]       # box: edge lengths [m]; sphere: radius; capsule, cylinder: radius, length
+    size = [0.1, 4.0, 1.0]       # box: edge lengths [m]
+    # sphere: radius = R; capsule, cylinder: radius = R, length = L (along the local z)
     xyz = [2.5, 0.0, 0.2]        # world frame [m]
     rpy = [0.0, 0.0, 0.0]        # [rad]
     exempt = []                  # links that may touch it; "ee": those moving with the EE frame
+    velocity = [0.0, 0.0, 0.0]   # [m/s] world frame (a moving obstacle: the robot gives way at its speed)
     # a plane: normal = [nx, ny, nz], offset = c — the half-space n·p ≤ c is free, beyond it solid
 
     [fence]
@@ -17,8 +19,11 @@ A scene file (``configs/scenes/default.toml`` is the default; ``--scene FILE`` o
     ee_upper = [3.5, 3.5, 2.0]
 
 Every obstacle is a hard constraint for every body of the robot (the velocity dampers of
-:mod:`wmm_qp.limits.collision`); the fence is one for the base's origin and the EE, and a setpoint
-outside the EE box is not yet clamped to it by the daemon (issue 13).
+:mod:`wmm_qp.limits.collision`) but its ``exempt`` ones; the fence is one for the base's origin and
+the EE. The daemon clamps every setpoint into the EE box and above the floor margin
+(:meth:`Scene.clamp_target`) before it chases it. Live obstacles (the daemon's
+``<prefix>/<robot>/obstacles``) are tables of the same keys as ``[[obstacles]]``
+(:func:`obstacle_from_table`); they replace the previous live set and add to the scene's.
 """
 
 from __future__ import annotations
@@ -79,6 +84,49 @@ class Scene:
     fence: Fence = field(default_factory=Fence)
     path: Path | None = None
 
+    def clamp_target(self, x: FloatArray, z_min: float = -np.inf) -> tuple[FloatArray, str]:
+        """An EE target clamped into the fence's EE box and above ``z_min`` (the floor margin).
+
+        Returns:
+            (the clamped target, "" when it was inside, else which axes were clamped, e.g.
+            "x 20 -> 3.5, z -1.15 -> -0.32").
+        """
+        x = np.asarray(x, dtype=float)
+        lo = np.array(self.fence.ee_lower, dtype=float)
+        lo[2] = max(lo[2], z_min)
+        hi = np.maximum(self.fence.ee_upper, lo)
+        y = np.minimum(np.maximum(x, lo), hi)
+        moved = np.flatnonzero(y != x)
+        return y, ", ".join(f"{'xyz'[k]} {x[k]:.4g} -> {y[k]:.4g}" for k in moved)
+
+
+def obstacle_from_table(path: Path | str, o: dict, i: int) -> ShapeConfig:
+    """One obstacle from its table (the keys of ``[[obstacles]]``); ``i`` names it in errors.
+
+    Raises:
+        ConfigError: naming ``obstacles[i].<key>``.
+    """
+    path = Path(path)
+    oid = o.get("id", f"obstacle_{i}")
+    if not isinstance(oid, str) or not oid:
+        raise ConfigError(path, f"obstacles[{i}].id", "must be a non-empty string")
+    t = TomlTable(path, {k: v for k, v in o.items() if k not in ("id", "exempt", "velocity")}, f"obstacles[{i}].")
+    velocity = TomlTable(path, o, f"obstacles[{i}].").vector("velocity", 3) if "velocity" in o else None
+    exempt = o.get("exempt", [])
+    if not isinstance(exempt, list) or not all(isinstance(x, str) for x in exempt):
+        raise ConfigError(path, f"obstacles[{i}].exempt", "must be a list of link names (or \"ee\")")
+    shape = load_shape(t, oid, "", OBSTACLE_KINDS)
+    return replace(shape, exempt=tuple(exempt), velocity=velocity)
+
+
+def obstacles_from_tables(path: Path | str, raw: list) -> tuple[ShapeConfig, ...]:
+    """Every obstacle of a list of tables, ids unique (a scene file's, or a live message's)."""
+    obstacles = tuple(obstacle_from_table(path, o, i) for i, o in enumerate(raw))
+    ids = [o.name for o in obstacles]
+    if len(set(ids)) != len(ids):
+        raise ConfigError(Path(path), "obstacles", "obstacle ids must be unique")
+    return obstacles
+
 
 def default_scene_file() -> Path:
     """``<default_config_dir()>/scenes/default.toml``."""
@@ -97,21 +145,7 @@ def load_scene(path: Path | str | None = None) -> Scene:
     raw = r.get("obstacles", [])
     if not isinstance(raw, list) or not all(isinstance(o, dict) for o in raw):
         raise ConfigError(path, "obstacles", "must be a list of tables ([[obstacles]])")
-    obstacles = []
-    for i, o in enumerate(raw):
-        t = TomlTable(path, {k: v for k, v in o.items() if k != "id"}, f"obstacles[{i}].")
-        oid = o.get("id", f"obstacle_{i}")
-        if not isinstance(oid, str) or not oid:
-            raise ConfigError(path, f"obstacles[{i}].id", "must be a non-empty string")
-        exempt = t.get("exempt", [])
-        if not isinstance(exempt, list) or not all(isinstance(x, str) for x in exempt):
-            raise ConfigError(path, f"obstacles[{i}].exempt", "must be a list of link names (or \"ee\")")
-        t.data.pop("exempt", None)
-        shape = load_shape(t, oid, "", OBSTACLE_KINDS)
-        obstacles.append(replace(shape, exempt=tuple(exempt)))
-    ids = [o.name for o in obstacles]
-    if len(set(ids)) != len(ids):
-        raise ConfigError(path, "obstacles", "obstacle ids must be unique")
+    obstacles = obstacles_from_tables(path, raw)
     f = r.table("fence", required=False)
     f.unknown({"base", "ee_lower", "ee_upper"})
     fence = Fence()

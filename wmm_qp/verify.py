@@ -146,9 +146,18 @@ class CollisionJudge:
         self._floor = coal.Halfspace(np.array([0.0, 0.0, 1.0]), self.geo.floor_z)  # solid: z ≤ floor_z
         from .limits.collision import exempt_mask
 
-        self.obstacles = [
-            (o.name, coal_shape(o), shape_pose(o), exempt_mask(self.geo, o.exempt)) for o in scene.obstacles
-        ]
+        self.obstacles = []
+        for o in scene.obstacles:
+            shape, pose = coal_shape(o), shape_pose(o)
+            if o.kind == "plane":
+                centre, radius = np.zeros(3), np.inf
+            else:
+                shape.computeLocalAABB()
+                centre, radius = pose.act(np.asarray(shape.aabb_center, dtype=float)), float(shape.aabb_radius)
+            self.obstacles.append((o.name, shape, pose, exempt_mask(self.geo, o.exempt), centre, radius))
+        # a pair whose bounding spheres are this far apart cannot break the rule (its distance is
+        # at least the safety distance): its gap stands in for the distance (exact for the rule)
+        self.cutoff = max(safety_distance, floor_margin) + 0.01
         self.last = ""  # the pair of the last violation
 
     def distances(self, q_base: FloatArray, q_arm: FloatArray) -> dict[str, float]:
@@ -163,16 +172,22 @@ class CollisionJudge:
         T = [coal.Transform3s(m.rotation, m.translation) for m in W]
         req, out = coal.DistanceRequest(), {}
         b = geo.bodies
+        cen = [W[k].act(body.center) for k, body in enumerate(b)]  # bounding spheres, world frame
+        cut = self.cutoff
         for i, j in geo.self_pairs:
-            res = coal.DistanceResult()
-            out[f"{b[i].name}/{b[j].name}"] = coal.distance(b[i].shape, T[i], b[j].shape, T[j], req, res)
+            gap = float(np.linalg.norm(cen[i] - cen[j])) - b[i].radius - b[j].radius
+            out[f"{b[i].name}/{b[j].name}"] = gap if gap >= cut else coal.distance(
+                b[i].shape, T[i], b[j].shape, T[j], req, coal.DistanceResult())
         for i in geo.floor_bodies:
-            out[f"{b[i].name}/floor"] = coal.distance(b[i].shape, T[i], self._floor, coal.Transform3s(), req,
-                                                      coal.DistanceResult())
-        for name, shape, pose, checked in self.obstacles:
+            gap = float(cen[i][2]) - b[i].radius - geo.floor_z
+            out[f"{b[i].name}/floor"] = gap if gap >= cut else coal.distance(
+                b[i].shape, T[i], self._floor, coal.Transform3s(), req, coal.DistanceResult())
+        for name, shape, pose, checked, centre, radius in self.obstacles:
             To = coal.Transform3s(pose.rotation, pose.translation)
             for i in (int(k) for k in np.flatnonzero(checked)):
-                out[f"{b[i].name}/{name}"] = coal.distance(b[i].shape, T[i], shape, To, req, coal.DistanceResult())
+                gap = float(np.linalg.norm(cen[i] - centre)) - b[i].radius - radius
+                out[f"{b[i].name}/{name}"] = gap if gap >= cut else coal.distance(
+                    b[i].shape, T[i], shape, To, req, coal.DistanceResult())
         fence = self.scene.fence
         A, cc = fence.half_planes()
         for k in range(A.shape[0]):

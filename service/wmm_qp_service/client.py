@@ -27,7 +27,17 @@ import zenoh
 
 from .config import ServiceConfig
 from .keys import Keys
-from .protocol import BoxMsg, InfoMsg, ModeMsg, SetpointMsg, StateMsg, StatusMsg, TelemetryMsg, encode
+from .protocol import (
+    BoxMsg,
+    InfoMsg,
+    ModeMsg,
+    ObstaclesMsg,
+    SetpointMsg,
+    StateMsg,
+    StatusMsg,
+    TelemetryMsg,
+    encode,
+)
 from .transport import ROLE_CLIENT, open_session
 
 
@@ -63,19 +73,25 @@ class Client:
     def open(self) -> Client:
         """Open the session and declare publishers, subscribers and the liveliness token."""
         k = self.keys
-        s = self.session = open_session(self.svc, ROLE_CLIENT)
+        s = self.session = self._open_session()
         self._pub_sp = s.declare_publisher(k.setpoint, express=True,
                                            congestion_control=zenoh.CongestionControl.DROP)
         self._pub_mode = s.declare_publisher(k.mode, congestion_control=zenoh.CongestionControl.BLOCK,
                                              reliability=zenoh.Reliability.RELIABLE)
         self._pub_box = s.declare_publisher(k.sim_box, congestion_control=zenoh.CongestionControl.BLOCK,
                                             reliability=zenoh.Reliability.RELIABLE)
+        self._pub_obstacles = s.declare_publisher(k.obstacles, congestion_control=zenoh.CongestionControl.BLOCK,
+                                                  reliability=zenoh.Reliability.RELIABLE)
         self._sub_state = s.declare_subscriber(k.state, zenoh.handlers.RingChannel(1))
         self._sub_status = s.declare_subscriber(k.status, zenoh.handlers.RingChannel(1))
         self._sub_tel = (s.declare_subscriber(k.telemetry, zenoh.handlers.FifoChannel(100_000))
                          if self._want_telemetry else None)
         self._token = s.liveliness().declare_token(k.alive(self.name))
         return self
+
+    def _open_session(self) -> zenoh.Session:
+        """The Zenoh session :meth:`open` declares everything on (a subclass may open another kind)."""
+        return open_session(self.svc, ROLE_CLIENT)
 
     def close(self) -> None:
         """Close the session (always do: an open session can hang the process at exit)."""
@@ -119,6 +135,14 @@ class Client:
                      mu=float(mu), face_x=float(face_x), center_y=float(center_y),
                      width=float(width), height=float(height))
         self._pub_box.put(encode(msg))
+
+    def put_obstacles(self, obstacles: Sequence[dict[str, Any]]) -> None:
+        """Replace the live obstacle set (daemon and sim): tables with the keys of a scene file's
+        ``[[obstacles]]`` (world frame), e.g. ``{"id": "ball", "kind": "sphere", "radius": 0.1,
+        "xyz": [1, 0, 0.3]}``; an empty list clears it (docs/protocol.md, ObstaclesMsg)."""
+        msg = ObstaclesMsg(robot=self.svc.robot, seq=self._next(), stamp=time.time(), source=self.source,
+                           obstacles=[dict(o) for o in obstacles])
+        self._pub_obstacles.put(encode(msg))
 
     def put_raw(self, key: str, payload: bytes) -> None:
         """Publish raw bytes on ``<prefix>/<robot>/<key>`` (tests of the validation)."""

@@ -44,6 +44,12 @@ class LoopConfig:
             Needs CAP_SYS_NICE (root); without it the daemon says so and runs normally.
         queries_per_tick: ``info`` queries answered per tick at most (the others wait in
             their FIFO for the next ticks), so a burst of queries cannot stall the loop.
+        trigger: what starts a tick. ``rate``: the fixed-rate clock (absolute deadlines).
+            ``state``: a new state from the robot (the robot's cycle is the clock: the command
+            for state k is out well before the robot's next cycle); without one for 1.5
+            periods, a tick on the prediction path, and after ``watchdog.state_timeout`` the
+            safe stop, as in ``rate``. ``rate_hz`` must then be the robot's cycle rate (the
+            commands' Δt): ticks are never closer than half a period.
     """
 
     rate_hz: float = 500.0
@@ -52,6 +58,7 @@ class LoopConfig:
     telemetry_every: int = 1
     rt_priority: int = 0
     queries_per_tick: int = 1
+    trigger: str = "rate"
 
 
 @dataclass(frozen=True)
@@ -76,6 +83,9 @@ class WatchdogConfig:
         operator_timeout: [s] one operator holds the setpoint stream while its setpoints keep
             arriving; another source is refused (counted, reported) until the holder has been
             silent this long.
+        obstacles_timeout: [s] the live obstacle set is stale when no obstacles message came
+            for this long: it is kept (a silent perception does not make obstacles vanish) and
+            the status says ``obstacles_stale``.
     """
 
     state_timeout: float = 0.05
@@ -84,6 +94,7 @@ class WatchdogConfig:
     state_age_max: float = 0.01
     resume: str = "manual"
     operator_timeout: float = 0.5
+    obstacles_timeout: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -114,16 +125,25 @@ class ValidationConfig:
         command_abs_max: [rad/s] max |entry| of a command message.
         payload_max_bytes: larger payloads are rejected (``size``) before they are decoded
             (the largest valid message, a state, is < 1 KiB; a 20k-entry vector costs ~0.4 ms).
+        obstacles_max: the most obstacles one live obstacles message may carry.
+        obstacles_payload_max_bytes: ``payload_max_bytes`` for an obstacles message.
+        obstacle_size_max: [m] the largest edge, radius or length of a live obstacle.
+
+    A setpoint inside these ranges can still be outside the scene's fence or below the floor:
+    the daemon clamps it (``status.clamped``); these ranges only refuse nonsense.
     """
 
     position_abs_max: float = 100.0
-    z_min: float = -0.5
-    z_max: float = 2.0
+    z_min: float = -10.0
+    z_max: float = 10.0
     speed_max: float = 2.0
     angular_speed_max: float = 10.0
     state_abs_max: float = 1e3
     command_abs_max: float = 1e2
     payload_max_bytes: int = 4096
+    obstacles_max: int = 32
+    obstacles_payload_max_bytes: int = 16384
+    obstacle_size_max: float = 100.0
 
 
 @dataclass(frozen=True)
@@ -236,6 +256,8 @@ def load_service_config(path: Path | str | None = None) -> ServiceConfig:
         raise ConfigError(p, "validation.z_min", "must be < validation.z_max")
     if cfg.watchdog.resume not in ("manual", "auto"):
         raise ConfigError(p, "watchdog.resume", f"must be \"manual\" or \"auto\", got {cfg.watchdog.resume!r}")
+    if cfg.loop.trigger not in ("rate", "state"):
+        raise ConfigError(p, "loop.trigger", f"must be \"rate\" or \"state\", got {cfg.loop.trigger!r}")
     if cfg.loop.queries_per_tick < 1:
         raise ConfigError(p, "loop.queries_per_tick", "must be >= 1")
     return cfg

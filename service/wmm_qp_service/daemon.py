@@ -22,12 +22,16 @@ import threading
 import time
 from collections import Counter, deque
 from dataclasses import asdict
+from pathlib import Path
 from typing import Any
 
+import msgspec
 import numpy as np
 import zenoh
 
 import wmm_qp as w
+from wmm_qp.config import ShapeConfig
+from wmm_qp.scene import Scene, load_scene
 from wmm_qp.tasks import rotation_to_quat
 
 from .config import ServiceConfig
@@ -36,14 +40,16 @@ from .protocol import (
     CommandMsg,
     InfoMsg,
     ModeMsg,
+    ObstaclesMsg,
     SetpointMsg,
     StateMsg,
     StatusMsg,
     TelemetryMsg,
     encode,
 )
-from .rate_loop import RateLoop, realtime_priority
+from .rate_loop import LoopTiming, RateLoop, StateLoop, realtime_priority
 from .smoother import OrientationTarget, SetpointSmoother, VelocityEstimator
+from .tick_stages import STAGES, TickStages
 from .transport import ROLE_DAEMON, open_session
 from .validation import Validator
 
@@ -53,6 +59,15 @@ ROUND_TRIPS = 50
 SEQ_JUMP_MAX = 100_000
 """A state seq further ahead of the last one than this is refused (a sim steps at ~1 kHz)."""
 _SENT = 1024  # publication times kept per command seq (a ring)
+_POLL, _VALIDATION, _WATCHDOGS, _RUCKIG, _STEP, _PUBLISH, _TELEMETRY, _STATUS, _QUERIES = range(len(STAGES))
+
+
+def _matching(pub: Any) -> bool:
+    """Some subscriber matches the publisher (True when Zenoh cannot tell)."""
+    try:
+        return bool(pub.matching_status.matching)
+    except Exception:
+        return True
 
 
 def _say(line: str) -> None:
@@ -141,10 +156,11 @@ class ControlCore:
         ctl_cfg: controller config (its rate is replaced by ``svc.loop.rate_hz``).
         robot: robot config.
         kind: controller kind (qp, paper, traditional); None = ``ctl_cfg.kind``.
+        scene: obstacles and the workspace fence (None: ``configs/scenes/default.toml``).
     """
 
     def __init__(self, svc: ServiceConfig, ctl_cfg: w.ControllerConfig, robot: w.RobotConfig,
-                 kind: str | None = None) -> None:
+                 kind: str | None = None, scene: Scene | None = None) -> None:
         svc = svc.with_robot(robot)
         self.svc = svc
         # Bounds (13) brake from where the joints can be when the next command (or the robot's
@@ -155,6 +171,18 @@ class ControlCore:
         self.model = w.WmmModel(robot)
         self.kind = kind or self.cfg.kind
         self.ctl = w.make_controller(self.kind, self.model, self.cfg)
+        # the scene: its obstacles and fence are rows of the QP controller's stages (the baselines
+        # have none); every controller's setpoints are clamped into the fence (on_setpoint)
+        self.scene = scene if scene is not None else load_scene()
+        set_scene = getattr(self.ctl, "set_scene", None)
+        if set_scene is not None:
+            set_scene(self.scene)
+        self.live_obstacles: tuple[ShapeConfig, ...] = ()
+        self.obstacles_time = -math.inf  # [s] the last live obstacles message (-inf: none yet)
+        self.obstacles_stale = False
+        self.z_floor = robot.base.floor_z + self.cfg.collision.floor_margin  # setpoints stay above it
+        self.clamped = 0  # setpoints clamped into the fence / above the floor margin
+        self.last_clamp = ""
         self.ctl.warm_up()  # the compiled kernels are loaded before the loop, not in its first tick
         self.dt = self.cfg.dt
         if 2.0 * self.dt > svc.watchdog.state_age_max:
@@ -180,6 +208,7 @@ class ControlCore:
         self.sim_alive = False
         self.cmd: w.Command | None = None
         self.ref = w.Reference(mode=w.Mode.HOLD)
+        self._ref = w.Reference(mode=w.Mode.HOLD)  # the one tick() refills
         self.ref_valid = False  # self.ref was computed from the current latch
         self.ee_error = math.nan
         self.faults: Counter[str] = Counter()
@@ -205,9 +234,17 @@ class ControlCore:
         self.seq = 0
         self._sent_t = np.full(_SENT, -math.inf)
         self._sent_seq = np.full(_SENT, -1, dtype=np.int64)
-        self._age = np.full(ROUND_TRIPS, math.nan)  # per-state upper bounds of the age [s]
+        self._age = [math.nan] * ROUND_TRIPS  # per-state upper bounds of the age [s]
         self._n_age = 0
         self.round_trip = math.nan
+        # bounds (13)'s latency margin: the robot's own command timeout plus the state's age
+        # (command_hold = timeout + state_age_max, the worst the watchdog allows); with the state
+        # trigger the age is the measured one (follow_state_age, set by the Daemon)
+        self.follow_state_age = False
+        self.command_timeout = svc.watchdog.command_hold - svc.watchdog.state_age_max
+        self.latency = self.cfg.state_latency  # [s] the margin the controller uses now
+        self.stages: TickStages | None = None  # the breakdown's stopwatch (None: off)
+        self.step_ns = 0  # [ns] the last ctl.step
         # one operator per setpoint stream
         self.operator = ""
         self.operator_time = -math.inf
@@ -258,8 +295,8 @@ class ControlCore:
             return False
         self.last_state_seq = msg.seq
         self.state_msg = msg
-        self.state = w.RobotState(q_base=np.array(msg.q_base), q_arm=np.array(msg.q_arm),
-                                  v_arm=np.array(msg.v_arm), wheel_speeds=np.array(msg.wheel_speeds))
+        self.state = w.RobotState(q_base=msg.q_base, q_arm=msg.q_arm,  # type: ignore[arg-type]
+                                  v_arm=msg.v_arm, wheel_speeds=msg.wheel_speeds)  # type: ignore[arg-type]
         self.state_time = now
         self.state_fresh = True
         self.lease_holder = msg.lease
@@ -276,14 +313,31 @@ class ControlCore:
             self._age[self._n_age % ROUND_TRIPS] = now - float(self._sent_t[cs % _SENT])
             self._n_age += 1
             if self._n_age >= ROUND_TRIPS and self._n_age % 8 == 0:
-                self.round_trip = float(np.median(self._age))
+                ages = sorted(self._age)  # (np.median of 50 floats: ~15 µs; this: ~2 µs)
+                self.round_trip = 0.5 * (ages[(ROUND_TRIPS - 1) // 2] + ages[ROUND_TRIPS // 2])
+                if self.follow_state_age:
+                    self._set_latency(self.command_timeout + min(ages[-1], self.svc.watchdog.state_age_max))
         return True
 
+    def _set_latency(self, latency: float) -> None:
+        """Bounds (13)'s latency margin [s] (and the collision rows', which share it): the
+        state's age when the command acts, plus the robot's own command timeout."""
+        self.latency = latency
+        bounds = getattr(self.ctl, "bounds", None)
+        if bounds is not None:
+            bounds.latency = latency
+        rows = getattr(self.ctl, "collision", None)
+        if rows is not None:
+            rows.latency = latency
+
     def _reset_age(self) -> None:
-        """Empty the state-age window (a new robot, or a new stream)."""
-        self._age[:] = math.nan
+        """Empty the state-age window (a new robot, or a new stream); bounds (13) go back to the
+        worst age the watchdog allows."""
+        self._age = [math.nan] * ROUND_TRIPS
         self._n_age = 0
         self.round_trip = math.nan
+        if self.latency != self.cfg.state_latency:
+            self._set_latency(self.cfg.state_latency)
 
     @property
     def lease_taken(self) -> bool:
@@ -378,13 +432,48 @@ class ControlCore:
             return True
         if self.pose:
             self.orient.set_target(msg.q, msg.w)
-        x = np.asarray(msg.x, dtype=float)
+        x, moved = self.scene.clamp_target(np.asarray(msg.x, dtype=float), self.z_floor)  # never beyond the fence
+        if moved:
+            self.clamped += 1
+            self.last_clamp = f"setpoint clamped to the fence: {moved}"
         if msg.xd is not None:  # a scripted trajectory: its own feed-forward velocity
-            self.smoother.set_target(x, np.asarray(msg.xd, dtype=float))
+            xd = np.asarray(msg.xd, dtype=float)
+            if moved:
+                xd = np.where(x != np.asarray(msg.x, dtype=float), 0.0, xd)  # no feed-forward along a clamped axis
+            self.smoother.set_target(x, xd)
         else:
             xf, v = self.estimator.update(x, msg.stamp)
             self.smoother.set_target(xf, v)
         return True
+
+    def on_obstacles(self, shapes: tuple[ShapeConfig, ...], now: float) -> None:
+        """A validated live obstacle set arrived: it replaces the previous live set, atomically
+        (the controller sees it from the next tick on); the scene's obstacles stay."""
+        self.live_obstacles = shapes
+        self.obstacles_time = now
+        if self.obstacles_stale:
+            self.say(f"wmm-qp serve: live obstacles fresh again ({len(shapes)})")
+        self.obstacles_stale = False
+        set_obstacles = getattr(self.ctl, "set_obstacles", None)
+        if set_obstacles is not None:
+            set_obstacles(self.scene.obstacles + shapes)
+
+    def check_obstacles(self, now: float) -> None:
+        """The live set goes stale after ``watchdog.obstacles_timeout`` without a message: it is
+        kept (said once, and shown by the status)."""
+        if (not self.obstacles_stale and self.obstacles_time > -math.inf
+                and now - self.obstacles_time > self.svc.watchdog.obstacles_timeout):
+            self.obstacles_stale = True
+            self.say(f"wmm-qp serve: live obstacles stale (none for {now - self.obstacles_time:.2f} s); "
+                     f"the last set ({len(self.live_obstacles)}) is kept")
+
+    def collision_summary(self) -> str:
+        """One line: whether the controller has collision rows, and how many pairs it monitors."""
+        rows = getattr(self.ctl, "collision", None)
+        if rows is None:
+            return "no collision rows"
+        geo = rows.geo
+        return f"collision rows on ({len(geo.self_pairs)} self pairs, {len(geo.floor_bodies)} bodies vs the floor)"
 
     def on_sim_alive(self, alive: bool) -> None:
         """The sim's liveliness token appeared or vanished."""
@@ -460,7 +549,10 @@ class ControlCore:
         if not self.anchor_on_command:  # this tick's command starts a stream (the referee's baseline)
             self.stream_start = self.seq + 1  # the seq the daemon gives it
         if (why := self.hazard(now)) is not None:
-            return self._safe_stop(why)
+            cmd = self._safe_stop(why)
+            if self.stages is not None:
+                self.stages.lap(_WATCHDOGS)
+            return cmd
         if self.safe:  # the fault cleared: re-latch from the measured state
             self.safe = False
             self.need_latch = True
@@ -484,18 +576,29 @@ class ControlCore:
             self.orient.bring_to_rest()
         # ground-truth error of the state (the previous tick's command) against its target
         if self.ref_valid and self.state_msg is not None and self.mode != w.Mode.DM_CARTESIAN:
-            self.ee_error = float(np.linalg.norm(np.asarray(self.state_msg.ee_true) - self.ref.x_d))
+            x_prev = self.ref.x_d
+            self.ee_error = math.dist(self.state_msg.ee_true, x_prev.tolist()) if x_prev is not None else math.nan
         else:
             self.ee_error = math.nan
+        stages = self.stages
+        if stages is not None:
+            stages.lap(_WATCHDOGS)
         x_d, xd_d = self.smoother.step()
+        # one Reference, refilled (a new one re-validates its arrays: ~4 µs); the smoother and the
+        # orientation target return fresh float arrays of the right sizes
+        ref = self.ref = self._ref
+        ref.mode, ref.x_d, ref.xd_d, ref.direction = self.mode, x_d, xd_d, self.direction
         if self.pose:
-            quat_d, omega_d = self.orient.step()
-            self.ref = w.Reference(mode=self.mode, x_d=x_d, xd_d=xd_d, direction=self.direction,
-                                   quat_d=quat_d, omega_d=omega_d)
-        else:
-            self.ref = w.Reference(mode=self.mode, x_d=x_d, xd_d=xd_d, direction=self.direction)
+            ref.quat_d, ref.omega_d = self.orient.step()
         self.ref_valid = True
-        cmd = self.ctl.step(self._anchored(), self.ref)
+        state = self._anchored()
+        if stages is not None:
+            stages.lap(_RUCKIG)
+        t = time.perf_counter_ns()
+        cmd = self.ctl.step(state, self.ref)
+        self.step_ns = time.perf_counter_ns() - t
+        if stages is not None:
+            stages.lap(_STEP)
         self.anchor_on_command = True
         if cmd.status == w.Status.SAFE_STOP:
             self._fault(f"controller: {cmd.reason}")
@@ -582,9 +685,10 @@ class ControlCore:
         self.anchor_on_command = True
         return cmd
 
-    def status(self, loop: RateLoop, rejected: Counter[str], accepted: dict[str, int]) -> StatusMsg:
+    def status(self, loop: LoopTiming, rejected: Counter[str], accepted: dict[str, int]) -> StatusMsg:
         """The status message."""
         cmd = self.cmd
+        rows = getattr(self.ctl, "last_rows", None)
         return StatusMsg(
             robot=self.svc.robot, stamp=time.time(), mode=self.mode.value,
             state_ok=self.state is not None and not self.safe, safe_stop=self.safe,
@@ -599,7 +703,11 @@ class ControlCore:
             operator_conflicts=self.operator_conflicts, resume_needed=self.resume_needed,
             round_trip_ms=self.round_trip * 1e3, protective_stop=bool(self.protective),
             quat_d=self.orient.quat.tolist() if self.pose else [],
-            orientation_ignored=self.orientation_ignored)
+            orientation_ignored=self.orientation_ignored, clamped=self.clamped, last_clamp=self.last_clamp,
+            obstacles=len(self.scene.obstacles) + len(self.live_obstacles),
+            obstacles_live=len(self.live_obstacles), obstacles_stale=self.obstacles_stale,
+            collision_distance=rows.min_distance if rows is not None and math.isfinite(rows.min_distance) else math.nan,
+            collision_pair=rows.closest if rows is not None else "")
 
     def _ee_now(self) -> list[float]:
         """[m] the EE position of the last command, or — when it has none (a safe stop's) — of
@@ -632,7 +740,7 @@ class ControlCore:
                       "start": r.arm.start.tolist()},
         }
 
-    def info(self, loop: RateLoop, rejected: Counter[str], accepted: dict[str, int]) -> InfoMsg:
+    def info(self, loop: LoopTiming, rejected: Counter[str], accepted: dict[str, int]) -> InfoMsg:
         """The ``info`` reply: status, the robot description's names and sizes, the configuration."""
         return InfoMsg(robot=self.svc.robot, stamp=time.time(), status=self.status(loop, rejected, accepted),
                        config=self.config_dict(), joints=list(self.robot.arm.joints),
@@ -660,6 +768,10 @@ class Daemon:
         kind: controller kind; None = the controller config's.
         wait_lease: when another daemon holds the robot's lease, wait until it is free
             instead of refusing to start (:class:`LeaseHeld`).
+        scene: obstacles and the workspace fence (None: ``configs/scenes/default.toml``).
+        breakdown: time each stage of every tick that publishes a command
+            (:class:`~.tick_stages.TickStages`) and write the summary to this JSON file at exit
+            (``wmm-qp serve --breakdown``; ``wmm-qp bench --only daemon``). None: off.
     """
 
     LEASE_GRACE = 1.0
@@ -667,27 +779,32 @@ class Daemon:
     concludes that it lost a start-up race for the lease."""
 
     def __init__(self, svc: ServiceConfig, ctl_cfg: w.ControllerConfig, robot: w.RobotConfig,
-                 kind: str | None = None, wait_lease: bool = False) -> None:
+                 kind: str | None = None, wait_lease: bool = False, scene: Scene | None = None,
+                 breakdown: str | Path | None = None) -> None:
         self.wait_lease = wait_lease
+        self.breakdown = breakdown
+        self.stages = TickStages() if breakdown is not None else None
         svc = svc.with_robot(robot)
         self.svc = svc
-        self.core = ControlCore(svc, ctl_cfg, robot, kind)
+        self.core = ControlCore(svc, ctl_cfg, robot, kind, scene)
         self.keys = Keys.of(svc.prefix, svc.robot)
         lim = svc.validation
         self.v_state = Validator(StateMsg, svc.robot, lim, n_arm=robot.n_arm, n_wheels=robot.n_wheels)
         self.v_mode = Validator(ModeMsg, svc.robot, lim)
         self.v_setpoint = Validator(SetpointMsg, svc.robot, lim)
-        self.loop = RateLoop(svc.loop.rate_hz, svc.loop.spin_us * 1e-6)
+        self.v_obstacles = Validator(ObstaclesMsg, svc.robot, lim)
+        self.loop: LoopTiming = RateLoop(svc.loop.rate_hz, svc.loop.spin_us * 1e-6)  # run() sets the trigger's
         self.scheduling = "not started"  # set by run(): the control thread's scheduling policy
 
     def rejected(self) -> Counter[str]:
         """Rejected and refused messages by reason, all keys together."""
-        return self.v_state.rejected + self.v_mode.rejected + self.v_setpoint.rejected + self.core.refused
+        return (self.v_state.rejected + self.v_mode.rejected + self.v_setpoint.rejected
+                + self.v_obstacles.rejected + self.core.refused)
 
     def accepted(self) -> dict[str, int]:
         """Accepted messages by key."""
         return {"state": self.v_state.accepted, "mode": self.v_mode.accepted,
-                "setpoint": self.v_setpoint.accepted}
+                "setpoint": self.v_setpoint.accepted, "obstacles": self.v_obstacles.accepted}
 
     def run(self, stop: threading.Event, max_ticks: int | None = None) -> StatusMsg:
         """Run until ``stop`` is set (or ``max_ticks``); returns the final status.
@@ -746,12 +863,14 @@ class Daemon:
         k, core, svc = self.keys, self.core, self.svc
         # After the session opened: Zenoh's own threads keep normal priority, only this one is raised.
         self.scheduling = realtime_priority(svc.loop.rt_priority)
-        print(f"wmm-qp serve: control thread: {self.scheduling}", file=sys.stderr, flush=True)
+        print(f"wmm-qp serve: control thread: {self.scheduling}; trigger {svc.loop.trigger}",
+              file=sys.stderr, flush=True)
         ring = zenoh.handlers.RingChannel
         fifo = zenoh.handlers.FifoChannel
         sub_state = session.declare_subscriber(k.state, ring(1))
         sub_setpoint = session.declare_subscriber(k.setpoint, ring(1))
         sub_mode = session.declare_subscriber(k.mode, fifo(256))
+        sub_obstacles = session.declare_subscriber(k.obstacles, ring(1))  # the latest set wins
         queryable = session.declare_queryable(k.info, fifo(64))
         alive_sub = session.liveliness().declare_subscriber(k.alive("sim"), fifo(64), history=True)
         token = session.liveliness().declare_token(k.alive("daemon"))
@@ -765,22 +884,56 @@ class Daemon:
         pub_tel = session.declare_publisher(k.telemetry, congestion_control=zenoh.CongestionControl.DROP)
         status_every = max(1, round(svc.loop.rate_hz / svc.loop.status_hz))
         tel_every = svc.loop.telemetry_every
+        tel_listened = bool(tel_every)  # re-read with every status: no telemetry built for nobody
         queries_per_tick = svc.loop.queries_per_tick
         period = 1.0 / svc.loop.rate_hz
+        stages = self.stages
+        core.stages = stages
+        clock, clock_ns, wall = time.perf_counter, time.perf_counter_ns, time.time
+        v_state = self.v_state
+        rx = [0, 0, 0]  # [ns] a state's poll start, decoded, accepted (the breakdown's stages)
+        rx_wall = [math.nan]  # [s] the daemon's receipt time of the last accepted state
+
+        def poll_state() -> StateMsg | None:
+            """The newest state if one arrived, validated and accepted (``core.on_state``)."""
+            t0 = clock_ns() if stages is not None else 0
+            s = sub_state.try_recv()
+            if s is None:
+                return None
+            t_rx = wall()  # its receipt (the telemetry's state_rx)
+            data = s.payload.to_bytes()
+            if stages is not None:
+                rx[0], rx[1] = t0, clock_ns()
+            m = v_state(data)
+            if m is None or not core.on_state(m, clock()):
+                return None
+            rx_wall[0] = t_rx
+            if stages is not None:
+                rx[2] = clock_ns()
+            return m
+
+        state_loop: StateLoop[StateMsg] | None = None
+        if svc.loop.trigger == "state":
+            state_loop = StateLoop(svc.loop.rate_hz, poll_state)
+        loop: LoopTiming = state_loop or RateLoop(svc.loop.rate_hz, svc.loop.spin_us * 1e-6)
+        self.loop = loop
+        core.follow_state_age = state_loop is not None
         core.say = fault_log = FaultLog()
         gc.collect()
         gc.freeze()
-        loop = self.loop
         t0 = loop.start()
         core.t0 = now = t0
         try:
             while not stop.is_set() and (max_ticks is None or loop.ticks < max_ticks):
-                # ---- inputs, all polled from this thread
-                while (a := alive_sub.try_recv()) is not None:
-                    core.on_sim_alive(a.kind == zenoh.SampleKind.PUT)
-                s = sub_state.try_recv()
-                if s is not None and (m := self.v_state(s.payload.to_bytes())) is not None:
-                    core.on_state(m, now)
+                # ---- the state: the state loop's wait() polled it, the fixed-rate loop polls now
+                if stages is not None:
+                    stages.begin(clock_ns())
+                m = state_loop.item if state_loop is not None else poll_state()
+                if m is not None:
+                    if stages is not None:
+                        stages.begin(rx[0])
+                        stages.lap_at(_POLL, rx[1])
+                        stages.lap_at(_VALIDATION, rx[2])
                     if core.lease_taken:
                         lost_since = min(lost_since, now)
                         if now - lost_since > self.LEASE_GRACE and not self.wait_lease:
@@ -788,15 +941,22 @@ class Daemon:
                             break
                     else:
                         lost_since = math.inf
+                # ---- the other inputs (FIFO of modes, the latest setpoint and obstacles)
                 while (s := sub_mode.try_recv()) is not None:
                     if (mm := self.v_mode(s.payload.to_bytes())) is not None:
                         core.on_mode(mm)
                 s = sub_setpoint.try_recv()
                 if s is not None and (sp := self.v_setpoint(s.payload.to_bytes())) is not None:
                     core.on_setpoint(sp, now)
-                # ---- control
+                s = sub_obstacles.try_recv()
+                if s is not None and self.v_obstacles(s.payload.to_bytes()) is not None:
+                    core.on_obstacles(self.v_obstacles.shapes, now)
+                if stages is not None:
+                    stages.lap(_POLL)
+                core.check_obstacles(now)
+                # ---- control (stages: watchdogs, ruckig, step)
                 cmd = core.tick(now)
-                if cmd is not None and core.late(t_pub := time.perf_counter()):  # this tick itself stalled
+                if cmd is not None and core.late(t_pub := clock()):  # this tick itself stalled
                     core.break_stream(f"command stream broken (the tick took "
                                       f"{(t_pub - now) * 1e3:.0f} ms: its command is too late)")
                     cmd = None
@@ -804,34 +964,57 @@ class Daemon:
                     core.seq += 1
                     seq = core.seq
                     pub_cmd.put(encode(CommandMsg(
-                        robot=svc.robot, seq=seq, stamp=time.time(),
+                        robot=svc.robot, seq=seq, stamp=wall(),
                         wheel_speeds=cmd.wheel_speeds.tolist(), arm_rates=cmd.arm_rates.tolist(),
                         status=cmd.status.value, lease=core.lease, instance=core.instance,
                         period=period, state_seq=core.cmd_state_seq, stream=core.stream_start)))
+                    cmd_stamp = wall()
                     core.sent(seq, t_pub)
-                    if tel_every and loop.ticks % tel_every == 0:
+                    if stages is not None:
+                        stages.lap(_PUBLISH)
+                    # ---- after the command: telemetry (when someone listens), status, queries
+                    if tel_listened and loop.ticks % tel_every == 0:
+                        fresh = core.cmd_state_seq >= 0
                         ee = core.state_msg.ee_true if core.state_msg is not None else _NAN3
                         pub_tel.put(encode(TelemetryMsg(
-                            robot=svc.robot, seq=seq, stamp=time.time(), t=now - t0,
+                            robot=svc.robot, seq=seq, stamp=cmd_stamp, t=now - t0,
                             mode=core.mode.value, x=cmd.x.tolist(), x_d=_xd(core.ref),
-                            xd_d=core.ref.xd_d.tolist(), ee_true=list(ee), ee_error=core.ee_error,
+                            xd_d=core.ref.xd_d.tolist(), ee_true=ee, ee_error=core.ee_error,
                             wheel_speeds=cmd.wheel_speeds.tolist(), arm_rates=cmd.arm_rates.tolist(),
                             status=cmd.status.value, dm=float(cmd.dm), task_error=float(cmd.task_error),
-                            tick_us=(time.perf_counter() - now) * 1e6)))
-                # ---- status, queries
+                            tick_us=loop.last_work * 1e6, step_us=core.step_ns * 1e-3,
+                            state_seq=core.cmd_state_seq, state_rx=rx_wall[0] if fresh else math.nan,
+                            cmd_stamp=cmd_stamp)))
+                    if stages is not None:
+                        stages.lap(_TELEMETRY)
+                while (a := alive_sub.try_recv()) is not None:
+                    core.on_sim_alive(a.kind == zenoh.SampleKind.PUT)
                 if loop.ticks % status_every == 0:
                     pub_status.put(encode(core.status(loop, self.rejected(), self.accepted())))
+                    tel_listened = bool(tel_every) and _matching(pub_tel)
+                if stages is not None:
+                    stages.lap(_STATUS)
                 self.answer_queries(queryable, queries_per_tick)
+                if stages is not None:
+                    stages.lap(_QUERIES)
+                    if cmd is not None:
+                        stages.end()
+                    else:
+                        stages.discard()
                 now = loop.wait()
         finally:
             fault_log.close()
             core.say = _say
             gc.unfreeze()
             final = core.status(loop, self.rejected(), self.accepted())
-            for ent in (token, lease_token, sub_state, sub_setpoint, sub_mode, queryable, alive_sub,
+            for ent in (token, lease_token, sub_state, sub_setpoint, sub_mode, sub_obstacles, queryable, alive_sub,
                         pub_cmd, pub_status, pub_tel):
                 with contextlib.suppress(Exception):
                     ent.undeclare()
+            if stages is not None and self.breakdown is not None:
+                with contextlib.suppress(Exception):
+                    stages.write(self.breakdown, {"trigger": svc.loop.trigger, "rate_hz": svc.loop.rate_hz,
+                                                  "loop": msgspec.to_builtins(final.loop)})
         if lost:
             raise LeaseHeld(k.root, lost)
         return final

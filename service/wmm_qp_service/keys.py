@@ -46,6 +46,11 @@ class Keys:
         return f"{self.root}/sim/box"
 
     @property
+    def obstacles(self) -> str:
+        """client → daemon and sim: the live obstacles (:class:`~.protocol.ObstaclesMsg`), latest wins."""
+        return f"{self.root}/obstacles"
+
+    @property
     def status(self) -> str:
         """daemon → all: status (:class:`~.protocol.StatusMsg`), ~10 Hz."""
         return f"{self.root}/status"

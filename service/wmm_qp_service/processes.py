@@ -48,10 +48,11 @@ def log_folder(path: str | Path | None, tag: str) -> Path:
     return folder
 
 
-def _service_args(svc: ServiceConfig, robot_file: Path | None = None) -> list[str]:
+def _service_args(svc: ServiceConfig, robot_file: Path | None = None, scene_file: Path | None = None) -> list[str]:
     out = ["--prefix", svc.prefix, "--robot", svc.robot,
            "--daemon-endpoint", svc.zenoh.daemon_endpoint, "--sim-endpoint", svc.zenoh.sim_endpoint]
-    return out + (["--robot-config", str(robot_file)] if robot_file is not None else [])
+    out += ["--robot-config", str(robot_file)] if robot_file is not None else []
+    return out + (["--scene", str(scene_file)] if scene_file is not None else [])
 
 
 @dataclass
@@ -64,6 +65,7 @@ class Stack:
         rate_hz: [Hz] daemon rate.
         log_dir: where their stderr goes (None: discarded).
         robot_file: the robot description both get (``--robot-config``); None: the default.
+        scene_file: the scene both get (``--scene``); None: the default scene.
     """
 
     svc: ServiceConfig
@@ -72,6 +74,7 @@ class Stack:
     extra_daemon_args: list[str] = field(default_factory=list)
     extra_sim_args: list[str] = field(default_factory=list)
     robot_file: Path | None = None
+    scene_file: Path | None = None
     procs: dict[str, subprocess.Popen[bytes]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -89,11 +92,12 @@ class Stack:
 
     def start_sim(self) -> subprocess.Popen[bytes]:
         """Start (or restart) the sim."""
-        return self._spawn("sim", ["sim", *_service_args(self.svc, self.robot_file), *self.extra_sim_args])
+        return self._spawn("sim", ["sim", *_service_args(self.svc, self.robot_file, self.scene_file),
+                                           *self.extra_sim_args])
 
     def start_daemon(self) -> subprocess.Popen[bytes]:
         """Start (or restart) the daemon."""
-        return self._spawn("daemon", ["serve", *_service_args(self.svc, self.robot_file),
+        return self._spawn("daemon", ["serve", *_service_args(self.svc, self.robot_file, self.scene_file),
                                       "--rate", f"{self.rate_hz:g}", *self.extra_daemon_args])
 
     def start(self) -> Stack:

@@ -164,6 +164,25 @@ class SetpointMsg(_Msg, tag="setpoint", kw_only=True):
     w: list[float] | None = None
 
 
+class ObstaclesMsg(_Msg, tag="obstacles", kw_only=True):
+    """client (perception, an operator) → daemon and sim: the live obstacles, world frame.
+
+    Each message replaces the previous live set as a whole (the scene file's obstacles stay); an
+    empty list clears it. A set older than ``obstacles.timeout`` (service.toml) is *kept* — a
+    stale perception does not make an obstacle vanish — and the status says ``obstacles_stale``.
+
+    Attributes:
+        source: the sender's id.
+        obstacles: tables with the keys of a scene file's ``[[obstacles]]`` (``wmm_qp.scene``):
+            ``id`` (unique), ``kind`` (box | sphere | capsule | cylinder | plane), ``size``
+            (box) or ``radius`` (+ ``length``), ``xyz``, ``rpy``, ``normal``/``offset`` (plane),
+            ``exempt`` (links that may touch it; "ee": those moving with the EE).
+    """
+
+    source: str
+    obstacles: list[dict[str, Any]]
+
+
 class ModeMsg(_Msg, tag="mode"):
     """client → daemon: change the mode.
 
@@ -185,6 +204,11 @@ class LoopStats(msgspec.Struct, kw_only=True):
         ticks: ticks run.
         deadline_misses: ticks that started after their deadline.
         tick_p50_us, tick_p99_us, tick_max_us: [µs] work time per tick (recent window; max: ever).
+        trigger: ``rate`` (fixed-rate ticks) or ``state`` (a tick per new state, ``loop.trigger``).
+        watchdog_ticks: (state trigger) ticks without a new state for 1.5 periods: the
+            prediction path; each is also a deadline miss.
+        overruns: ticks whose command came more than a period after their start (rate) or their
+            state (state trigger).
     """
 
     rate_hz: float = 0.0
@@ -194,6 +218,9 @@ class LoopStats(msgspec.Struct, kw_only=True):
     tick_p50_us: float = 0.0
     tick_p99_us: float = 0.0
     tick_max_us: float = 0.0
+    trigger: str = "rate"
+    watchdog_ticks: int = 0
+    overruns: int = 0
 
 
 class StatusMsg(_Msg, tag="status"):
@@ -226,6 +253,13 @@ class StatusMsg(_Msg, tag="status"):
         quat_d: the orientation target, a quaternion [x, y, z, w] (world), pose task only
             ([] with the position task).
         orientation_ignored: setpoints whose orientation was ignored (the position task).
+        clamped: setpoints clamped into the scene's fence (its EE box) and above the floor
+            margin before they were followed; ``last_clamp``: the last one, e.g. "x 20 -> 3.5".
+        obstacles: obstacles the controller keeps away from (the scene's and the live ones);
+            ``obstacles_live``: of them, from the last live set; ``obstacles_stale``: that set
+            is older than ``obstacles.timeout`` (kept all the same).
+        collision_distance, collision_pair: [m] the closest monitored pair of the last tick
+            (self, floor, obstacles; nan and "" without collision rows).
     """
 
     mode: str
@@ -253,6 +287,13 @@ class StatusMsg(_Msg, tag="status"):
     protective_stop: bool = False
     quat_d: list[float] = msgspec.field(default_factory=list)
     orientation_ignored: int = 0
+    clamped: int = 0
+    last_clamp: str = ""
+    obstacles: int = 0
+    obstacles_live: int = 0
+    obstacles_stale: bool = False
+    collision_distance: float = float("nan")
+    collision_pair: str = ""
 
 
 class TelemetryMsg(_Msg, tag="telemetry"):
@@ -269,7 +310,13 @@ class TelemetryMsg(_Msg, tag="telemetry"):
         status: controller status.
         dm: directional manipulability.
         task_error: [m/s] ‖J v − ẋ_ref‖.
-        tick_us: [µs] work time of this tick.
+        tick_us: [µs] work time of the previous tick, all of it (inputs to status and queries:
+            this tick's own ends after its telemetry).
+        step_us: [µs] this tick's ``ctl.step`` alone.
+        state_seq: seq of the state this tick's command was computed from (-1: a predicted
+            state, no new one arrived), as the command's ``state_seq``.
+        state_rx: [s] the daemon's ``time.time()`` when it received that state (nan: predicted).
+        cmd_stamp: [s] the daemon's ``time.time()`` right after it published the command.
     """
 
     t: float
@@ -285,6 +332,10 @@ class TelemetryMsg(_Msg, tag="telemetry"):
     dm: float
     task_error: float
     tick_us: float
+    step_us: float = float("nan")
+    state_seq: int = -1
+    state_rx: float = float("nan")
+    cmd_stamp: float = float("nan")
 
 
 class InfoMsg(_Msg, tag="info"):

@@ -155,26 +155,33 @@ class SetpointSmoother:
         return self._target_x.copy()
 
     def step(self) -> tuple[FloatArray, FloatArray]:
-        """Advance one period; returns (x_d [m], ẋ_d [m/s]). Never raises.
+        """Advance one period; returns (x_d [m], ẋ_d [m/s]), fresh arrays. Never raises.
 
         On a Ruckig error the setpoint holds still (counted in :attr:`errors`); the
         controller's own acceleration bounds keep the robot's command continuous.
+
+        The three axes' arithmetic is done in floats (numpy on 3-vectors costs ~1 µs a call, a
+        dozen calls a tick): x_t += v_t·Δt, v = clip(v_t + k_p (x_t − x_s), ±v_max).
         """
+        vm = self.v_max
         if self.resting:
-            v_cmd = np.zeros(3)
+            self._inp.target_velocity = [0.0, 0.0, 0.0]
         else:
-            self._target_x = self._target_x + self._target_v * self.dt
-            v_cmd = self._target_v + self.gain * (self._target_x - self.position)
-        self._inp.target_velocity = np.clip(v_cmd, -self.v_max, self.v_max).tolist()
+            dt, g = self.dt, self.gain
+            tx, tv, p = self._target_x.tolist(), self._target_v.tolist(), self.position.tolist()
+            tx = [tx[0] + tv[0] * dt, tx[1] + tv[1] * dt, tx[2] + tv[2] * dt]
+            self._target_x = np.array(tx)
+            self._inp.target_velocity = [min(vm, max(-vm, tv[i] + g * (tx[i] - p[i]))) for i in range(3)]
         try:
             ok = self._otg.update(self._inp, self._out) in (Result.Working, Result.Finished)
         except Exception:
             ok = False
         if ok:
-            self.position = np.array(self._out.new_position)
-            self.velocity = np.array(self._out.new_velocity)
-            self.acceleration = np.array(self._out.new_acceleration)
-            self._out.pass_to_input(self._inp)
+            out = self._out
+            self.position = np.array(out.new_position)
+            self.velocity = np.array(out.new_velocity)
+            self.acceleration = np.array(out.new_acceleration)
+            out.pass_to_input(self._inp)
         else:
             self.errors += 1
             self.velocity = np.zeros(3)

@@ -13,7 +13,12 @@ centre y within ``position_abs_max``, width and height in (0, 10] m. A command: 
 ``lease`` and ``instance``, ``period`` in (0, ``PERIOD_MAX``]. A setpoint: a non-empty
 ``source``; its optional orientation ``q`` finite, entries ≤ 1e6, norm > 1e-9 (the controller
 normalises it), its angular velocity ``w`` finite with norm ≤ ``angular_speed_max``. A state: a
-non-empty ``instance``.
+non-empty ``instance``. An obstacles message (:class:`~.protocol.ObstaclesMsg`): a non-empty
+``source``, at most ``obstacles_max`` obstacles, each one a valid scene-file obstacle table
+(:func:`wmm_qp.scene.obstacle_from_table`; else ``range`` with the key), ids unique, positions within
+``position_abs_max`` and sizes within ``obstacle_size_max``; its payload may be up to
+``obstacles_payload_max_bytes``. The validator keeps the accepted set's primitives in
+:attr:`Validator.shapes`.
 """
 
 from __future__ import annotations
@@ -25,8 +30,11 @@ from collections.abc import Iterable
 from typing import Generic, TypeVar
 
 import msgspec
+import numpy as np
 
-from wmm_qp import Mode
+from wmm_qp import ConfigError, Mode
+from wmm_qp.config import ShapeConfig
+from wmm_qp.scene import obstacles_from_tables
 
 from .config import ValidationConfig
 from .protocol import (
@@ -35,6 +43,7 @@ from .protocol import (
     CommandMsg,
     Header,
     ModeMsg,
+    ObstaclesMsg,
     SetpointMsg,
     StateMsg,
     TelemetryMsg,
@@ -138,6 +147,8 @@ class Validator(Generic[M]):
         self.rejected: Counter[str] = Counter()
         self.accepted = 0
         self.last_rejection = ""
+        self.shapes: tuple[ShapeConfig, ...] = ()  # an obstacles validator: the last accepted set
+        self._payload_max = limits.obstacles_payload_max_bytes if cls is ObstaclesMsg else limits.payload_max_bytes
 
     def __call__(self, data: bytes) -> M | None:
         """The checked message, or None (the reason is counted in :attr:`rejected`)."""
@@ -156,8 +167,8 @@ class Validator(Generic[M]):
         Raises:
             Rejected: with the reason.
         """
-        if len(data) > self.limits.payload_max_bytes:  # never spend time decoding a huge payload
-            raise Rejected(Reject.SIZE, f"payload of {len(data)} bytes exceeds {self.limits.payload_max_bytes}")
+        if len(data) > self._payload_max:  # never spend time decoding a huge payload
+            raise Rejected(Reject.SIZE, f"payload of {len(data)} bytes exceeds {self._payload_max}")
         try:
             h = _HEADER.decode(data)
         except msgspec.ValidationError as e:
@@ -232,6 +243,8 @@ class Validator(Generic[M]):
                     raise Rejected(Reject.RANGE, f"box {name} = {v:g} outside its range")
             if max(abs(msg.face_x), abs(msg.center_y)) > lim.position_abs_max:
                 raise Rejected(Reject.RANGE, f"box face x, y beyond ±{lim.position_abs_max:g} m")
+        elif isinstance(msg, ObstaclesMsg):
+            self.shapes = _obstacles(msg, lim)
         elif isinstance(msg, CommandMsg):
             if not (msg.lease and msg.instance):
                 raise Rejected(Reject.SCHEMA, "lease or instance is empty")
@@ -248,3 +261,27 @@ class Validator(Generic[M]):
             _vector("arm_rates", msg.arm_rates, self.n_arm, lim.command_abs_max)
             for name in ("x", "x_d", "xd_d", "ee_true"):  # nan: no target (x_d), no state (ee_true)
                 _size(name, getattr(msg, name), 3)
+
+
+def _obstacles(msg: ObstaclesMsg, lim: ValidationConfig) -> tuple[ShapeConfig, ...]:
+    """The message's obstacles as primitives (see the module docstring), or :class:`Rejected`."""
+    if not msg.source:
+        raise Rejected(Reject.SCHEMA, "source is empty")
+    if len(msg.obstacles) > lim.obstacles_max:
+        raise Rejected(Reject.SIZE, f"{len(msg.obstacles)} obstacles, at most {lim.obstacles_max}")
+    try:
+        shapes = obstacles_from_tables("<obstacles message>", msg.obstacles)
+    except ConfigError as e:
+        raise Rejected(Reject.RANGE, str(e)) from None
+    except Exception as e:  # a table of unexpected types: never let anything escape into the loop
+        raise Rejected(Reject.SCHEMA, f"{type(e).__name__}: {e}") from None
+    for o in shapes:
+        if o.kind == "plane":
+            if abs(o.xyz[2]) > lim.position_abs_max:
+                raise Rejected(Reject.RANGE, f"obstacle {o.name!r}: |offset| beyond {lim.position_abs_max:g} m")
+            continue
+        if float(np.max(np.abs(o.xyz))) > lim.position_abs_max:
+            raise Rejected(Reject.RANGE, f"obstacle {o.name!r}: xyz beyond ±{lim.position_abs_max:g} m")
+        if float(np.max(o.size)) > lim.obstacle_size_max:
+            raise Rejected(Reject.RANGE, f"obstacle {o.name!r}: size beyond {lim.obstacle_size_max:g} m")
+    return shapes

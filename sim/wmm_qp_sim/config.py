@@ -46,11 +46,13 @@ class RefereeConfig:
         collision_distance: [m] a monitored pair (self, floor, obstacles) closer than this counts a
             ``collision`` violation each step (the controller's dampers keep
             ``collision.safety_distance``, 3 cm by default; 0 would count contact only).
+        collisions: check collisions every step (self, floor, obstacles: :mod:`.collision`).
     """
 
     rtol: float = 1e-9
     atol: float = 1e-9
     collision_distance: float = 0.01
+    collisions: bool = True
 
 
 @dataclass(frozen=True)
@@ -151,9 +153,10 @@ def load_sim_config(path: Path | str | None = None) -> SimConfig:
         yaw_drift_per_meter=s.number("yaw_drift_per_meter", ds.yaw_drift_per_meter),
     )
     t = r.table("referee", required=False)
-    t.unknown({"rtol", "atol", "collision_distance"})
+    t.unknown({"rtol", "atol", "collision_distance", "collisions"})
     referee = RefereeConfig(rtol=t.number("rtol", 1e-9, lo=0.0), atol=t.number("atol", 1e-9, lo=0.0),
-                            collision_distance=t.number("collision_distance", 0.01))
+                            collision_distance=t.number("collision_distance", 0.01),
+                            collisions=t.boolean("collisions", True))
     b = r.table("box", required=False)
     b.unknown({"enabled", "mass", "mu", "face_x", "center_y", "width", "height", "g"})
     db = BoxConfig()

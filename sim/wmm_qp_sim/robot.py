@@ -14,6 +14,7 @@ sim brakes every joint and wheel to rest by itself at its acceleration limit
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -128,12 +129,13 @@ class SimRobot:
             limits (see the module docstring); False: each command is executed at once.
         scene: the obstacles the referee checks the robot against (None: none; self and floor
             collisions are checked anyway).
-        collisions: check collisions (``collision`` violations, :mod:`.collision`; off by default
-            with the controller's rows, issue 13: in Python it costs ~2 µs a monitored pair a step).
+        collisions: check collisions (``collision`` violations, :mod:`.collision`); None: the
+            config's ``referee.collisions``.
     """
 
     def __init__(self, model: wmm_qp.WmmModel, config: SimConfig, seed: int | None = None,
-                 ramp: bool = False, scene: wmm_qp.scene.Scene | None = None, collisions: bool = False) -> None:
+                 ramp: bool = False, scene: wmm_qp.scene.Scene | None = None,
+                 collisions: bool | None = None) -> None:
         self.model = model
         self.config = config
         self.seed = config.seed if seed is None else seed
@@ -154,16 +156,36 @@ class SimRobot:
         self._w_tol = self.w_max * (1.0 + tol.rtol) + tol.atol
         self.ramp = ramp
         self.collision: CollisionReferee | None = None
-        if collisions:
+        if config.referee.collisions if collisions is None else collisions:
             self.collision = CollisionReferee(model, config.referee.collision_distance)
-            if scene is not None:
-                self.collision.set_obstacles(scene.obstacles)
+        self.scene_obstacles = scene.obstacles if scene is not None else ()
+        self.live_obstacles: tuple[wmm_qp.config.ShapeConfig, ...] = ()
+        self.box: Box | None = None
         self.reset()
 
-    def set_obstacles(self, obstacles: list[wmm_qp.config.ShapeConfig]) -> None:
-        """The obstacles the referee checks against (live obstacles replace the scene's)."""
+    def set_obstacles(self, obstacles: Sequence[wmm_qp.config.ShapeConfig]) -> None:
+        """The live obstacles the referee checks against (they replace the previous live set; the
+        scene's and the pushed box stay)."""
+        self.live_obstacles = tuple(obstacles)
+        self._update_obstacles()
+
+    def box_obstacle(self) -> wmm_qp.config.ShapeConfig | None:
+        """The pushed box as an obstacle for every body but the EE's (``exempt = ["ee"]``): from
+        the floor to its height, its depth along x its width (the contact model knows only the
+        face), None without a box."""
+        if self.box is None:
+            return None
+        c = self.box.config
+        z0 = self.model.config.base.floor_z
+        return wmm_qp.config.ShapeConfig(
+            name="box", link="", kind="box", size=np.array([c.width, c.width, c.height - z0]),
+            xyz=np.array([self.box.face_x + 0.5 * c.width, c.center_y, 0.5 * (c.height + z0)]),
+            rpy=np.zeros(3), exempt=("ee",))
+
+    def _update_obstacles(self) -> None:
         if self.collision is not None:
-            self.collision.set_obstacles(obstacles)
+            box = self.box_obstacle()
+            self.collision.set_obstacles(self.scene_obstacles + self.live_obstacles + ((box,) if box else ()))
 
     def reset(
         self,
@@ -193,6 +215,8 @@ class SimRobot:
         self.base_true = self.base_odom.copy()
         box_cfg = box if box is not None else self.config.box
         self.box = Box(box_cfg) if box_cfg is not None else None
+        self._box_x = self.box.face_x if self.box is not None else math.nan
+        self._update_obstacles()
         self.t_last_command = 0.0
         self.stale = False
         self.rejected = 0
@@ -211,6 +235,8 @@ class SimRobot:
     def place_box(self, box: BoxConfig | None) -> None:
         """Put a box in the scene now (or remove it with None), keeping the robot's state."""
         self.box = Box(box) if box is not None else None
+        self._box_x = self.box.face_x if self.box is not None else math.nan
+        self._update_obstacles()
 
     # ------------------------------------------------------------------ stepping
     def step(self, command: SimCommand | None, dt: float) -> SimState:
@@ -243,7 +269,10 @@ class SimRobot:
         self.t += dt
         self.referee.check_positions(self.q_arm)
         if self.collision is not None:
-            hits = self.collision.check(self.base_true, self.model.arm.pin_q(self.q_arm).copy())
+            if self.box is not None and abs(self.box.face_x - self._box_x) > 1e-4:  # the box moved
+                self._box_x = self.box.face_x
+                self._update_obstacles()
+            hits = self.collision.check(self.base_true, self.q_arm)
             if hits:
                 self.referee.counts["collision"] += hits
                 self.referee.last_event = f"collision: {self.collision.closest} at {self.collision.min_distance:.4f} m"

@@ -6,7 +6,9 @@ judged by the referee as received; the latest is executed), publishes the state 
 and ground truth, torques, the referee's violation counts) and holds a liveliness token.
 When commands go stale the pure model brakes the robot to rest by itself. A client may place
 a box in the scene at run time (``sim/box``, :class:`~wmm_qp_service.protocol.BoxMsg`, FIFO,
-validated on receipt); it is applied between two steps with :meth:`SimRobot.place_box`.
+validated on receipt); it is applied between two steps with :meth:`SimRobot.place_box`. The live
+obstacles (``obstacles``, :class:`~wmm_qp_service.protocol.ObstaclesMsg`, latest wins) go to the
+collision referee, which also checks the scene's obstacles (``--scene``) and the pushed box.
 
 One robot, one controller:
 
@@ -40,12 +42,13 @@ import numpy as np
 import zenoh
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.keys import Keys
-from wmm_qp_service.protocol import BoxMsg, CommandMsg, StateMsg, encode
+from wmm_qp_service.protocol import BoxMsg, CommandMsg, ObstaclesMsg, StateMsg, encode
 from wmm_qp_service.rate_loop import RateLoop, realtime_priority
 from wmm_qp_service.transport import ROLE_SIM, open_session
 from wmm_qp_service.validation import Validator
 
 import wmm_qp as w
+from wmm_qp.scene import Scene, load_scene
 
 from .config import BoxConfig, SimConfig
 from .robot import SimCommand, SimRobot, SimState
@@ -82,17 +85,19 @@ class SimNode:
     def __init__(self, svc: ServiceConfig, sim_cfg: SimConfig, robot: w.RobotConfig,
                  seed: int | None = None, ramp: bool = True, spin_s: float = 0.0,
                  state_loss: float = 0.0, state_delay: float = 0.0, fault_seed: int = 0,
-                 rt_priority: int = 0) -> None:
+                 rt_priority: int = 0, scene: Scene | None = None) -> None:
         svc = svc.with_robot(robot)
         self.svc = svc
         self.cfg = sim_cfg
         self.robot = robot
         self.model = w.WmmModel(robot)
-        self.sim = SimRobot(self.model, sim_cfg, seed=seed, ramp=ramp)
+        self.scene = scene if scene is not None else load_scene()
+        self.sim = SimRobot(self.model, sim_cfg, seed=seed, ramp=ramp, scene=self.scene)
         self.keys = Keys.of(svc.prefix, svc.robot)
         self.validate = Validator(CommandMsg, svc.robot, svc.validation, n_arm=robot.n_arm,
                                   n_wheels=robot.n_wheels)
         self.validate_box = Validator(BoxMsg, svc.robot, svc.validation)
+        self.validate_obstacles = Validator(ObstaclesMsg, svc.robot, svc.validation)
         self.loop = RateLoop(sim_cfg.rate_hz, spin_s)
         self.cmd_seq = -1
         self.instance = secrets.token_hex(8)
@@ -173,6 +178,13 @@ class SimNode:
                                      center_y=msg.center_y, width=msg.width, height=msg.height))
         return True
 
+    def set_obstacles(self, data: bytes) -> bool:
+        """Validate a live obstacles message and hand its set to the referee (False: rejected)."""
+        if self.validate_obstacles(data) is None:
+            return False
+        self.sim.set_obstacles(self.validate_obstacles.shapes)
+        return True
+
     def state_msg(self, st: SimState, seq: int) -> StateMsg:
         """The wire message of a sim state."""
         return StateMsg(
@@ -212,6 +224,7 @@ class SimNode:
             k = self.keys
             sub = session.declare_subscriber(k.cmd, zenoh.handlers.RingChannel(COMMAND_QUEUE))
             sub_box = session.declare_subscriber(k.sim_box, zenoh.handlers.FifoChannel(16))
+            sub_obstacles = session.declare_subscriber(k.obstacles, zenoh.handlers.RingChannel(1))
             pub = session.declare_publisher(k.state, express=True,
                                             congestion_control=zenoh.CongestionControl.DROP,
                                             priority=zenoh.Priority.REAL_TIME)
@@ -230,6 +243,8 @@ class SimNode:
                         self.on_lease(str(a.key_expr).rsplit("/", 1)[-1], a.kind == zenoh.SampleKind.PUT)
                     while (b := sub_box.try_recv()) is not None:
                         self.place_box(b.payload.to_bytes())
+                    if (o := sub_obstacles.try_recv()) is not None:  # the referee checks the live set too
+                        self.set_obstacles(o.payload.to_bytes())
                     received = []
                     while (s := sub.try_recv()) is not None:  # oldest first
                         if (c := self.accept(s.payload.to_bytes())) is not None:
@@ -245,7 +260,7 @@ class SimNode:
                         pub.put(payload)
                     self.loop.wait()
             finally:
-                for ent in (token, lease_sub, sub, sub_box, pub):
+                for ent in (token, lease_sub, sub, sub_box, sub_obstacles, pub):
                     with contextlib.suppress(Exception):
                         ent.undeclare()
             return st

@@ -153,18 +153,23 @@ class Controller(ABC):
         Args:
             q_arm: [rad] arm configuration to tick at (default: mid-range of every joint).
         """
-        arm = self.robot.arm
-        if q_arm is None:
-            lo = np.where(np.isfinite(arm.position_lower), arm.position_lower, -1.0)
-            hi = np.where(np.isfinite(arm.position_upper), arm.position_upper, 1.0)
-            q_arm = 0.5 * (lo + hi) + 0.3  # off the straight (singular) pose
-        state = RobotState(q_base=np.zeros(3), q_arm=q_arm)
+        state = RobotState(q_base=np.zeros(3), q_arm=self.warm_up_configuration(q_arm))
         for mode in Mode:
             cmd = self.step(state, Reference(mode))
             if cmd.status == Status.SAFE_STOP:  # at rest, mid-range: only a broken kernel stops here
                 raise RuntimeError(f"{self.name} controller failed its warm-up tick in {mode}: {cmd.reason}")
         self.reset()
         self.clear_statistics()
+
+    def warm_up_configuration(self, q_arm: FloatArray | None = None) -> FloatArray:
+        """[rad] where :meth:`warm_up` ticks: q_arm, or mid-range of every joint, off the straight
+        (singular) pose."""
+        if q_arm is not None:
+            return np.asarray(q_arm, dtype=float)
+        arm = self.robot.arm
+        lo = np.where(np.isfinite(arm.position_lower), arm.position_lower, -1.0)
+        hi = np.where(np.isfinite(arm.position_upper), arm.position_upper, 1.0)
+        return np.asarray(0.5 * (lo + hi) + 0.3, dtype=float)
 
     def clear_statistics(self) -> None:  # noqa: B027 (optional hook, no-op by default)
         """Zero the controller's diagnostic counters (after :meth:`warm_up`)."""

@@ -71,8 +71,9 @@ import numpy as np
 
 from .._jit import jit
 from ..config import ControllerConfig, FloatArray
-from ..limits.collision import CollisionRows, Rows
+from ..limits.collision import CollisionRows, Rows, warm_up_obstacles
 from ..linalg3 import solve_spd, solve_sym3
+from ..manipulability.preference import dm_preference_gain
 from ..model.arm import IntArray
 from ..model.collision import robot_geometry
 from ..model.wmm import WmmModel
@@ -205,9 +206,9 @@ def _add_return_term(q: FloatArray, q_lower: FloatArray, q_upper: FloatArray, ga
 
 @jit
 def _add_nullspace_term(cost: FloatArray, grad_q: FloatArray, k_N: float, v_n_max: FloatArray, g: FloatArray) -> None:
-    """g += −W_x⁻¹ v_n, v_n = [0; k_N ∇H2] of eq. (19), each joint's preference clipped to
-    ±10× its velocity limit: ∇H2 grows like H2³ and is astronomically large next to a singular
-    direction (H2 is capped at 1e6 there)."""
+    """g += −W_x⁻¹ v_n, v_n = [0; k_N ∇H2] of eq. (19) (k_N: the gain of the preference,
+    manipulability/preference.py), each joint's preference clipped to ±v_n_max: ∇H2 grows like
+    H2³ and is astronomically large next to a singular direction (H2 is capped at 1e6 there)."""
     n_w = cost.shape[0] - grad_q.shape[0]
     for i in range(grad_q.shape[0]):
         v_n = min(max(k_N * grad_q[i], -v_n_max[i]), v_n_max[i])
@@ -350,6 +351,8 @@ class QpController(Controller):
         self._no_rows = np.zeros((0, self.n_v))  # no EE box rows (read only)
         self._no_rows.setflags(write=False)
         self._v_n_max = 10.0 * self.robot.arm.velocity_max
+        # ρ of the normalised DM preference, at most the slowest joint's velocity limit
+        self._dm_speed = min(qp.dm_speed, float(np.min(self.robot.arm.velocity_max, initial=np.inf)))
         self._return_gain = RETURN_WEIGHT * self._w_inv[self.n_wheels :] / RETURN_TIME  # see return_term
         self._last_problem: QPProblem | None = None
         self.last_stage = ""
@@ -367,6 +370,27 @@ class QpController(Controller):
     def last_problem(self) -> QPProblem | None:
         """The last QP handed to a backend (for tests and logs)."""
         return self._last_problem
+
+    def warm_up(self, q_arm: FloatArray | None = None) -> None:
+        """:meth:`Controller.warm_up`, then, with collision rows, every mode once more among
+        :func:`~wmm_qp.limits.collision.warm_up_obstacles` around the EE: the obstacles' kernels
+        (boxes, planes, moving obstacles) load now, not in the tick an obstacle first comes near
+        (compiling them there took a tick of 5.6 s on a fresh install). The obstacles in force are
+        restored."""
+        super().warm_up(q_arm)
+        if self.collision is None:
+            return
+        q = self.warm_up_configuration(q_arm)
+        kept = self.collision.shapes
+        self.collision.set_obstacles(warm_up_obstacles(self.model.ee_position(np.zeros(3), q)))
+        try:
+            state = RobotState(q_base=np.zeros(3), q_arm=q)
+            for mode in Mode:  # a safe stop among the obstacles is no failure here: the kernels ran
+                self.step(state, Reference(mode))
+        finally:
+            self.collision.set_obstacles(kept)
+        self.reset()
+        self.clear_statistics()
 
     def reset(self) -> None:
         self._arm.reset()
@@ -542,7 +566,9 @@ class QpController(Controller):
         p.g[: self.n_v] = 0.0
         if mode == Mode.DM_NULLSPACE:
             assert ctx.grad_q is not None
-            _add_nullspace_term(cost, ctx.grad_q, float(self.config.k_N), self._v_n_max, p.g)
+            # eq. (19)'s k_N, floored where ∇H2 is flat (manipulability/preference.py)
+            gain = dm_preference_gain(ctx.grad_q, self.config.k_N, self._dm_speed, self.config.qp.dm_gradient_floor)
+            _add_nullspace_term(cost, ctx.grad_q, gain, self._v_n_max, p.g)
         arm = self.robot.arm
         _add_return_term(ctx.kin.q_arm, arm.position_lower, arm.position_upper, self._return_gain, p.g[self.n_wheels :])
         if C.shape[0]:

@@ -8,8 +8,11 @@ For a monitored pair (a, b) at distance d with closest points p_a, p_b and n̂ =
 with d_s the safety distance (``collision.floor_margin`` for the floor), ξ the gain [m/s] and
 d' = d − τ·max(0, −ḋ_prev) the distance left after the state's age τ at the approach speed the
 robot already has (ḋ_prev from the bounds' centre, the last command): like bounds (13), the rows
-account for the state's latency. Point Jacobians: a point p on joint j moves at v_j + ω_j × (p − o_j),
-so n̂ᵀJ_p = n̂ᵀJ_v + ((p − o_j) × n̂)ᵀJ_ω (the joint's Jacobian in the base frame); for a pair with
+account for the state's latency. A moving obstacle (its ``velocity`` v_b, world frame) closes the
+distance by n̂ᵀv_b on its own: its rows ask that much more of the robot, ḋ = n̂ᵀJ_a v − n̂ᵀv_b
+(the robot gives way at the obstacle's approach speed, as far as the bounds allow).
+Point Jacobians: a point p on joint j moves at v_j + ω_j × (p − o_j), so
+n̂ᵀJ_p = n̂ᵀJ_v + ((p − o_j) × n̂)ᵀJ_ω (the joint's Jacobian in the base frame); for a pair with
 the world (floor, obstacles) the base's motion adds n̂ᵀ[[1, 0, −p_y], [0, 1, p_x], [0, 0, 0]]·M on the
 wheels (eq. (5)'s J_b for the point p, eq. (3)'s M); between two bodies of the robot it cancels.
 
@@ -36,7 +39,7 @@ distance the robot needs to stop (docs/model.md gives the numbers).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import coal
 import numpy as np
@@ -44,7 +47,7 @@ import pinocchio as pin
 
 from .._jit import jit
 from ..config import CollisionParams, FloatArray, ShapeConfig
-from ..model.collision import RobotGeometry, coal_shape, shape_pose, transform
+from ..model.collision import RobotGeometry, bounding_capsule, coal_shape, shape_pose, transform
 from ..scene import Fence, Scene
 from ._distance import box_plane, swept_box, swept_plane, swept_swept
 
@@ -52,6 +55,7 @@ IntArray = np.ndarray
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 RELAX_MARGIN = 1e-9  # [m/s]
+PARALLEL = 0.995  # two rows of one pair of links this parallel (cos) are one
 MAX_ROWS = 48
 """At most this many body pairs per tick, the closest first (further pairs are left out only while
 MAX_ROWS closer ones are within the influence distance); of those, two rows of one pair of links
@@ -116,12 +120,12 @@ class _Obstacle:
     normal_b: FloatArray = field(default_factory=lambda: np.zeros(3))
     offset_b: float = 0.0
     _M: pin.SE3 = field(default_factory=pin.SE3.Identity)
+    velocity_w: FloatArray = field(default_factory=lambda: np.zeros(3))  # [m/s] world frame
 
     def place(self, Rb: FloatArray, tb: FloatArray) -> None:
         """This tick's pose in the base frame, the base at (Rb, tb) in the world."""
         if self.plane:  # n·p_w ≤ c  ⇔  (Rbᵀ n)·p_b ≤ c − n·tb
             self.normal_b, self.offset_b = Rb.T @ self.normal_w, self.offset_w - float(self.normal_w @ tb)
-            self.shape = coal.Halfspace(-self.normal_b, -self.offset_b)  # coal: solid where n'·p ≤ d
             return
         self._M = pin.SE3(Rb.T @ self.world.rotation, Rb.T @ (self.world.translation - tb))
         self.placed.set(0, self.shape, self._M, self.center)
@@ -152,6 +156,8 @@ def _obstacle(s: ShapeConfig, geometry: RobotGeometry) -> _Obstacle:
     o = _Obstacle(s.name, shape, shape_pose(s), center, radius, plane, exempt_mask(geometry, s.exempt))
     if plane:
         o.normal_w, o.offset_w = np.asarray(s.size, dtype=float), float(s.xyz[2])
+    if s.velocity is not None:
+        o.velocity_w = np.asarray(s.velocity, dtype=float)
     return o
 
 
@@ -168,11 +174,22 @@ class CollisionRows:
     def __init__(self, geometry: RobotGeometry, M: FloatArray, params: CollisionParams, latency: float) -> None:
         self.geo = geometry
         self.M = np.asarray(M, dtype=float)
+        own = geometry.robot.collision.influence_distance  # the robot file's, when larger
+        if own is not None and own > params.influence_distance:
+            params = replace(params, influence_distance=own)
         self.p = params
         self.latency = latency
         self.n_w = self.M.shape[1]
         self.n_a = geometry.arm.n
         self.obstacles: list[_Obstacle] = []
+        self.shapes: tuple[ShapeConfig, ...] = ()  # the obstacles in force, as given to set_obstacles
+        self._names: dict[tuple[int, int], str] = {}
+        self._moving = False
+        self._obs_boxes = np.zeros(0, dtype=np.int64)
+        self._obs_joint = np.zeros(0, dtype=np.int64)
+        self._H_world = np.eye(4)[None].copy()  # world → base frame, refilled each tick
+        self._obs: tuple = (np.zeros(0, dtype=np.int64), Table(0), Table(0), np.zeros(0),
+                            np.zeros((0, len(geometry.bodies)), dtype=bool), [])
         self.fence = Fence()
         self._floor = coal.Halfspace(np.array([0.0, 0.0, 1.0]), geometry.floor_z)  # coal: n·p ≤ d is solid: z ≤ floor_z
         self._identity = coal.Transform3s()
@@ -192,7 +209,11 @@ class CollisionRows:
         # the compiled path: each body's primitive in its joint's frame, placed each tick
         self._shapes = Table(len(bodies))
         for k, b in enumerate(bodies):
-            self._shapes.set(k, b.shape, b.placement, b.center)
+            bound = bounding_capsule(b.shape)  # cylinders, convex meshes: a capsule that contains them
+            if bound is None:
+                self._shapes.set(k, b.shape, b.placement, b.center)
+            else:
+                self._shapes.set(k, bound[0], b.placement * bound[1], bound[1].actInv(b.center))
         self._placed = Table(len(bodies))
         self._placed.kind[:] = self._shapes.kind
         self._placed.r[:], self._placed.h[:] = self._shapes.r, self._shapes.h
@@ -208,6 +229,10 @@ class CollisionRows:
                 self._support[j, jm.idx_v : jm.idx_v + jm.nv] = 1.0
                 a = model.parents[a]
         self._fence_A, self._fence_c = np.zeros((0, 2)), np.zeros(0)
+        self._body_joint_ids = np.array([b.joint for b in bodies], dtype=np.int64)
+        links = sorted({b.link for b in bodies})
+        self._body_link = np.array([links.index(b.link) for b in bodies], dtype=np.int64)
+        self._n_links = len(links)
 
     def set_scene(self, scene: Scene) -> None:
         self.set_obstacles(scene.obstacles)
@@ -215,8 +240,31 @@ class CollisionRows:
         self._fence_A, self._fence_c = scene.fence.half_planes()
 
     def set_obstacles(self, obstacles: tuple[ShapeConfig, ...] | list[ShapeConfig]) -> None:
-        """Replace the obstacle set (atomically: the next tick sees the new set only)."""
-        self.obstacles = [_obstacle(s, self.geo) for s in obstacles]
+        """Replace the obstacle set (atomically: the next tick sees the new set only).
+
+        The solid obstacles go into one table (world frame; a cylinder as the capsule that
+        contains it), placed in the base frame each tick in one compiled call; the planes apart."""
+        self.shapes = tuple(obstacles)  # the set in force, as given
+        self._names = {}  # row names by pair (the obstacle indices change here)
+        obs = [_obstacle(s, self.geo) for s in obstacles]
+        solid = [k for k, o in enumerate(obs) if not o.plane]
+        world, placed = Table(len(solid)), Table(len(solid))
+        for r, k in enumerate(solid):
+            o = obs[k]
+            bound = bounding_capsule(o.shape)
+            if bound is None:
+                world.set(r, o.shape, o.world, o.center)
+            else:
+                world.set(r, bound[0], o.world * bound[1], bound[1].actInv(o.center))
+        placed.kind[:], placed.r[:], placed.h[:] = world.kind, world.r, world.h
+        checked = np.array([obs[k].checked for k in solid], dtype=bool).reshape(len(solid), len(self.geo.bodies))
+        radii = np.array([obs[k].radius for k in solid], dtype=float)
+        self._obs = (np.array(solid, dtype=np.int64), world, placed, radii, checked,
+                     [k for k, o in enumerate(obs) if o.plane])
+        self._obs_boxes = np.flatnonzero(world.kind == 1)  # rows of the table that are boxes
+        self._obs_joint = np.zeros(len(solid), dtype=np.int64)  # every obstacle placed by the one H
+        self.obstacles = obs
+        self._moving = any(bool(o.velocity_w.any()) for o in obs)
 
     # ------------------------------------------------------------------ per tick
     def rows(
@@ -240,98 +288,143 @@ class CollisionRows:
         p, d_i = self.p, self.p.influence_distance
         n_v = self.n_w + self.n_a
         out = Rows(np.zeros((0, n_v)), np.zeros(0))
-        sh = self._shapes
-        data = self.geo.arm.data
         oMi = self._oMi
         for k, j in enumerate(self._joint_ids):  # the joints that carry bodies: their placements
             self._Hj[k] = oMi[j].homogeneous
-        _place(self._Hj, self._body_joint, sh, self._placed)
+        _place(self._Hj, self._body_joint, self._shapes, self._placed)
         pl = self._placed
-        found: list[tuple[float, int, int, FloatArray, FloatArray, FloatArray, float, str, tuple[str, str]]] = []
         bodies = self.geo.bodies
+        # every pair within d_i, as arrays: (d, p_a, p_b, n̂, body a, the other side: a body ≥ 0,
+        # the floor -1, obstacle k -2 - k; its d_s)
+        parts: list[tuple[FloatArray, FloatArray, FloatArray, FloatArray, IntArray, IntArray, float]] = []
+        best = [math.inf, 0, 0]
 
-        def take(d: float, i: int, j: int, pa: FloatArray, pb: FloatArray, n: FloatArray, d_s: float,
-                 name: str, key: tuple[str, str]) -> None:
-            if d < out.min_distance:
-                out.min_distance, out.closest = d, name
-            if d < d_i:
-                found.append((d, i, j, pa.copy(), pb.copy(), n.copy(), d_s, name, key))
+        def collect(d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, I: IntArray, J: IntArray,
+                    d_s: float) -> None:
+            k = int(np.argmin(d))
+            if d[k] < best[0]:
+                best[:] = float(d[k]), int(I[k]), int(J[k])
+            near = d < d_i
+            if near.all():
+                parts.append((d, P, Q, N, I, J, d_s))
+            elif near.any():
+                parts.append((d[near], P[near], Q[near], N[near], I[near], J[near], d_s))
 
         # robot vs robot (base frame; the base's motion cancels)
         if self._pairs.shape[0]:
-            gap = np.linalg.norm(pl.centre[self._pairs[:, 0]] - pl.centre[self._pairs[:, 1]], axis=1) - self._pair_r
+            diff = pl.centre[self._pairs[:, 0]] - pl.centre[self._pairs[:, 1]]
+            gap = np.sqrt(np.einsum("ij,ij->i", diff, diff)) - self._pair_r  # (a norm: 3× slower)
             cand = self._pairs[gap <= d_i]
             if cand.shape[0]:
                 d, P, Q, N, ok = _pair_distances(pl, cand[:, 0], cand[:, 1], pl, self._buf(cand.shape[0]))
-                for k in range(cand.shape[0]):
+                for k in np.flatnonzero(~ok).tolist():  # box-box and other shapes: coal
                     i, j = int(cand[k, 0]), int(cand[k, 1])
-                    if not ok[k]:
-                        d[k], P[k], Q[k], N[k] = self._coal(bodies[i].shape, self._T(i), bodies[j].shape, self._T(j))
-                    take(float(d[k]), i, j, P[k], Q[k], N[k], p.safety_distance,
-                         f"{bodies[i].name}/{bodies[j].name}", (bodies[i].link, bodies[j].link))
+                    d[k], P[k], Q[k], N[k] = self._coal(bodies[i].shape, self._T(i), bodies[j].shape, self._T(j))
+                collect(d, P, Q, N, cand[:, 0], cand[:, 1], p.safety_distance)
         # robot vs the floor z = floor_z (the same plane in the base frame)
         if self._floor_idx.shape[0]:
             gap = pl.centre[self._floor_idx, 2] - self._radii[self._floor_idx] - self.geo.floor_z
-            cand = self._floor_idx[gap <= d_i]
-            if cand.shape[0]:
-                d, P, Q, N, ok = _plane_distances(pl, cand, self._floor_n, self._floor_o, self._buf(cand.shape[0]))
-                for k in range(cand.shape[0]):
-                    i = int(cand[k])
-                    if not ok[k]:
-                        d[k], P[k], Q[k], N[k] = self._coal(bodies[i].shape, self._T(i), self._floor, self._identity)
-                    take(float(d[k]), i, -1, P[k], Q[k], N[k], p.floor_margin, f"{bodies[i].name}/floor",
-                         (bodies[i].link, "floor"))
-        n_self = len(found)
+            cand1 = self._floor_idx[gap <= d_i]
+            if cand1.shape[0]:
+                d, P, Q, N, ok = _plane_distances(pl, cand1, self._floor_n, self._floor_o, self._buf(cand1.shape[0]))
+                for k in np.flatnonzero(~ok).tolist():
+                    i = int(cand1[k])
+                    d[k], P[k], Q[k], N[k] = self._coal(bodies[i].shape, self._T(i), self._floor, self._identity)
+                collect(d, P, Q, N, cand1, np.full(cand1.shape[0], -1, dtype=np.int64), p.floor_margin)
         if self.obstacles:  # robot vs obstacles, in the base frame at this base pose
             c, s_ = math.cos(q_base[2]), math.sin(q_base[2])
             Rb = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
             tb = np.array([q_base[0], q_base[1], 0.0])
-            for o in self.obstacles:
+            solid, world, placed, radii, checked, planes = self._obs
+            if solid.shape[0]:
+                H = self._H_world  # world → base frame
+                H[0, :3, :3], H[0, :3, 3] = Rb.T, -(Rb.T @ tb)
+                _place(H, self._obs_joint, world, placed)
+                diff3 = pl.centre[None, :, :] - placed.centre[:, None, :]
+                gap = np.sqrt(np.einsum("obi,obi->ob", diff3, diff3)) - self._radii[None, :] - radii[:, None]
+                boxes = self._obs_boxes
+                if boxes.shape[0]:  # a box: the distance of each body's bounding sphere to the box itself
+                    rel = np.einsum("oji,obj->obi", placed.R[boxes],
+                                    pl.centre[None, :, :] - placed.c[boxes][:, None, :])  # box frame
+                    out_ = np.maximum(np.abs(rel) - placed.h[boxes][:, None, :], 0.0)
+                    gap[boxes] = np.sqrt(np.einsum("obi,obi->ob", out_, out_)) - self._radii[None, :]
+                oi, bi = np.nonzero((gap <= d_i) & checked)
+                if oi.shape[0]:
+                    d, P, Q, N, ok = _pair_distances(pl, bi, oi, placed, self._buf(oi.shape[0]))
+                    for k in np.flatnonzero(~ok).tolist():  # box-box and other shapes: coal
+                        o, i = self.obstacles[int(solid[oi[k]])], int(bi[k])
+                        Mo = pin.SE3(Rb.T @ o.world.rotation, Rb.T @ (o.world.translation - tb))
+                        d[k], P[k], Q[k], N[k] = self._coal(bodies[i].shape, self._T(i), o.shape, transform(Mo))
+                    collect(d, P, Q, N, bi, -2 - solid[oi], p.safety_distance)
+            for oi_ in planes:
+                o = self.obstacles[oi_]
                 o.place(Rb, tb)
-                if o.plane:
-                    cand = np.flatnonzero(o.checked)
-                else:
-                    gap = np.linalg.norm(pl.centre - o.centre_b, axis=1) - self._radii - o.radius
-                    cand = np.flatnonzero((gap <= d_i) & o.checked)
-                if not cand.shape[0]:
+                cand2 = np.flatnonzero(o.checked)
+                if not cand2.shape[0]:
                     continue
-                if o.plane:
-                    d, P, Q, N, ok = _plane_distances(pl, cand, o.normal_b, o.offset_b, self._buf(cand.shape[0]))
-                else:
-                    zeros = np.zeros(cand.shape[0], dtype=np.int64)
-                    d, P, Q, N, ok = _pair_distances(pl, cand, zeros, o.placed, self._buf(cand.shape[0]))
-                for k in range(cand.shape[0]):
-                    i = int(cand[k])
-                    if not ok[k]:
-                        d[k], P[k], Q[k], N[k] = self._coal(bodies[i].shape, self._T(i), o.shape, o.transform())
-                    take(float(d[k]), i, -2, P[k], Q[k], N[k], p.safety_distance, f"{bodies[i].name}/{o.name}",
-                         (bodies[i].link, o.name))
-        fence: list[tuple[FloatArray, float, str]] = []
-        self._fence_rows(q_base, x_ee, J_ee, fence, n_v)
-        if not found and not fence:
+                d, P, Q, N, ok = _plane_distances(pl, cand2, o.normal_b, o.offset_b, self._buf(cand2.shape[0]))
+                for k in np.flatnonzero(~ok).tolist():  # coal's half-space, built when a body needs it
+                    i = int(cand2[k])
+                    o.shape = coal.Halfspace(-o.normal_b, -o.offset_b)  # coal: solid where n'·p ≤ d
+                    d[k], P[k], Q[k], N[k] = self._coal(bodies[i].shape, self._T(i), o.shape, o.transform())
+                collect(d, P, Q, N, cand2, np.full(cand2.shape[0], -2 - oi_, dtype=np.int64), p.safety_distance)
+        if math.isfinite(best[0]):
+            out.min_distance, out.closest = float(best[0]), self._name(int(best[1]), int(best[2]))
+        fC, fd, fnames = self._fence_rows(q_base, x_ee, J_ee, n_v)
+        if not parts and not fnames:
             return out
-        order = sorted(range(len(found)), key=lambda k: found[k][0])[:MAX_ROWS]  # the closest first
-        m = len(order)
-        C = np.zeros((m + len(fence), n_v))
+        if parts:
+            D = np.concatenate([part[0] for part in parts])
+            order = np.argsort(D, kind="stable")[:MAX_ROWS]  # the closest first
+            PA = np.concatenate([part[1] for part in parts])[order]
+            PB = np.concatenate([part[2] for part in parts])[order]
+            NN = np.concatenate([part[3] for part in parts])[order]
+            IA = np.concatenate([part[4] for part in parts])[order]
+            IB = np.concatenate([part[5] for part in parts])[order]
+            DS = np.concatenate([np.full(part[0].shape[0], part[6]) for part in parts])[order]
+            D = D[order]
+        else:
+            D, DS = np.zeros(0), np.zeros(0)
+            IA = IB = np.zeros(0, dtype=np.int64)
+        m = D.shape[0]
+        C = np.zeros((m + len(fnames), n_v))
         if m:
-            sel = [found[k] for k in order]
-            world = np.array([k >= n_self for k in order])
-            ja = np.array([bodies[f[1]].joint for f in sel], dtype=np.int64)
-            jb = np.array([bodies[f[2]].joint if f[2] >= 0 else 0 for f in sel], dtype=np.int64)
-            _point_rows(np.asarray(data.J), self._support, ja, jb, np.array([f[3] for f in sel]),
-                        np.array([f[4] for f in sel]), np.array([f[5] for f in sel]), world, self.M, self.n_w, C)
-        chosen = order
-        dist = np.array([found[k][0] for k in chosen] + [f[1] for f in fence])
-        d_s = np.array([found[k][6] for k in chosen] + [0.0] * len(fence))
-        for k, f in enumerate(fence):
-            C[m + k] = f[0]
-        l, l_brake, damper = _all_bounds(C, v_prev, lb, ub, dist, d_s, d_i, p.gain, self.latency)
-        names = [found[k][7] for k in chosen] + [f[2] for f in fence]
-        keys = [found[k][8] for k in chosen] + [(f[2], "") for f in fence]
-        keep = _distinct_rows(C, l, keys)  # two bodies of one link pair: one row where they are parallel
+            bj = self._body_joint_ids
+            jb = np.where(IB >= 0, bj[np.maximum(IB, 0)], 0)
+            _point_rows(np.asarray(self.geo.arm.data.J), self._support, bj[IA], jb, PA, PB, NN, IB < 0, self.M,
+                        self.n_w, C)
+        if fnames:
+            C[m:] = fC
+        dist = np.concatenate((D, fd))
+        d_s = np.concatenate((DS, np.zeros(len(fnames))))
+        # a moving obstacle b: ḋ = n̂ᵀJ_a v − n̂ᵀv_b, so its rows ask n̂ᵀv_b more of the robot
+        shift = np.zeros(dist.shape[0])
+        if self._moving and m:
+            c, s_ = math.cos(q_base[2]), math.sin(q_base[2])
+            Rb = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
+            for k in np.flatnonzero(IB <= -2).tolist():
+                shift[k] = float(NN[k] @ (Rb.T @ self.obstacles[-2 - int(IB[k])].velocity_w))
+        l, l_brake, damper = _all_bounds(C, v_prev, lb, ub, dist, d_s, d_i, p.gain, self.latency, shift)
+        # two bodies of one pair of links: one row where they are parallel (the key: link a, and
+        # link b, the floor or the obstacle; each fence row its own)
+        nl = self._n_links
+        other = np.where(IB >= 0, self._body_link[np.maximum(IB, 0)], nl - 1 - IB)
+        keys = np.concatenate((self._body_link[IA] * (nl + 2 + len(self.obstacles)) + other,
+                               -1 - np.arange(len(fnames))))
+        keep = _distinct_rows(C, l, keys)
         out.C, out.l, out.l_brake, out.damper, out.distances = C[keep], l[keep], l_brake[keep], damper[keep], dist[keep]
-        out.names = [names[k] for k in keep]
+        out.names = [self._name(int(IA[k]), int(IB[k])) if k < m else fnames[k - m] for k in keep.tolist()]
         return out
+
+    def _name(self, i: int, j: int) -> str:
+        """A row's pair: "a/b" (bodies), "a/floor", "a/<obstacle id>" (j = -2 - its index)."""
+        key = (i, j)
+        name = self._names.get(key)
+        if name is None:
+            bodies = self.geo.bodies
+            other = bodies[j].name if j >= 0 else "floor" if j == -1 else self.obstacles[-2 - j].name
+            name = self._names[key] = f"{bodies[i].name}/{other}"
+        return name
 
     def _buf(self, n: int) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, np.ndarray]:
         return np.empty(n), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty(n, dtype=np.bool_)
@@ -349,25 +442,57 @@ class CollisionRows:
         return float(d), np.asarray(res.getNearestPoint1()), np.asarray(res.getNearestPoint2()), _normal(res)
 
     def _fence_rows(self, q_base: FloatArray, x: FloatArray, J: FloatArray,
-                    out: list[tuple[FloatArray, float, str]], n_v: int) -> None:
-        """(row, distance, name) of each fence damper within the influence distance (d_s = 0)."""
+                    n_v: int) -> tuple[FloatArray, FloatArray, list[str]]:
+        """(rows, distances, names) of the fence dampers within the influence distance (d_s = 0)."""
         f, d_i = self.fence, self.p.influence_distance
         A, c = self._fence_A, self._fence_c
+        rows: list[FloatArray] = []
+        dist: list[float] = []
+        names: list[str] = []
         if A.shape[0] and self.n_w:
-            cs, sn = math.cos(q_base[2]), math.sin(q_base[2])
-            P2 = np.array([[cs, -sn], [sn, cs]]) @ self.M[:2]  # the base origin's world velocity, eq. (3)
             gaps = c - A @ q_base[:2]  # distance to each edge's line, inside ≥ 0
-            for k in np.flatnonzero(gaps < d_i):
-                row = np.zeros(n_v)
-                row[: self.n_w] = -A[k] @ P2  # ḋ = −n_eᵀ ṗ_b
-                out.append((row, float(gaps[k]), f"fence:base edge {k}"))
-        for ax in range(3):
-            for sign, bound in ((1.0, f.ee_upper[ax]), (-1.0, f.ee_lower[ax])):
-                if not math.isfinite(bound):
-                    continue
-                d = sign * (bound - x[ax])
-                if d < d_i:
-                    out.append((-sign * np.asarray(J[ax], dtype=float), float(d), f"fence:ee {'xyz'[ax]}"))
+            near = np.flatnonzero(gaps < d_i)
+            if near.shape[0]:
+                cs, sn = math.cos(q_base[2]), math.sin(q_base[2])
+                P2 = np.array([[cs, -sn], [sn, cs]]) @ self.M[:2]  # the base origin's world velocity, eq. (3)
+                for k in near:
+                    row = np.zeros(n_v)
+                    row[: self.n_w] = -A[k] @ P2  # ḋ = −n_eᵀ ṗ_b
+                    rows.append(row)
+                    dist.append(float(gaps[k]))
+                    names.append(f"fence:base edge {k}")
+        up, lo = f.ee_upper - x, x - f.ee_lower  # inf where the box is open
+        if (up < d_i).any() or (lo < d_i).any():
+            for ax in range(3):
+                for sign, d in ((1.0, up[ax]), (-1.0, lo[ax])):
+                    if d < d_i:
+                        rows.append(-sign * np.asarray(J[ax], dtype=float))
+                        dist.append(float(d))
+                        names.append(f"fence:ee {'xyz'[ax]}")
+        if not rows:
+            return np.zeros((0, n_v)), np.zeros(0), names
+        return np.array(rows), np.array(dist), names
+
+
+def warm_up_obstacles(x: FloatArray) -> tuple[ShapeConfig, ...]:
+    """One obstacle of every kind around the point x [m] (world), each ~0.1 m from it, the sphere
+    moving, the box exempting the EE: ticked once, every compiled kernel of the rows is loaded
+    (or compiled) before a real-time loop starts, not at the first obstacle that comes near."""
+    from ..scene import obstacles_from_tables
+
+    x = np.asarray(x, dtype=float)
+
+    def at(dx: float, dy: float, dz: float) -> list[float]:
+        return [float(x[0] + dx), float(x[1] + dy), float(x[2] + dz)]
+
+    return obstacles_from_tables("<warm-up obstacles>", [
+        {"id": "warm-up sphere", "kind": "sphere", "radius": 0.1, "xyz": at(0.2, 0.0, 0.0),
+         "velocity": [-0.01, 0.0, 0.0]},
+        {"id": "warm-up box", "kind": "box", "size": [0.2, 0.2, 0.2], "xyz": at(-0.2, 0.0, 0.0), "exempt": ["ee"]},
+        {"id": "warm-up capsule", "kind": "capsule", "radius": 0.08, "length": 0.2, "xyz": at(0.0, 0.18, 0.0)},
+        {"id": "warm-up cylinder", "kind": "cylinder", "radius": 0.08, "length": 0.2, "xyz": at(0.0, -0.18, 0.0)},
+        {"id": "warm-up plane", "kind": "plane", "normal": [0.0, 0.0, 1.0], "offset": float(x[2] + 0.15)},
+    ])
 
 
 @jit
@@ -488,14 +613,15 @@ def _point_rows(
 @jit
 def _all_bounds(
     C: FloatArray, v_prev: FloatArray, lb: FloatArray, ub: FloatArray, d: FloatArray, d_s: FloatArray,
-    d_i: float, gain: float, latency: float,
+    d_i: float, gain: float, latency: float, shift: FloatArray,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """(l, l_brake, damper) of every row (see the module docstring)."""
+    """(l, l_brake, damper) of every row (see the module docstring); ``shift``: n̂ᵀv_b of a row
+    against a moving obstacle (0 otherwise)."""
     m = C.shape[0]
     l, l_brake, damper = np.empty(m), np.empty(m), np.empty(m)
     v0 = np.minimum(np.maximum(0.0, lb), ub)
     for k in range(m):
-        dk, best, brake = _row_bounds(C[k], v_prev, v0, lb, ub, d[k], d_s[k], d_i, gain, latency)
+        dk, best, brake = _row_bounds(C[k], v_prev, v0, lb, ub, d[k], d_s[k], d_i, gain, latency, shift[k])
         damper[k] = dk
         # a relaxed row would pass through a vertex of the box exactly: 1e-9 m/s below it, so that
         # no solver's tolerance reads the degenerate (feasible) problem as infeasible
@@ -507,7 +633,7 @@ def _all_bounds(
 @jit
 def _row_bounds(
     row: FloatArray, v_prev: FloatArray, v0: FloatArray, lb: FloatArray, ub: FloatArray,
-    d: float, d_s: float, d_i: float, gain: float, latency: float,
+    d: float, d_s: float, d_i: float, gain: float, latency: float, shift: float,
 ) -> tuple[float, float, float]:
     """(the damper's bound, the most separating rate in lb ≤ v ≤ ub, the braking command's rate)."""
     prev = best = brake = 0.0
@@ -516,27 +642,35 @@ def _row_bounds(
         prev += c * v_prev[i]
         brake += c * v0[i]
         best += c * ub[i] if c > 0.0 else c * lb[i]
-    d_eff = d - latency * max(0.0, -prev)  # the approach during the state's age
-    return -gain * (d_eff - d_s) / (d_i - d_s), best, brake
+    d_eff = d - latency * max(0.0, shift - prev)  # the approach during the state's age (ḋ = prev − shift)
+    return -gain * (d_eff - d_s) / (d_i - d_s) + shift, best, brake
 
 
-def _distinct_rows(C: FloatArray, l: FloatArray, keys: list[tuple[str, str]]) -> list[int]:
+@jit
+def _distinct_rows(C: FloatArray, l: FloatArray, keys: IntArray) -> IntArray:
     """The rows to keep: of two rows of the same pair of links whose directions agree to within
-    cos > 0.995 (one link's several shapes against one obstacle), only the more restrictive."""
-    keep: list[int] = []
-    norms = np.linalg.norm(C, axis=1) + 1e-300
-    for k in range(C.shape[0]):
-        for i, j in enumerate(keep):
-            if keys[j] == keys[k] and float(C[j] @ C[k]) > PARALLEL * norms[j] * norms[k]:
+    cos > PARALLEL (one link's several shapes against one obstacle), only the more restrictive."""
+    m = C.shape[0]
+    norms = np.empty(m)
+    for k in range(m):
+        norms[k] = math.sqrt(np.dot(C[k], C[k])) + 1e-300
+    keep = np.empty(m, dtype=np.int64)
+    n = 0
+    for k in range(m):
+        merged = False
+        for i in range(n):
+            j = keep[i]
+            if keys[j] == keys[k] and np.dot(C[j], C[k]) > PARALLEL * norms[j] * norms[k]:
                 if l[k] / norms[k] > l[j] / norms[j]:
                     keep[i] = k
+                merged = True
                 break
-        else:
-            keep.append(k)
-    return keep
+        if not merged:
+            keep[n] = k
+            n += 1
+    return keep[:n]
 
 
-PARALLEL = 0.995
 
 
 def _normal(res: coal.DistanceResult) -> FloatArray:

@@ -78,6 +78,8 @@ class ArmModel:
     def pin_q(self, q: FloatArray) -> FloatArray:
         """Pinocchio configuration of the n joint values q (a reused buffer)."""
         q = np.asarray(q, dtype=np.float64)
+        if not q.flags.writeable:  # a read-only array (a robot file's start) is another numba type:
+            q = q.copy()  # one specialisation of the kernel, compiled at warm-up, not later
         if q.shape != (self.n,):  # the kernel does not bounds-check
             raise ValueError(f"q must have {self.n} entries, got shape {q.shape}")
         _pin_q(q, self._idx_q, self._nq, self._q)

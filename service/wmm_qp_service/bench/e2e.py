@@ -1,32 +1,42 @@
-"""End-to-end over Zenoh: daemon + sim processes at 500 Hz and 1 kHz (``--only e2e``).
+"""End-to-end over Zenoh: daemon + sim processes, each trigger and rate (``--only e2e``).
 
-Per rate: start ``wmm-qp sim`` and ``wmm-qp serve --rate R`` on loopback (unique prefix and
-ports), wait for a valid state, then track the paper's circle (a setpoint stream at 100 Hz
-with feed-forward velocity, so the QP works on a moving reference and the robot moves) for
-``ticks`` control ticks. A client records every state of the sim and every tick's telemetry
-of the daemon (``loop.telemetry_every = 1``) and the daemon's loop counters before and after.
+Per case (:data:`CASES`: the fixed-rate loop at 500 Hz and 1 kHz, the state-triggered loop at
+1 kHz, the sim's rate): start ``wmm-qp sim`` and ``wmm-qp serve --rate R --trigger T`` on
+loopback (unique prefix and ports), wait for a valid state, then track the paper's circle (a
+setpoint stream at 100 Hz with feed-forward velocity, so the QP works on a moving reference and
+the robot moves) for ``ticks`` control ticks. A client records every state of the sim and every
+tick's telemetry of the daemon (``loop.telemetry_every = 1``) and the daemon's loop counters
+before and after.
 
-Figures per rate:
+Figures per case:
 
 - ``achieved_hz``: daemon ticks per second of daemon time over the window (telemetry ``t``).
 - ``tick_us``: the daemon's work per tick (telemetry ``tick_us``: inputs, validation,
-  watchdogs, smoothing, ``ctl.step``, command encode and publish), p50/p99/max over all ticks.
-- ``deadline_misses`` and ``misses_per_10k``: the daemon's own counter over the window
-  (a tick that starts after its deadline).
-- ``state_to_cmd_us``: from the sim publishing a state to the daemon publishing the command
-  computed from it (stamps of the two processes, same machine clock). The telemetry carries
-  the ground-truth EE of the state the daemon used, which identifies that state exactly
-  among the recorded ones while the robot moves. Includes the wait for the daemon's next tick
-  (up to one period) and the tick's work. The telemetry stamp is taken right after the
-  command's publication (a few µs later).
+  watchdogs, smoothing, ``ctl.step``, command encode and publish, telemetry), p50/p99/max over
+  all ticks; ``step_us``: ``ctl.step`` alone in the same ticks (telemetry ``step_us``);
+  ``tick_over_step_p50``: their ratio.
+- ``deadline_misses`` and ``misses_per_10k``: the daemon's own counter over the window (rate:
+  a tick that starts after its deadline; state: a tick whose command comes more than a period
+  after its state, and every watchdog tick); ``watchdog_ticks`` (state: no state for 1.5
+  periods, the prediction path).
+- ``state_to_cmd_us``: from the sim publishing state k (its ``stamp``) to the daemon publishing
+  the command computed from it (the telemetry's ``state_seq`` = k and ``cmd_stamp``), split into
+  ``state_transport_us`` (to the daemon's receipt, ``state_rx``) and ``daemon_us`` (receipt to
+  publication). Both processes' ``time.time()``, one machine.
+- ``applied_next_step``: the fraction of the window's states k whose command (the one computed
+  from k) is the one the sim applied at step k + 1 (state k + 1's ``cmd_seq``).
 - ``cmd_to_applied_us``: from the command's publication to the first sim state reporting it
-  applied (``StateMsg.cmd_seq``); ``cmds_not_applied``: commands the sim never applied
-  (overwritten in its depth-1 ring by a newer one before its tick).
+  applied; ``cmds_not_applied``: commands the sim never applied (a newer one arrived before its
+  step: overwritten).
+- ``cpu_pct``: each process's CPU share over the window, % of one core
+  (:class:`~.machine.CpuMeter`: /proc CPU time over wall time): ``daemon``, ``sim`` and this
+  recording client.
 - ``telemetry_lost``: gaps in the telemetry's seq (transport drops to the recording client).
 """
 
 from __future__ import annotations
 
+import json
 import os
 import sys
 import tempfile
@@ -39,58 +49,82 @@ import numpy as np
 
 from wmm_qp import RobotConfig
 
-RATES: tuple[float, ...] = (500.0, 1000.0)
+from .machine import CPU_HOW, CpuMeter, loadavg
+
+CASES: tuple[tuple[str, float], ...] = (("rate", 500.0), ("rate", 1000.0), ("state", 1000.0))
+"""(trigger, rate [Hz]) of each case; the state-triggered loop runs at the sim's rate (1 kHz)."""
 SETPOINT_HZ = 100.0  # [Hz]
 STARTUP_TIMEOUT = 60.0  # [s]
 
 
+def case_key(trigger: str, rate_hz: float) -> str:
+    """The result's key of a case: ``"rate 500"``, ``"state 1000"``."""
+    return f"{trigger} {rate_hz:g}"
+
+
 def _pct(a: np.ndarray) -> dict[str, float]:
+    a = a[np.isfinite(a)] if a.size else a
     if a.size == 0:
         nan = float("nan")
-        return {"p50": nan, "p99": nan, "max": nan, "n": 0}
-    p50, p99 = np.percentile(a, [50.0, 99.0])
-    return {"p50": round(float(p50), 1), "p99": round(float(p99), 1), "max": round(float(a.max()), 1), "n": int(a.size)}
+        return {"p50": nan, "p99": nan, "p999": nan, "max": nan, "n": 0}
+    p50, p99, p999 = np.percentile(a, [50.0, 99.0, 99.9])
+    return {"p50": round(float(p50), 1), "p99": round(float(p99), 1), "p999": round(float(p999), 1),
+            "max": round(float(a.max()), 1), "n": int(a.size)}
 
 
-def run_rate(
+def run_case(
+    trigger: str,
     rate_hz: float,
     ticks: int,
     log_dir: Path | None = None,
     robot: RobotConfig | None = None,
     controller_file: Path | None = None,
+    breakdown: bool = False,
 ) -> dict[str, Any]:
-    """One rate: start the stack, track the circle for ``ticks`` ticks, measure, stop.
+    """One case: start the stack, track the circle for ``ticks`` ticks, measure, stop.
 
     Args:
+        trigger: the daemon's ``loop.trigger`` (``rate`` or ``state``).
         rate_hz: [Hz] daemon rate.
         ticks: control ticks to measure (duration = ticks / rate_hz).
         log_dir: the processes' logs (None: a temporary folder).
         robot: the robot; the sim and the daemon load its file and run under its name (None:
             their default).
         controller_file: the daemon's controller config (None: its default).
+        breakdown: the daemon times each stage of its ticks (``--breakdown``): the result gains
+            ``breakdown`` (:meth:`~..tick_stages.TickStages.summary`, over the ticks that
+            published a command, start-up included).
 
     Returns:
         The figures of the module docstring, plus the load average, exit codes and faults.
     """
     from ..client import Client
-    from ..experiments.circle import circle
-    from ..experiments.realtime import Recorder, match_states
     from ..processes import Stack, isolated_config
     from ..protocol import StateMsg
+    from ..streams import circle
 
-    log_dir = log_dir or Path(tempfile.mkdtemp(prefix=f"wmm-qp-e2e-{rate_hz:g}-"))
+    log_dir = log_dir or Path(tempfile.mkdtemp(prefix=f"wmm-qp-e2e-{trigger}-{rate_hz:g}-"))
     svc = isolated_config(robot=robot)
     duration = ticks / rate_hz
     out: dict[str, Any] = {
+        "trigger": trigger,
         "rate_hz": rate_hz,
         "duration_s": round(duration, 2),
-        "loadavg_before": [round(x, 2) for x in os.getloadavg()],
+        "loadavg_before": loadavg(),
         "logs": str(log_dir),
     }
-    ctl_args = [] if controller_file is None else ["--controller-config", str(controller_file)]
-    stack = Stack(svc, rate_hz=rate_hz, log_dir=log_dir, extra_daemon_args=ctl_args,
+    args = ["--trigger", trigger] + ([] if controller_file is None else ["--controller-config", str(controller_file)])
+    breakdown_file = log_dir / "breakdown.json"
+    if breakdown:
+        args += ["--breakdown", str(breakdown_file)]
+    stack = Stack(svc, rate_hz=rate_hz, log_dir=log_dir, extra_daemon_args=args,
                   robot_file=None if robot is None else robot.path)  # fmt: skip
     svc = stack.svc
+    info0 = info1 = None
+    states_raw: list[bytes] = []
+    tel: list[Any] = []
+    cpu: dict[str, float | None] = {}
+    load_during: list[float] = []
     try:
         stack.start()
         with Client(svc, name="bench-e2e", telemetry=True) as c:
@@ -104,6 +138,8 @@ def run_rate(
                 return out | {"available": False, "reason": f"the stack did not come up (logs: {log_dir})"}
             out["controller"] = info.config.get("controller", {}).get("kind")
             out["solver"] = info.config.get("controller", {}).get("solver")
+            from ..experiments.realtime import Recorder
+
             x0 = np.array(st.ee_true)
             rec = Recorder(c).open()
             c.set_mode("track")
@@ -112,33 +148,67 @@ def run_rate(
             rec.states.clear()
             rec.telemetry.clear()
             info0 = c.info()
+            meter = CpuMeter({**{n: p.pid for n, p in stack.procs.items()}, "client": os.getpid()})
             t0 = time.monotonic()
             k = 0
+            next_load = t0
             while (t := time.monotonic() - t0) < duration:
                 x, xd = circle(x0, t + 0.2)
                 c.send_setpoint(x, xd)
                 rec.drain()
                 k += 1
+                if time.monotonic() >= next_load:
+                    load_during.append(round(os.getloadavg()[0], 2))
+                    next_load += 5.0
                 time.sleep(max(0.0, t0 + k / SETPOINT_HZ - time.monotonic()))
+            cpu = meter.shares()
             info1 = c.info()
             rec.drain()
             c.set_mode("hold")
             rec.close()
+            states_raw, tel = rec.states, rec.telemetry
     finally:
         out["exit_codes"] = stack.stop()
-    if info0 is None or info1 is None or not rec.telemetry or not rec.states:
+    if breakdown:
+        try:
+            out["breakdown"] = json.loads(breakdown_file.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as e:
+            out["breakdown"] = {"available": False, "reason": f"{breakdown_file}: {e}"}
+    if info0 is None or info1 is None or not tel or not states_raw:
         return out | {"available": False, "reason": "no status or no telemetry during the window"}
     dec = msgspec.msgpack.Decoder(StateMsg)
-    states = [dec.decode(b) for b in rec.states]
-    tel = rec.telemetry
-    l0, l1 = info0.status.loop, info1.status.loop
+    states = [dec.decode(b) for b in states_raw]
+    return out | figures(states, tel, info0.status.loop, info1.status.loop) | {
+        "cpu_pct": cpu,
+        "cpu_how": CPU_HOW,
+        "loadavg_during": load_during,
+        "violations": dict(states[-1].violations),
+        "rejected": dict(info1.status.rejected),
+        "last_fault": info1.status.last_fault,
+        "faults": dict(info1.status.faults),
+        "loadavg_after": loadavg(),
+    }
+
+
+def figures(states: list[Any], tel: list[Any], l0: Any, l1: Any) -> dict[str, Any]:
+    """The latency and delivery figures of one window (module docstring) from the recorded sim
+    states, the daemon's telemetry, and its loop counters before (``l0``) and after (``l1``)."""
     n_ticks = l1.ticks - l0.ticks
     misses = l1.deadline_misses - l0.deadline_misses
     t_tel = np.array([m.t for m in tel])
     seqs = np.array([m.seq for m in tel])
-    idx = match_states(states, tel)
-    s2c = np.array([(m.stamp - states[i].stamp) * 1e6 for m, i in zip(tel, idx, strict=True)])
-    cmd_stamp = {m.seq: m.stamp for m in tel}
+    by_seq = {s.seq: s for s in states}
+    # state → command, exactly: the command's state_seq names the state
+    from_state = [m for m in tel if m.state_seq >= 0 and m.state_seq in by_seq]
+    s2c = np.array([(m.cmd_stamp - by_seq[m.state_seq].stamp) * 1e6 for m in from_state])
+    transport = np.array([(m.state_rx - by_seq[m.state_seq].stamp) * 1e6 for m in from_state])
+    daemon = np.array([(m.cmd_stamp - m.state_rx) * 1e6 for m in from_state])
+    cmd_of_state = {m.state_seq: m.seq for m in from_state}
+    cmd_stamp = {m.seq: m.cmd_stamp for m in tel}
+    # the command from state k applied at step k + 1 (states of one sim: consecutive seq)
+    lo, hi = min(by_seq), max(by_seq)
+    window = [k for k in range(lo + 1, hi - 1) if k in by_seq and k + 1 in by_seq]
+    on_time = sum(1 for k in window if k in cmd_of_state and by_seq[k + 1].cmd_seq == cmd_of_state[k])
     applied: list[float] = []
     seen: set[int] = set()
     prev = None
@@ -149,38 +219,45 @@ def run_rate(
         prev = s.cmd_seq
     in_window = [q for q in cmd_stamp if seqs[0] < q < seqs[-1] - 2]  # the last ones may be in flight
     span = float(t_tel[-1] - t_tel[0])
-    return out | {
+    tick = _pct(np.array([m.tick_us for m in tel]))
+    step = _pct(np.array([m.step_us for m in tel]))
+    wd = getattr(l1, "watchdog_ticks", 0) - getattr(l0, "watchdog_ticks", 0)
+    return {
         "available": True,
         "ticks": n_ticks,
         "achieved_hz": round(float(seqs[-1] - seqs[0]) / span, 2) if span > 0 else None,
-        "tick_us": _pct(np.array([m.tick_us for m in tel])),
+        "tick_us": tick,
+        "step_us": step,
+        "tick_over_step_p50": round(tick["p50"] / step["p50"], 2) if step["n"] and step["p50"] > 0 else None,
         "deadline_misses": misses,
         "misses_per_10k": round(1e4 * misses / n_ticks, 2) if n_ticks else None,
-        "skipped_ticks_note": "a miss by more than a period skips the missed deadlines (no burst)",
+        "watchdog_ticks": wd,
         "state_to_cmd_us": _pct(s2c),
+        "state_transport_us": _pct(transport),
+        "daemon_us": _pct(daemon),
+        "states_in_window": len(window),
+        "applied_next_step": round(on_time / len(window), 5) if window else None,
+        "states_without_command": sum(1 for k in window if k not in cmd_of_state),
         "cmd_to_applied_us": _pct(np.array(applied)),
         "cmds_not_applied": sum(1 for q in in_window if q not in seen),
         "cmds_in_window": len(in_window),
+        "predicted_cmds": sum(1 for m in tel if m.state_seq < 0),
         "telemetry_lost": int(np.sum(np.diff(seqs) - 1)),
         "daemon_loop_end": msgspec.to_builtins(l1),
-        "violations": dict(states[-1].violations),
-        "rejected": dict(info1.status.rejected),
-        "last_fault": info1.status.last_fault,
-        "loadavg_after": [round(x, 2) for x in os.getloadavg()],
     }
 
 
 def run(
     ticks: int,
-    rates: tuple[float, ...] = RATES,
+    cases: tuple[tuple[str, float], ...] = CASES,
     robot: RobotConfig | None = None,
     controller_file: Path | None = None,
 ) -> dict[str, Any]:
-    """Every rate in turn: {"available", "<rate>": figures of :func:`run_rate`}."""
+    """Every case in turn: {"available", "<trigger> <rate>": figures of :func:`run_case`}."""
     out: dict[str, Any] = {"available": True}
-    for r in rates:
-        print(f"e2e: {r:g} Hz for {ticks} ticks ({ticks / r:.0f} s)", file=sys.stderr, flush=True)
-        res = run_rate(r, ticks, robot=robot, controller_file=controller_file)
-        out[f"{r:g}"] = res
+    for trigger, r in cases:
+        print(f"e2e: {trigger} trigger, {r:g} Hz for {ticks} ticks ({ticks / r:.0f} s)", file=sys.stderr, flush=True)
+        res = run_case(trigger, r, ticks, robot=robot, controller_file=controller_file)
+        out[case_key(trigger, r)] = res
         out["available"] = out["available"] and bool(res.get("available"))
     return out

@@ -10,11 +10,12 @@ import wmm_qp as w
 from wmm_qp.config import TASK_KINDS
 from wmm_qp.solvers import available_solvers
 
-from . import controller, e2e, oneshot, pink_race, scaling
+from . import collision, controller, daemon, e2e, jitter, oneshot, pink_race, scaling
 from .machine import machine_info
 from .stats import now_ns
 
-SECTIONS: tuple[str, ...] = ("controller", "oneshot", "pink", "scaling", "robots", "e2e")
+SECTIONS: tuple[str, ...] = ("controller", "oneshot", "pink", "scaling", "robots", "e2e", "daemon", "collisions",
+                             "jitter")
 
 
 def shipped_robots() -> list[Path]:
@@ -134,6 +135,15 @@ def run_bench(
     if "e2e" in sections:
         print("e2e: daemon + sim over Zenoh", file=sys.stderr, flush=True)
         out["e2e"] = e2e.run(ticks, robot=robot, controller_file=controller_file)
+    if "daemon" in sections:
+        print("daemon: the daemon's tick, stage by stage, over Zenoh", file=sys.stderr, flush=True)
+        out["daemon"] = daemon.run(ticks, robot=robot, controller_file=controller_file)
+    if "collisions" in sections:
+        print("collisions: the track-mode step with and without the collision rows", file=sys.stderr, flush=True)
+        out["collisions"] = collision.run(robot, cfg, min(ticks, 10000), max_seconds)
+    if "jitter" in sections:
+        print("jitter: the daemon's fixed-rate loop with no work (the machine's floor)", file=sys.stderr, flush=True)
+        out["jitter"] = jitter.run(ticks)
     out["targets"] = targets(out)
     return out
 
@@ -167,8 +177,33 @@ def targets(r: dict[str, Any]) -> dict[str, Any]:
         t["pink_over_ours_p50"] = race["ratio_p50"]
         t["at_least_3x_faster_than_pink"] = race["ratio_p50"] >= 3.0
         t["race_fair"] = race["fair"]
-    khz = r.get("e2e", {}).get("1000")
+    e = r.get("e2e", {})
+    khz = e.get("rate 1000")
     if khz and khz.get("available"):
         t["zenoh_1khz_misses_per_10k"] = khz["misses_per_10k"]
         t["zenoh_1khz_lt_10_misses_per_10k"] = khz["misses_per_10k"] < 10.0
+    t |= issue15_targets(e)
+    return t
+
+
+def issue15_targets(e: dict[str, Any]) -> dict[str, Any]:
+    """Issue 15's targets against one e2e run (only the cases that ran)."""
+    t: dict[str, Any] = {}
+    for key in ("rate 500", "rate 1000", "state 1000"):
+        c = e.get(key)
+        if c and c.get("available") and c.get("tick_over_step_p50") is not None:
+            t[f"{key}: tick_over_step_p50"] = c["tick_over_step_p50"]
+            t[f"{key}: tick_p50_within_2x_step"] = c["tick_over_step_p50"] <= 2.0
+            t[f"{key}: misses_per_10k"] = c["misses_per_10k"]
+    s = e.get("state 1000")
+    if s and s.get("available"):
+        lat = s["state_to_cmd_us"]
+        t["state 1000: state_to_cmd_p50_le_200us"] = lat["p50"] <= 200.0
+        t["state 1000: state_to_cmd_p99_le_500us"] = lat["p99"] <= 500.0
+        t["state 1000: applied_next_step_ge_99.9pct"] = (s["applied_next_step"] or 0.0) >= 0.999
+        t["state 1000: no_command_overwritten"] = s["cmds_not_applied"] == 0
+        cpu = s.get("cpu_pct", {})
+        for proc in ("daemon", "sim"):
+            if cpu.get(proc) is not None:
+                t[f"state 1000: {proc}_cpu_le_35pct"] = cpu[proc] <= 35.0
     return t

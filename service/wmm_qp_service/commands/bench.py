@@ -20,7 +20,7 @@ from .common import add_config_arguments, load_configs
 
 HELP = "measure per-tick controller time and the loop over Zenoh"
 
-_SECTIONS = ("controller", "oneshot", "pink", "scaling", "robots", "e2e")
+_SECTIONS = ("controller", "oneshot", "pink", "scaling", "robots", "e2e", "daemon", "collisions", "jitter")
 _MODES = ("hold", "track", "dm_cartesian", "dm_nullspace")
 
 
@@ -107,18 +107,34 @@ def _print_report(r: dict[str, Any]) -> None:
         if isinstance(rows, dict):
             for n, row in rows.items():
                 print(f"scaling    {solver:9s} {n:>2s} arm joints ({row['n_vars']} vars) {_fmt(row['tick_us'])}")
-    for rate, e in r.get("e2e", {}).items():
+    for case, e in r.get("e2e", {}).items():
         if not isinstance(e, dict):
             continue
         if not e.get("available"):
-            print(f"e2e        {rate} Hz: {e.get('reason')}")
+            print(f"e2e        {case} Hz: {e.get('reason')}")
             continue
         print(
-            f"e2e        {rate:>4s} Hz: achieved {e['achieved_hz']} Hz, {e['ticks']} ticks, "
-            f"misses {e['deadline_misses']} ({e['misses_per_10k']} / 10k)"
+            f"e2e        {case:>10s} Hz: achieved {e['achieved_hz']} Hz, {e['ticks']} ticks, "
+            f"misses {e['deadline_misses']} ({e['misses_per_10k']} / 10k, watchdog {e['watchdog_ticks']}), "
+            f"tick/step p50 ×{e['tick_over_step_p50']}, applied at k+1 {e['applied_next_step']}, "
+            f"overwritten {e['cmds_not_applied']}/{e['cmds_in_window']}, CPU % {e.get('cpu_pct')}"
         )
-        for k in ("tick_us", "state_to_cmd_us", "cmd_to_applied_us"):
+        for k in ("tick_us", "step_us", "state_to_cmd_us", "state_transport_us", "daemon_us", "cmd_to_applied_us"):
             print(f"           {k:18s} {_fmt(e[k])}")
+    for case, e in r.get("daemon", {}).items():
+        if not isinstance(e, dict):
+            continue
+        b = e.get("breakdown", {})
+        if not b.get("stages"):
+            print(f"daemon     {case} Hz: {e.get('reason') or b.get('reason')}")
+            continue
+        print(f"daemon     {case:>10s} Hz: tick {_fmt(b['tick'])}, tick/step p50 ×{b.get('tick_over_step_p50')}")
+        for name, st in b["stages"].items():
+            print(f"           {name:18s} {_fmt(st)}")
+    for rate, j in r.get("jitter", {}).items():
+        print(f"jitter     {rate:>5s} Hz, no work, {j['scheduling']}: {j['deadline_misses']} deadline misses in "
+              f"{j['ticks']} ticks ({j['misses_per_10k']} per 10k), late {j['late_us']} µs, "
+              f"steal {j['steal_percent']} %")
     print(f"targets    {r['targets']}")
 
 

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from wmm_qp import ControllerConfig, RobotConfig, load_controller_config, load_robot_config
+from wmm_qp.scene import Scene, load_scene
 
 from ..config import ServiceConfig
 
@@ -38,6 +39,22 @@ def add_robot_argument(parser: argparse.ArgumentParser) -> None:
         help="robot description (configs/robots/*.toml, docs/robots.md; default: "
              "configs/robots/gen3_mecanum.toml)",
     )
+
+
+def add_scene_argument(parser: argparse.ArgumentParser, default: str | None = None) -> None:
+    """``--scene FILE``: obstacles and the workspace fence (default: configs/scenes/default.toml,
+    or what ``default`` says)."""
+    parser.add_argument(
+        "--scene", type=Path, default=None, metavar="FILE",
+        help="scene file: static obstacles and the workspace fence (wmm_qp/scene.py, docs/model.md "
+             "\"Collisions\"; default: "
+             + (default or "configs/scenes/default.toml, a fence 3 m around the start") + ")",
+    )
+
+
+def load_scene_arg(args: argparse.Namespace) -> Scene:
+    """The scene of ``--scene`` (a bad file raises :class:`wmm_qp.ConfigError`: one line, exit 2)."""
+    return load_scene(getattr(args, "scene", None))
 
 
 def add_config_arguments(parser: argparse.ArgumentParser) -> None:

@@ -21,7 +21,7 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
-from .common import add_robot_argument, load_robot
+from .common import add_robot_argument, add_scene_argument, load_robot, load_scene_arg
 
 HELP = "start sim and daemon on loopback, drive every mode, print a summary"
 
@@ -37,6 +37,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--controller-config", type=Path, default=None, metavar="FILE",
                         help="the daemon's controller.toml (default: configs/controller.toml)")
     add_robot_argument(parser)
+    add_scene_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -51,6 +52,7 @@ def run(args: argparse.Namespace) -> int:
     from ..processes import Stack, isolated_config, log_folder
 
     robot = load_robot(args)  # a bad file: one line, exit 2, before anything starts
+    scene = load_scene_arg(args)
     ctl = w.load_controller_config(args.controller_config)
     ctl.weights_for(robot)
     svc = isolated_config(robot=robot)
@@ -58,10 +60,18 @@ def run(args: argparse.Namespace) -> int:
     daemon_args = [] if args.controller_config is None else ["--controller-config",
                                                              str(Path(args.controller_config).resolve())]
     stack = Stack(svc, rate_hz=args.rate, log_dir=log_dir, robot_file=robot.path,
+                  scene_file=scene.path if args.scene is not None else None,  # a scene: collision rows on
                   extra_daemon_args=daemon_args)
+    from ..bench.machine import CPU_HOW, CpuMeter
+
+    meters: list[CpuMeter] = []  # started when the stack is up (start-up is not the loop's CPU)
+    cpu: dict[str, float | None] = {}
     try:
         stack.start()
-        summary = _drive(svc, args.duration, args.json)
+        summary = _drive(svc, args.duration, args.json,
+                         on_ready=lambda: meters.append(CpuMeter({n: p.pid for n, p in stack.procs.items()})))
+        if meters:
+            cpu = meters[0].shares()
     finally:
         codes = stack.stop()
     if summary is None:
@@ -69,6 +79,7 @@ def run(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return 1
     summary["exit_codes"] = codes
+    summary["cpu_pct"], summary["cpu_how"] = cpu, CPU_HOW
     summary["logs"] = str(log_dir)
     summary["robot"] = {"name": robot.name, "file": str(robot.path), "n_arm": robot.n_arm,
                         "n_wheels": robot.n_wheels, "base_kind": robot.base.kind, "task": ctl.task.kind}
@@ -81,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
               f"deadline misses {lp['deadline_misses']}, tick p50 {lp['tick_p50_us']:.0f} µs, "
               f"p99 {lp['tick_p99_us']:.0f} µs, max {lp['tick_max_us']:.0f} µs")
         print(f"      violations {summary['violations_total']} {summary['violations']}")
+        print(f"      CPU % of one core (the scenario's wall time) {cpu}")
         e = summary["ee_error_max"]
         print(f"      EE error max (ground truth) {'n/a' if e is None else f'{e * 100:.2f} cm'}; "
               f"DM along x {summary['dm_start']:.3f} → {summary['dm_end']:.3f}")
@@ -114,7 +126,8 @@ class _Operator:
     quiet_until = 0.0  # [s, wall] statuses stamped before this predate the last mode message
 
 
-def _drive(svc: Any, duration: float, quiet: bool) -> dict[str, Any] | None:
+def _drive(svc: Any, duration: float, quiet: bool,
+           on_ready: Any = None) -> dict[str, Any] | None:
     import numpy as np
 
     from ..client import Client
@@ -123,13 +136,15 @@ def _drive(svc: Any, duration: float, quiet: bool) -> dict[str, Any] | None:
     scale = duration / sum(d for _, d in PHASES)
     say = (lambda m: None) if quiet else (lambda m: print(m, file=sys.stderr, flush=True))
     with Client(svc, name="demo", telemetry=True) as c:
-        info = c.wait_for_daemon(30.0)
+        info = c.wait_for_daemon(90.0)  # a fresh install compiles its kernels at first start
         end = time.monotonic() + 30.0
         while info is not None and not info.status.state_ok and time.monotonic() < end:
             time.sleep(0.1)
             info = c.info()
         if info is None or not info.status.state_ok:
             return None
+        if on_ready is not None:
+            on_ready()
         ee_err: list[float] = []
         per_phase: list[dict[str, Any]] = []
         statuses: Counter[str] = Counter()  # controller statuses of the current phase

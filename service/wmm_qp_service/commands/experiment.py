@@ -23,7 +23,7 @@ import numpy as np
 
 from wmm_qp.config import TASK_KINDS
 
-from .common import add_config_arguments, load_configs
+from .common import add_config_arguments, add_scene_argument, load_configs, load_scene_arg
 
 HELP = "reproduce one of the paper's experiments (circle, dm, push)"
 
@@ -36,6 +36,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--controller", choices=("traditional", "paper", "qp"), default="qp")
     parser.add_argument("--solver", default=None, help="QP backend (qp controller only)")
     parser.add_argument("--direction", choices=("x", "z"), default="x", help="DM direction (dm)")
+    parser.add_argument("--radius", type=float, default=None,
+                        help="circle radius [m] (circle; default the paper's 0.25; the large circle: 1.7)")
+    parser.add_argument("--wheel-units", choices=("rad", "rim"), default="rad",
+                        help="units of the wheel entries of v for the traditional controller's J+: wheel speeds "
+                             "in rad/s (ours) or rim speeds in m/s (the paper's, likely); docs/results.md §1")
     parser.add_argument(
         "--duration",
         type=float,
@@ -51,6 +56,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="per-tick CSV log (push: FILE gets _with_dm/_without_dm suffixes)",
     )
+    add_scene_argument(parser, "none: the paper's setting, no obstacles and no collision rows; "
+                               "a scene turns the qp controller's rows on")
     parser.add_argument("--plots", type=Path, default=None, help="folder for PNG plots")
     parser.add_argument(
         "--realtime",
@@ -84,9 +91,22 @@ def run(args: argparse.Namespace) -> int:
         return _fail(f"--duration must be > 0, got {args.duration}")
     if args.solver is not None and args.controller != "qp":
         return _fail("--solver only applies to --controller qp")
+    if args.radius is not None and (args.name != "circle" or not (np.isfinite(args.radius) and args.radius > 0)):
+        return _fail(f"--radius applies to circle only and must be > 0, got {args.radius}")
+    if args.radius is not None and args.realtime:
+        return _fail("--radius does not apply with --realtime yet (the realtime circle is the paper's 0.25 m)")
+    if args.wheel_units != "rad" and args.controller != "traditional":
+        return _fail("--wheel-units only applies to --controller traditional")
+    if args.wheel_units != "rad" and args.realtime:
+        return _fail("--wheel-units does not apply with --realtime (the daemon builds its own controller)")
     if args.task is not None and args.realtime:
         return _fail("--task does not apply with --realtime (the daemon loads its own --controller-config)")
     robot, ctl_cfg = load_configs(args)
+    # in process, the paper's setting by default: no obstacles and no collision rows (the sim's
+    # referee still checks self and floor collisions); --scene adds the scene and the qp
+    # controller's rows. --realtime runs the service's own stack (its daemon: rows on).
+    scene = load_scene_arg(args) if args.scene is not None else None
+    ctl_cfg = ctl_cfg.with_(collision={"enabled": scene is not None})
     if args.task is not None:
         ctl_cfg = ctl_cfg.with_(task={"kind": args.task})
     if args.plots is not None:
@@ -97,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
 
     def setup() -> Any:
         return make_setup(args.controller, args.solver, slip=not args.no_slip, seed=args.seed, robot=robot,
-                          ctl_cfg=ctl_cfg)
+                          ctl_cfg=ctl_cfg, wheel_units=args.wheel_units, scene=scene)
 
     first = setup()  # a config error (a W of another length, a solver missing) before anything runs
     tty = not args.json or sys.stderr.isatty()
@@ -106,6 +126,10 @@ def run(args: argparse.Namespace) -> int:
                               "controller": args.controller}
     if args.controller == "qp":
         result["solver"] = args.solver
+    if args.controller == "traditional":
+        result["wheel_units"] = args.wheel_units
+    if args.name == "circle":
+        result["radius"] = circle.RADIUS if args.radius is None else args.radius
     if args.realtime and args.name == "push":
         from ..experiments.realtime import run_push_realtime
 
@@ -144,13 +168,14 @@ def run(args: argparse.Namespace) -> int:
                 plots.plot_dm(tr, args.plots, tag)
     elif args.name == "circle":
         s = first
-        tr = circle.run_circle(s, args.duration or circle.DEFAULT_DURATION, progress=tty)
+        radius = circle.RADIUS if args.radius is None else args.radius
+        tr = circle.run_circle(s, args.duration or circle.DEFAULT_DURATION, progress=tty, radius=radius)
         result |= {"duration": float(tr.t[-1] + s.ctl_cfg.dt), **circle.circle_metrics(tr)}
         traces = {"": tr}
         if args.plots:
             from ..experiments.plots import plot_circle
 
-            plot_circle(tr, args.plots, tag)
+            plot_circle(tr, args.plots, circle.plot_tag(tag, radius, args.wheel_units))
     elif args.name == "dm":
         s = first
         duration = args.duration or dm.DEFAULT_DURATION

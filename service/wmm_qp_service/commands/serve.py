@@ -10,11 +10,17 @@ HELP = "run the control daemon (Zenoh)"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from ..cli_common import add_service_arguments
-    from .common import add_robot_argument
+    from .common import add_robot_argument, add_scene_argument
 
     add_service_arguments(parser)
     add_robot_argument(parser)
+    add_scene_argument(parser)
     parser.add_argument("--rate", type=float, help="[Hz] control rate (default: the service config's)")
+    parser.add_argument("--trigger", choices=("rate", "state"),
+                        help="what starts a tick: the fixed-rate clock, or each new state (default: the "
+                             "service config's loop.trigger)")
+    parser.add_argument("--breakdown", metavar="JSON",
+                        help="time each stage of every tick and write the summary to this file at exit")
     parser.add_argument("--controller", choices=("qp", "paper", "traditional"),
                         help="controller kind (default: controller.toml's)")
     parser.add_argument("--solver", help="QP solver (default: controller.toml's)")
@@ -29,15 +35,20 @@ def run(args: argparse.Namespace) -> int:
 
     from ..cli_common import stop_on_signals
     from ..daemon import Daemon, LeaseHeld
-    from .common import robot_service_config
+    from .common import load_scene_arg, robot_service_config
 
     robot, svc = robot_service_config(args)
+    scene = load_scene_arg(args)  # the default scene's fence clamps setpoints in any case
     if args.rate is not None:
         if not 0 < args.rate <= 5000:
             print("wmm-qp serve: error: --rate must be in (0, 5000] Hz", file=sys.stderr)
             return 2
         svc = svc.with_(loop={"rate_hz": args.rate})
+    if args.trigger is not None:
+        svc = svc.with_(loop={"trigger": args.trigger})
     ctl_cfg = w.load_controller_config(args.controller_config)
+    if args.scene is not None:  # a scene given: the qp controller's collision rows on
+        ctl_cfg = ctl_cfg.with_(collision={"enabled": True})
     if args.solver:
         from wmm_qp.solvers import available_solvers
 
@@ -46,11 +57,13 @@ def run(args: argparse.Namespace) -> int:
                   f"{', '.join(available_solvers())}", file=sys.stderr)
             return 2
         ctl_cfg = ctl_cfg.with_(qp={"solver": args.solver})
-    daemon = Daemon(svc, ctl_cfg, robot, kind=args.controller, wait_lease=args.wait_lease)
+    daemon = Daemon(svc, ctl_cfg, robot, kind=args.controller, wait_lease=args.wait_lease, scene=scene,
+                    breakdown=args.breakdown)
     stop = stop_on_signals()
-    print(f"wmm-qp serve: {svc.prefix}/{svc.robot} at {svc.loop.rate_hz:g} Hz "
+    print(f"wmm-qp serve: {svc.prefix}/{svc.robot} at {svc.loop.rate_hz:g} Hz ({svc.loop.trigger} trigger) "
           f"({daemon.core.kind}, {ctl_cfg.task.kind} task; {robot.n_arm} joints, {robot.base.kind} base "
-          f"with {robot.n_wheels} wheels), listening on {svc.zenoh.daemon_endpoint}",
+          f"with {robot.n_wheels} wheels; scene {scene.path}: {len(scene.obstacles)} obstacles, "
+          f"{daemon.core.collision_summary()}), listening on {svc.zenoh.daemon_endpoint}",
           file=sys.stderr, flush=True)
     try:
         final = daemon.run(stop)

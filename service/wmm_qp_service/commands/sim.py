@@ -10,10 +10,11 @@ HELP = "run the simulated robot (Zenoh)"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from ..cli_common import add_service_arguments
-    from .common import add_robot_argument
+    from .common import add_robot_argument, add_scene_argument
 
     add_service_arguments(parser)
     add_robot_argument(parser)
+    add_scene_argument(parser)
     parser.add_argument("--sim-config", metavar="TOML", help="sim config (default: configs/sim.toml)")
     parser.add_argument("--seed", type=int, help="slip/drift noise seed (default: the sim config's)")
     parser.add_argument("--rate", type=float, help="[Hz] sim rate (default: the sim config's)")
@@ -35,9 +36,10 @@ def run(args: argparse.Namespace) -> int:
     from wmm_qp_sim.zenoh_adapter import SimNode
 
     from ..cli_common import stop_on_signals
-    from .common import robot_service_config
+    from .common import load_scene_arg, robot_service_config
 
     robot, svc = robot_service_config(args)
+    scene = load_scene_arg(args)
     sim_cfg = load_sim_config(args.sim_config)
     if args.rate is not None:
         if not args.rate > 0:
@@ -53,10 +55,12 @@ def run(args: argparse.Namespace) -> int:
         print("wmm-qp sim: error: --rt-priority must be in [0, 99]", file=sys.stderr)
         return 2
     node = SimNode(svc, sim_cfg, robot, seed=args.seed, ramp=not args.no_ramp,
-                   state_loss=args.state_loss, state_delay=args.state_delay_ms * 1e-3, rt_priority=prio)
+                   state_loss=args.state_loss, state_delay=args.state_delay_ms * 1e-3, rt_priority=prio, scene=scene)
     stop = stop_on_signals()
     print(f"wmm-qp sim: {svc.prefix}/{svc.robot} at {sim_cfg.rate_hz:g} Hz ({robot.n_arm} joints, "
-          f"{robot.base.kind} base with {robot.n_wheels} wheels), listening on {svc.zenoh.sim_endpoint}",
+          f"{robot.base.kind} base with {robot.n_wheels} wheels; scene {scene.path}: "
+          f"{len(scene.obstacles)} obstacles; collision referee "
+          f"{'on' if node.sim.collision is not None else 'off'}), listening on {svc.zenoh.sim_endpoint}",
           file=sys.stderr, flush=True)
     st = node.run(stop)
     print(f"wmm-qp sim: stopped at t = {st.t:.3f} s, violations {st.violations}, "

@@ -20,6 +20,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rate", type=float, default=1000.0, help="[Hz] control rate")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--logs", metavar="DIR", help="keep the processes' logs here")
+    parser.add_argument("--trigger", choices=("rate", "state"),
+                        help="the daemon's loop.trigger (default: the service config's)")
     add_robot_argument(parser)
 
 
@@ -43,6 +45,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     import numpy as np
 
+    from ..bench.machine import CPU_HOW, CpuMeter
     from ..client import Client
     from ..processes import Stack, isolated_config, log_folder
     from ..teleop import stream_circle, stream_haptic
@@ -50,7 +53,8 @@ def run(args: argparse.Namespace) -> int:
     robot = load_robot(args)  # a bad file: one line, exit 2, before anything starts
     svc = isolated_config(robot=robot)
     log_dir = log_folder(args.logs, "soak")
-    stack = Stack(svc, rate_hz=args.rate, log_dir=log_dir, robot_file=robot.path)
+    stack = Stack(svc, rate_hz=args.rate, log_dir=log_dir, robot_file=robot.path,
+                  extra_daemon_args=[] if args.trigger is None else ["--trigger", args.trigger])
     out: dict[str, Any] = {}
     try:
         stack.start()
@@ -69,9 +73,14 @@ def run(args: argparse.Namespace) -> int:
             x0 = np.array(info.status.x)
             pids = {n: p.pid for n, p in stack.procs.items()}
             rss0 = {n: rss_kib(pid) for n, pid in pids.items()}
+            loop0 = info.status.loop
+            meter = CpuMeter(pids)
+            samples: list[dict[str, Any]] = []  # every segment: time, load average, RSS
             t0 = time.monotonic()
             k = 0
             while (left := args.duration - (time.monotonic() - t0)) > 0:
+                samples.append({"t_s": round(time.monotonic() - t0, 1), "load1": round(os.getloadavg()[0], 2),
+                                "rss_kib": {n: rss_kib(pid) for n, pid in pids.items()}})
                 seg = min(20.0, left)
                 if k % 2 == 0:
                     stream_haptic(c, x0, seg, seed=k)
@@ -81,13 +90,24 @@ def run(args: argparse.Namespace) -> int:
                 c.set_mode("hold")
                 time.sleep(0.5)
                 c.set_mode("track")
+            cpu = meter.shares()
             final = c.info()
             st = c.latest_state() or c.wait_state(2.0)
             rss1 = {n: rss_kib(pid) for n, pid in pids.items()}
         if final is None:
             return 1
         lp = final.status.loop
-        out = {"robot": robot.name, "duration_s": args.duration, "rate_hz": args.rate, "ticks": lp.ticks,
+        n = lp.ticks - loop0.ticks
+        misses = lp.deadline_misses - loop0.deadline_misses
+        loads = [x["load1"] for x in samples]
+        out = {"robot": robot.name, "duration_s": args.duration, "rate_hz": args.rate, "trigger": lp.trigger,
+               "window_ticks": n, "window_misses": misses,
+               "misses_per_10k": round(1e4 * misses / n, 2) if n else None,
+               "watchdog_ticks": lp.watchdog_ticks - loop0.watchdog_ticks,
+               "cpu_pct": cpu, "cpu_how": CPU_HOW,
+               "load1_during": {"min": min(loads, default=None), "max": max(loads, default=None),
+                                "median": sorted(loads)[len(loads) // 2] if loads else None},
+               "samples": samples, "ticks": lp.ticks,
                "deadline_misses": lp.deadline_misses, "tick_p50_us": lp.tick_p50_us,
                "tick_p99_us": lp.tick_p99_us, "tick_max_us": lp.tick_max_us,
                "measured_hz": lp.measured_hz, "rss_kib_start": rss0, "rss_kib_end": rss1,
@@ -102,9 +122,11 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(out))
     else:
-        print(f"soak: {out['duration_s']:g} s at {out['rate_hz']:g} Hz — ticks {out['ticks']}, "
-              f"deadline misses {out['deadline_misses']}, tick p50 {out['tick_p50_us']:.0f} µs, "
-              f"p99 {out['tick_p99_us']:.0f} µs, max {out['tick_max_us']:.0f} µs")
+        print(f"soak: {out['duration_s']:g} s at {out['rate_hz']:g} Hz ({out['trigger']} trigger) — ticks "
+              f"{out['ticks']}, deadline misses {out['deadline_misses']} ({out['misses_per_10k']} per 10k in the "
+              f"window), tick p50 {out['tick_p50_us']:.0f} µs, p99 {out['tick_p99_us']:.0f} µs, max "
+              f"{out['tick_max_us']:.0f} µs")
+        print(f"      CPU % of one core {out['cpu_pct']}; load average (1 min) {out['load1_during']}")
         print(f"      RSS [KiB] start {out['rss_kib_start']} end {out['rss_kib_end']}")
         print(f"      violations {out['violations']}; faults {out['faults'] or 'none'}; "
               f"protective stops {out['protective_stops']}; exit codes {out['exit_codes']}")

@@ -16,7 +16,7 @@ from wmm_qp.controllers.qp import QpController
 from wmm_qp.solvers import SOLVER_NAMES
 from wmm_qp.verify import KINDS, verify_controller
 
-from .common import add_config_arguments, load_configs
+from .common import add_config_arguments, add_scene_argument, load_configs, load_scene_arg
 
 HELP = "sample random states and check every command against every hard bound"
 
@@ -50,6 +50,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--task", choices=TASK_KINDS, default=None,
                         help="task kind, overriding the controller config's [task] kind")
     add_config_arguments(parser)
+    add_scene_argument(parser, "none: the bounds only; a scene turns the qp controller's collision rows on and "
+                               "referees collisions too (states sampled near self-collisions, obstacles, the fence)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -58,6 +60,9 @@ def run(args: argparse.Namespace) -> int:
         cfg = cfg.with_(qp={"solver": args.solver})
     if args.task:
         cfg = cfg.with_(task={"kind": args.task})
+    scene = load_scene_arg(args) if args.scene is not None else None
+    if scene is not None:  # the scene's obstacles and fence: the qp controller's rows on
+        cfg = cfg.with_(collision={"enabled": True})
     model = w.WmmModel(robot)
     ctl = w.make_controller(args.controller, model, cfg)
     tty = sys.stderr.isatty() and not args.json
@@ -66,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
         if tty and (i % 50 == 0 or i == n):
             print(f"\rverify: {i}/{n} states", end="" if i < n else "\n", file=sys.stderr, flush=True)
 
-    rep = verify_controller(ctl, model, args.samples, args.seed, progress)
+    rep = verify_controller(ctl, model, args.samples, args.seed, progress, scene=scene)
     label = f"{robot.name}, {cfg.task.kind} task: " + args.controller
     label += f" ({ctl.solver})" if isinstance(ctl, QpController) else ""
     if args.json:
@@ -87,11 +92,14 @@ def run(args: argparse.Namespace) -> int:
                     "statuses": rep.statuses,
                     "examples": rep.examples,
                     "seed": args.seed,
+                    "scene": None if scene is None else str(scene.path),
                 }
             )
         )
     else:
-        print(f"{label}: {rep.samples} states x {len(rep.by_mode)} modes = {rep.steps} commands, seed {args.seed}")
+        where = "no collision referee" if scene is None else f"scene {scene.path}"
+        print(f"{label}: {rep.samples} states x {len(rep.by_mode)} modes = {rep.steps} commands, seed {args.seed}, "
+              f"{where}")
         print(f"{'mode':<14}" + "".join(f"{k:>14}" for k in KINDS))
         for mode, counts in rep.by_mode.items():
             print(f"{mode:<14}" + "".join(f"{counts[k]:>14}" for k in KINDS))

@@ -1,9 +1,9 @@
 """The circle beyond the arm's workspace (paper Sec. IV-B, Table I, Figs. 5–6).
 
-x_d(t) = x0 + [0.25(cos ωt − 1), 0.25 sin ωt, 0], ω = π/20 rad/s, with its feed-forward
-velocity, TRACK mode, from the robot's start configuration (``arm.start``; the Gen3's is the
-paper's), base slip on. x0 is the true EE position at t = 0. Any robot: with the pose task the
-reference also holds the EE's start orientation (quat_d, ω_d = 0).
+x_d(t) = x0 + [r(cos ωt − 1), r sin ωt, 0], ω = π/20 rad/s, r = 0.25 m (the paper's; any
+radius with ``radius``), with its feed-forward velocity, TRACK mode, from the robot's start
+configuration (``arm.start``; the Gen3's is the paper's), base slip on. x0 is the true EE
+position at t = 0. Any robot: with the pose task the reference also holds the EE's start orientation (quat_d, ω_d = 0).
 """
 
 from __future__ import annotations
@@ -19,28 +19,39 @@ from wmm_qp.tasks import rotation_to_quat
 
 from .runner import Setup, Trace, rms, run
 
-RADIUS = 0.25  # [m]
+RADIUS = 0.25  # [m] the paper's
+LARGE_RADIUS = 1.7  # [m] the large circle: ~2.27x the arm-alone largest (the paper: 0.25 vs 0.11 m); results.md §1
 OMEGA = math.pi / 20.0  # [rad/s]
 DEFAULT_DURATION = 40.0  # [s] one full circle
 BASE_MOVING = 1e-4  # [m/s] / [rad/s]: the base counts as moving above this commanded speed
 
 
-def circle(x0: FloatArray, t: float) -> tuple[FloatArray, FloatArray]:
-    """x_d(t) [m] and ẋ_d(t) [m/s]."""
+def circle(x0: FloatArray, t: float, radius: float = RADIUS) -> tuple[FloatArray, FloatArray]:
+    """x_d(t) [m] and ẋ_d(t) [m/s] of the circle of ``radius`` [m] through x0."""
     c, s = math.cos(OMEGA * t), math.sin(OMEGA * t)
-    x_d = x0 + np.array([RADIUS * (c - 1.0), RADIUS * s, 0.0])
-    xd_d = np.array([-RADIUS * OMEGA * s, RADIUS * OMEGA * c, 0.0])
+    x_d = x0 + np.array([radius * (c - 1.0), radius * s, 0.0])
+    xd_d = np.array([-radius * OMEGA * s, radius * OMEGA * c, 0.0])
     return x_d, xd_d
 
 
-def run_circle(setup: Setup, duration: float = DEFAULT_DURATION, progress: bool = True) -> Trace:
-    """Run the circle and return its trace."""
+def plot_tag(tag: str, radius: float, wheel_units: str = "rad") -> str:
+    """The plots' file tag: the controller's, ``_r<cm>`` for another radius than the paper's,
+    ``_rim`` for the traditional controller's rim-speed J⁺ (``circle_qp.png`` stays the paper's)."""
+    if abs(radius - RADIUS) > 1e-12:
+        tag += f"_r{radius * 100:g}"
+    return tag + ("_rim" if wheel_units == "rim" else "")
+
+
+def run_circle(
+    setup: Setup, duration: float = DEFAULT_DURATION, progress: bool = True, radius: float = RADIUS
+) -> Trace:
+    """Run the circle of ``radius`` [m] and return its trace."""
     q_arm = np.array(setup.robot.arm.start)
     x0 = setup.model.ee_position(np.zeros(3), q_arm)
     quat_d = rotation_to_quat(setup.model.ee_pose(np.zeros(3), q_arm)[1]) if setup.controller.pose else None
 
     def reference(t: float, _st: Any, _cmd: Any) -> wmm_qp.Reference:
-        x_d, xd_d = circle(x0, t)
+        x_d, xd_d = circle(x0, t, radius)
         return wmm_qp.Reference(mode=wmm_qp.Mode.TRACK, x_d=x_d, xd_d=xd_d, quat_d=quat_d)
 
     return run(

@@ -27,6 +27,7 @@ from .runner import Setup, Trace, run
 CARTESIAN_END = 5.0  # [s]
 DEFAULT_DURATION = 20.0  # [s]
 DIRECTIONS = {"x": np.array([1.0, 0.0, 0.0]), "z": np.array([0.0, 0.0, 1.0])}
+PAPER_DM_FINAL = {"x": 5.88, "z": 4.031}  # the paper's final DM: Fig. 9 (x), its simulation (z)
 
 
 def dm_reference(
@@ -75,6 +76,10 @@ def dm_metrics(trace: Trace, setup: Setup, direction: str, t_switch: float) -> d
     - ``torque_norm_per_10N_*``: [N·m] ‖W J_mᵀ u‖·10 N = 10 / H2.
     - ``ee_box_holds_start``: the start EE position lies inside the controller config's EE box
       on every boxed axis (else the Cartesian phase cannot move, eq. (17)).
+    - ``paper_dm_final``, ``t_paper_dm_final``: the paper's final DM along this direction and the
+      first tick [s] our DM reaches it (null if never).
+    - ``dm_max``: the largest DM of the run; ``dm_final_rate``: [1/s] the DM's mean rate of change
+      over the last second (≈ 0: the ascent has settled).
     """
     i5 = trace.at(t_switch)
     ns = slice(i5, None)
@@ -86,6 +91,10 @@ def dm_metrics(trace: Trace, setup: Setup, direction: str, t_switch: float) -> d
     drift_model = np.linalg.norm(
         x_model - trace.ee_des[i5 + 1] if i5 + 1 < len(trace.t) else x_model, axis=1
     )
+    target = PAPER_DM_FINAL.get(direction)
+    reached = np.flatnonzero(trace.dm >= target) if target is not None else np.zeros(0, dtype=int)
+    i_last = trace.at(float(trace.t[-1]) - 1.0)
+    span = float(trace.t[-1] - trace.t[i_last])
     return {
         "direction": direction,
         "dm_start": float(trace.dm[0]),
@@ -93,6 +102,10 @@ def dm_metrics(trace: Trace, setup: Setup, direction: str, t_switch: float) -> d
         "z_start": float(trace.ee_true[0, 2]),
         "z_after_cartesian": float(trace.ee_true[i5, 2]),
         "dm_final": float(trace.dm[-1]),
+        "dm_max": float(trace.dm.max()),
+        "dm_final_rate": float(trace.dm[-1] - trace.dm[i_last]) / span if span > 0 else 0.0,
+        "paper_dm_final": target,
+        "t_paper_dm_final": float(trace.t[reached[0]]) if reached.size else None,
         "ee_drift_max": float(drift.max()) if drift.size else 0.0,
         "ee_drift_max_model": float(drift_model.max()) if drift_model.size else 0.0,
         "base_travel": float(np.linalg.norm(trace.base_true[-1, :2] - trace.base_true[0, :2])),

@@ -20,6 +20,7 @@ run shows whether that arm can push this box, not the paper's claim.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -55,17 +56,30 @@ def _push_phase(setup: Setup, trace0: Trace | None, scale: float, progress: str 
     if sim is None:
         from wmm_qp_sim import SimRobot
 
-        sim = SimRobot(m, setup.sim_cfg, seed=setup.seed)
+        sim = SimRobot(m, setup.sim_cfg, seed=setup.seed, scene=setup.scene)
         sim.reset()
     st = sim.state()
     x_start = m.ee_position(st.base_odom, st.q_arm)
     sim.place_box(box_at(st.ee_true))
+    # the box is an obstacle for every body but the EE's (the sim's referee checks it too)
+    set_obstacles = getattr(setup.controller, "set_obstacles", None)
+    scene_obstacles = setup.scene.obstacles if setup.scene is not None else ()
+    placed = [math.nan]
+
+    def box_obstacle() -> None:
+        if set_obstacles is not None and sim.box is not None and abs(sim.box.face_x - placed[0]) > 1e-3:
+            placed[0] = sim.box.face_x
+            box = sim.box_obstacle()
+            set_obstacles(scene_obstacles + ((box,) if box is not None else ()))
+
+    box_obstacle()
     distance = GAP + TARGET + OVERSHOOT
     speed = PUSH_SPEED / scale
     t_move = distance / speed
     duration = t_move + SETTLE * scale
 
     def reference(t: float, _st: Any, _cmd: Any) -> wmm_qp.Reference:
+        box_obstacle()  # where the box is now
         s = min(t, t_move)
         v = speed if t < t_move else 0.0
         return wmm_qp.Reference(

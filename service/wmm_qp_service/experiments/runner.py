@@ -20,6 +20,7 @@ from wmm_qp_sim import BoxConfig, SimCommand, SimConfig, SimRobot, SimState
 import wmm_qp
 from wmm_qp.config import FloatArray
 from wmm_qp.manipulability import directional_manipulability
+from wmm_qp.scene import Scene
 
 ReferenceFn = Callable[[float, SimState, wmm_qp.Command | None], wmm_qp.Reference]
 """(t [s], true sim state, previous command) → the reference of this tick."""
@@ -109,6 +110,8 @@ class Setup:
         ctl_cfg: the controller's config (rate, gains).
         sim_cfg: the sim's config.
         seed: slip/drift seed.
+        scene: obstacles and fence: the qp controller's collision rows keep the robot clear of
+            them, the sim's collision referee checks them (None: no obstacles, no fence).
     """
 
     model: wmm_qp.WmmModel
@@ -116,6 +119,7 @@ class Setup:
     ctl_cfg: wmm_qp.ControllerConfig
     sim_cfg: SimConfig
     seed: int | None = None
+    scene: Scene | None = None
 
     @property
     def robot(self) -> wmm_qp.RobotConfig:
@@ -160,7 +164,7 @@ def run(
     u = np.asarray(dm_direction, dtype=float)
     u = u / np.linalg.norm(u)
     if sim is None:
-        sim = SimRobot(m, setup.sim_cfg, seed=setup.seed)
+        sim = SimRobot(m, setup.sim_cfg, seed=setup.seed, scene=setup.scene)
         sim.reset(
             q_base=np.zeros(3) if q_base is None else q_base,
             q_arm=q_arm,  # None: the robot's arm.start
@@ -292,6 +296,8 @@ def make_setup(
     seed: int | None = None,
     robot: wmm_qp.RobotConfig | None = None,
     ctl_cfg: wmm_qp.ControllerConfig | None = None,
+    wheel_units: str = "rad",
+    scene: Scene | None = None,
 ) -> Setup:
     """Load the configs and build the model, the controller and the sim config.
 
@@ -302,6 +308,9 @@ def make_setup(
         seed: slip seed; None = the sim config's.
         robot: the robot description; None = the default robot file (the Gen3).
         ctl_cfg: the controller config; None = the default controller config.
+        wheel_units: the traditional controller's J⁺ units, "rad" or "rim" (controllers/traditional.py).
+        scene: obstacles and fence (``--scene``), given to the controller (its collision rows, when
+            its config has them on) and to the sim's referee; None: none.
     """
     from wmm_qp_sim import load_sim_config
 
@@ -311,13 +320,21 @@ def make_setup(
     cfg.weights_for(robot)  # a W of another length than the robot's: the config error, now
     if solver is not None:
         cfg = cfg.with_(qp={"solver": solver})
-    ctl = wmm_qp.make_controller(controller, model, cfg)
+    if controller == "traditional":
+        from wmm_qp.controllers.traditional import TraditionalController
+
+        ctl: wmm_qp.Controller = TraditionalController(model, cfg, wheel_units=wheel_units)
+    else:
+        ctl = wmm_qp.make_controller(controller, model, cfg)
     # firmware off: the experiments measure the controllers, so the referee must see what a
     # controller commands without the robot's own protective stop masking it
     sim_cfg = load_sim_config().with_(firmware=False)
     if not slip:
         sim_cfg = sim_cfg.with_(slip={"enabled": False})
-    return Setup(model=model, controller=ctl, ctl_cfg=cfg, sim_cfg=sim_cfg, seed=seed)
+    set_scene = getattr(ctl, "set_scene", None)
+    if set_scene is not None and scene is not None:
+        set_scene(scene)
+    return Setup(model=model, controller=ctl, ctl_cfg=cfg, sim_cfg=sim_cfg, seed=seed, scene=scene)
 
 
 def rms(a: FloatArray) -> float:

@@ -1,0 +1,133 @@
+"""End to end in a real headless browser (Debian's chromium through Playwright): sim and daemon
+running, ``wmm-qp console`` attached; the page loads, its 3D canvas is not blank (a screenshot,
+analysed), a mode button changes the daemon's mode (read back from its ``status``), and a move
+of the target gizmo through viser's own message streams setpoints that move the simulated EE.
+
+Screenshots: ``WMM_QP_CONSOLE_SHOTS=docs/img .venv/bin/pytest tests/test_console_browser.py``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from console_helpers import (
+    StatusLog,
+    browser_missing,
+    canvas_not_blank,
+    chromium_page,
+    click_button,
+    console_process,
+    save_shot,
+    scene_pixels,
+    screenshot,
+    service_args,
+    wait_for,
+)
+
+pytestmark = [pytest.mark.integration, pytest.mark.slow]
+
+
+def test_the_blank_check_rejects_a_white_or_uniform_canvas() -> None:
+    assert not canvas_not_blank(np.full((200, 300, 3), 255, dtype=np.int16))[0]
+    assert not canvas_not_blank(np.full((200, 300, 3), 40, dtype=np.int16))[0]
+
+
+def test_console_in_chromium_drives_the_robot(tmp_path: Path) -> None:
+    why = browser_missing()
+    if why:
+        pytest.skip(why)
+    from wmm_qp_service.client import Client
+    from wmm_qp_service.processes import Stack, free_port, isolated_config
+
+    with Stack(isolated_config(), log_dir=tmp_path) as stack, Client(stack.svc, name="observer") as obs:
+        assert obs.wait_for_daemon(60.0) is not None, "daemon did not answer"
+        port = free_port()
+        with console_process(["--port", str(port), *service_args(stack.svc)], tmp_path / "console.log") as (_, url), \
+                chromium_page(tmp_path / "chromium-profile") as page:
+            assert url == f"http://127.0.0.1:{port}"
+            browser_log: list[str] = []
+            page.on("console", lambda m: browser_log.append(m.text[:200]))
+            try:
+                _drive(page, url, obs, tmp_path)
+            except Exception:
+                save_shot(screenshot(page), tmp_path, "failure.png")
+                print("browser console:", *browser_log[-20:], sep="\n  ")
+                raise
+
+
+def dark_map(px: np.ndarray, cols: int = 60, rows: int = 20) -> str:
+    """The view's dark pixels (those canvas_not_blank counts) as text, one character per cell
+    ('#': > 10 % dark, '+': some, '.': none): what CI's log shows of a view that did not pass."""
+    dark = (px < 130).all(axis=2)
+    h, w = dark.shape
+    out = []
+    for r in range(rows):
+        cells = []
+        for c in range(cols):
+            f = dark[r * h // rows:(r + 1) * h // rows, c * w // cols:(c + 1) * w // cols].mean()
+            cells.append("#" if f > 0.1 else "+" if f > 0 else ".")
+        out.append("".join(cells))
+    return "\n".join(out)
+
+
+def _drive(page: Any, url: str, obs: Any, tmp_path: Path) -> None:
+    from wmm_qp_service.console.wire import move_gizmo
+
+    page.goto(url)
+    wait_for("a canvas on the page", lambda: page.locator("canvas").count() > 0, timeout=60.0)
+    page.get_by_role("button", name="Track").wait_for(state="attached", timeout=60_000)
+    log = StatusLog(obs)
+
+    def click(name: str) -> None:
+        click_button(page, name)
+
+    page.evaluate("""() => document.querySelectorAll('.mantine-Notification-closeButton')
+                     .forEach(b => b.click())""")  # the "software WebGL" notice, out of the screenshots
+    verdict: list[str] = []
+
+    def rendered() -> bytes | None:  # software WebGL takes its time: poll screenshots
+        png = screenshot(page)
+        px = scene_pixels(png)
+        ok, why = canvas_not_blank(px)
+        verdict[:] = [why, dark_map(px)]
+        return png if ok else None
+
+    print("page loaded", flush=True)
+    try:  # software WebGL on a loaded 2-core machine has taken minutes to draw the first frames
+        png = wait_for("a 3D view that is not blank", rendered, timeout=240.0, every=1.0)
+    except AssertionError as e:
+        raise AssertionError(f"{e}; last screenshot: {verdict[0]}; its dark pixels:\n{verdict[1]}") from None
+    save_shot(png, tmp_path, "console.png")
+    print("3D view rendered", flush=True)
+
+    for label, mode in (("DM Cartesian", "dm_cartesian"), ("Track", "track")):
+        since = log.mark()
+        click(label)
+        wait_for(f"mode {mode} in the daemon's status after a click on {label!r}",
+                 lambda mode=mode, since=since: log.mode_seen(mode, since), timeout=60.0)
+    print("mode buttons work", flush=True)
+
+    st = wait_for("a status with the EE", lambda: (s := obs.latest_status()) and s.x and s)
+    target = np.asarray(st.x) + np.array([0.06, -0.04, 0.05])
+    accepted0 = st.accepted.get("setpoint", 0)
+    move_gizmo(url, target)
+
+    def near() -> bool:
+        s, state = obs.latest_status(), obs.latest_state()
+        if s is not None and s.resume_needed:  # a safe stop on a loaded machine: resume as an operator would
+            click("Track")
+            move_gizmo(url, target)
+        return state is not None and float(np.linalg.norm(np.asarray(state.ee_true) - target)) < 0.01
+
+    wait_for(f"the simulated EE at the gizmo's {target.round(3).tolist()}", near, timeout=60.0)
+    s = obs.latest_status()
+    assert s is not None and s.accepted.get("setpoint", 0) > accepted0
+    assert s.operator.startswith("console-")
+    page.wait_for_timeout(1500)
+    save_shot(screenshot(page), tmp_path, "console_moved.png")
+    since = log.mark()
+    click("STOP (hold)")
+    wait_for("mode hold after STOP", lambda: log.mode_seen("hold", since))
