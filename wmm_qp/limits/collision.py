@@ -47,7 +47,7 @@ import pinocchio as pin
 
 from .._jit import jit
 from ..config import CollisionParams, FloatArray, ShapeConfig
-from ..model.collision import RobotGeometry, bounding_capsule, coal_shape, shape_pose, transform
+from ..model.collision import RobotGeometry, bounding_sphere, coal_shape, row_shape, shape_pose, transform
 from ..scene import Fence, Scene
 from ._distance import box_plane, swept_box, swept_plane, swept_swept
 
@@ -149,10 +149,7 @@ def exempt_mask(geometry: RobotGeometry, exempt: tuple[str, ...]) -> FloatArray:
 def _obstacle(s: ShapeConfig, geometry: RobotGeometry) -> _Obstacle:
     shape = coal_shape(s)
     plane = s.kind == "plane"
-    if not plane:
-        shape.computeLocalAABB()
-    center = np.zeros(3) if plane else np.asarray(shape.aabb_center, dtype=float).copy()
-    radius = math.inf if plane else float(shape.aabb_radius)
+    center, radius = (np.zeros(3), math.inf) if plane else bounding_sphere(row_shape(shape))
     o = _Obstacle(s.name, shape, shape_pose(s), center, radius, plane, exempt_mask(geometry, s.exempt))
     if plane:
         o.normal_w, o.offset_w = np.asarray(s.size, dtype=float), float(s.xyz[2])
@@ -196,12 +193,14 @@ class CollisionRows:
         self._req = coal.DistanceRequest()
         self._res = coal.DistanceResult()
         bodies = geometry.bodies
-        # the broad phase's arrays: each body's bounding-sphere centre in its joint's frame
         self._joints = np.unique([b.joint for b in bodies]) if bodies else np.zeros(0, dtype=int)
         where = {int(j): k for k, j in enumerate(self._joints)}
         self._body_joint = np.array([where[b.joint] for b in bodies], dtype=int)
-        self._local_centers = np.array([b.placement.act(b.center) for b in bodies]).reshape(-1, 3)
-        self._radii = np.array([b.radius for b in bodies], dtype=float)
+        # the broad phase: each row shape's bounding sphere (a cylinder's capsule reaches past the
+        # cylinder's own sphere: culling on that would let a pair in already inside d_s)
+        row_shapes = [row_shape(b.shape) for b in bodies]
+        spheres = [bounding_sphere(shape) for shape in row_shapes]
+        self._radii = np.array([r for _, r in spheres], dtype=float)
         self._pairs = np.array(geometry.self_pairs, dtype=int).reshape(-1, 2)
         self._pair_r = self._radii[self._pairs[:, 0]] + self._radii[self._pairs[:, 1]]
         self._floor_idx = np.array(geometry.floor_bodies, dtype=int)
@@ -209,11 +208,7 @@ class CollisionRows:
         # the compiled path: each body's primitive in its joint's frame, placed each tick
         self._shapes = Table(len(bodies))
         for k, b in enumerate(bodies):
-            bound = bounding_capsule(b.shape)  # cylinders, convex meshes: a capsule that contains them
-            if bound is None:
-                self._shapes.set(k, b.shape, b.placement, b.center)
-            else:
-                self._shapes.set(k, bound[0], b.placement * bound[1], bound[1].actInv(b.center))
+            self._shapes.set(k, row_shapes[k], b.placement, spheres[k][0])
         self._placed = Table(len(bodies))
         self._placed.kind[:] = self._shapes.kind
         self._placed.r[:], self._placed.h[:] = self._shapes.r, self._shapes.h
@@ -251,11 +246,7 @@ class CollisionRows:
         world, placed = Table(len(solid)), Table(len(solid))
         for r, k in enumerate(solid):
             o = obs[k]
-            bound = bounding_capsule(o.shape)
-            if bound is None:
-                world.set(r, o.shape, o.world, o.center)
-            else:
-                world.set(r, bound[0], o.world * bound[1], bound[1].actInv(o.center))
+            world.set(r, row_shape(o.shape), o.world, o.center)  # o.center, o.radius: of the row shape
         placed.kind[:], placed.r[:], placed.h[:] = world.kind, world.r, world.h
         checked = np.array([obs[k].checked for k in solid], dtype=bool).reshape(len(solid), len(self.geo.bodies))
         radii = np.array([obs[k].radius for k in solid], dtype=float)

@@ -12,8 +12,10 @@ Pairs, decided here once and never per tick:
   its parent: they touch by construction), both fixed to the base, named in ``[collision] exclude``,
   or within ``TOUCH_DISTANCE`` (3 cm) of each other in at least 95 % of 200 random configurations
   inside the joint limits (seeded: every process decides the same) — touching by construction,
-  like a capsule over a joint and the next-but-one link's. Every exclusion is listed in
-  ``excluded`` with its reason;
+  like a capsule over a joint and the next-but-one link's. Decided on the shapes the rows keep
+  apart (a cylinder's bounding capsule, which takes in the Panda's spheres at its ends: its
+  link1/link3 spheres and capsules around joint 2 always touch; panda_moveit_config's SRDF
+  disables link1/link3 too). Every exclusion is listed in ``excluded`` with its reason;
 * robot vs the floor (the plane z = ``[base] floor_z``): every body that moves with the arm;
 * robot vs obstacles (a scene's, in the world frame): every body, the base's too.
 """
@@ -64,42 +66,25 @@ def shape_pose(shape: ShapeConfig) -> pin.SE3:
     return pin.SE3(pin.rpy.rpyToMatrix(np.asarray(shape.rpy, dtype=float)), np.asarray(shape.xyz, dtype=float))
 
 
-def bounding_capsule(shape: coal.CollisionGeometry,
-                     convex: bool = False) -> tuple[coal.CollisionGeometry, pin.SE3] | None:
-    """A capsule that contains ``shape`` and its pose in the shape's frame, for the shapes the
-    compiled distances do not handle (cylinders: the capsule of the same radius and segment;
-    convex hulls: along their principal axis, every vertex inside), or None (spheres, capsules,
-    boxes: the kernels take them as they are; other shapes: coal).
+def row_shape(shape: coal.CollisionGeometry) -> coal.CollisionGeometry:
+    """The shape the controller's rows keep apart for a body's ``shape``, in the same frame: for a
+    cylinder the capsule of the same radius and segment (the compiled
+    distances have no cylinder kernel), else the shape itself (spheres, capsules and boxes go to
+    the compiled kernels as they are, convex meshes to coal).
 
-    The controller's rows keep the capsules ``collision.safety_distance`` apart: since each one
-    contains its body, the bodies are at least as far apart (the referee checks the bodies).
-    Convex meshes only with ``convex``: the rows take them as they are (coal), because their
-    capsules are fat enough that the UR5's and TIAGo's start configurations are inside d_s and the
-    rows then fight every task (the UR5's floor test ran > 10 min)."""
+    The rows keep these shapes ``collision.safety_distance`` apart: since each one contains its
+    body, the bodies are at least as far apart (the referee checks the bodies). Convex meshes are
+    not wrapped in capsules: those are fat enough that the UR5's and TIAGo's start configurations
+    are inside d_s and the rows then fight every task (the UR5's floor test ran > 10 min)."""
     if isinstance(shape, coal.Cylinder):
-        return coal.Capsule(shape.radius, 2.0 * shape.halfLength), pin.SE3.Identity()
-    if not (convex and isinstance(shape, coal.ConvexBase)):
-        return None
-    v = np.asarray(shape.points(), dtype=float).reshape(-1, 3)
-    if v.shape[0] == 0:
-        return None
-    c = v.mean(axis=0)
-    _, _, vt = np.linalg.svd(v - c, full_matrices=False)
-    e = vt[0] / np.linalg.norm(vt[0])
-    t = (v - c) @ e
-    rho = np.linalg.norm((v - c) - np.outer(t, e), axis=1)
-    r = float(rho.max()) + 1e-6
-    cap = np.sqrt(np.maximum(r * r - rho * rho, 0.0))  # a vertex (t, ρ) is inside the end sphere at t ± this
-    lo, hi = float(np.min(t + cap)), float(np.max(t - cap))
-    if lo > hi:  # a short body: a sphere around the middle
-        lo = hi = 0.5 * (lo + hi)
-        r = float(np.linalg.norm(v - (c + lo * e), axis=1).max()) + 1e-6
-    z = e
-    ref = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    x = np.cross(ref, z)
-    x /= np.linalg.norm(x)
-    R = np.column_stack([x, np.cross(z, x), z])
-    return coal.Capsule(r, max(hi - lo, 0.0)), pin.SE3(R, c + 0.5 * (lo + hi) * e)
+        return coal.Capsule(shape.radius, 2.0 * shape.halfLength)
+    return shape
+
+
+def bounding_sphere(shape: coal.CollisionGeometry) -> tuple[FloatArray, float]:
+    """(centre, radius) of a sphere that contains ``shape``, in its own frame."""
+    shape.computeLocalAABB()
+    return np.asarray(shape.aabb_center, dtype=float).copy(), float(shape.aabb_radius)
 
 
 @dataclass
@@ -211,16 +196,19 @@ class RobotGeometry:
         arm = robot.arm
         lo = np.where(np.isfinite(arm.position_lower), arm.position_lower, -np.pi)
         hi = np.where(np.isfinite(arm.position_upper), arm.position_upper, np.pi)
+        # decided on the shapes the controller's rows keep apart (a cylinder's bounding capsule):
+        # a pair whose row shapes always touch would fight every task from the start
+        rows = [row_shape(b.shape) for b in self.bodies]
+        spheres = [bounding_sphere(shape) for shape in rows]
         rng = np.random.default_rng(0)
         close = np.zeros(len(candidates))
         for _ in range(TOUCH_SAMPLES):
             M = self.placements(rng.uniform(lo, hi))
-            c = [M[k].act(b.center) for k, b in enumerate(self.bodies)]
+            c = [m.act(x) for m, (x, _) in zip(M, spheres, strict=True)]
             for k, (i, j) in enumerate(candidates):
-                a, b = self.bodies[i], self.bodies[j]
-                if np.linalg.norm(c[i] - c[j]) - a.radius - b.radius >= TOUCH_DISTANCE:
-                    continue  # the bounding spheres are apart: so are the bodies
-                close[k] += distance(a.shape, M[i], b.shape, M[j])[0] < TOUCH_DISTANCE
+                if np.linalg.norm(c[i] - c[j]) - spheres[i][1] - spheres[j][1] >= TOUCH_DISTANCE:
+                    continue  # the bounding spheres are apart: so are the shapes
+                close[k] += distance(rows[i], M[i], rows[j], M[j])[0] < TOUCH_DISTANCE
         pairs = []
         for k, (i, j) in enumerate(candidates):
             if close[k] >= TOUCH_FRACTION * TOUCH_SAMPLES:
