@@ -298,6 +298,9 @@ class CollisionParams:
         safety_distance: [m] d_s, the distance the pair settles at (robot vs robot, robot vs obstacles).
         floor_margin: [m] d_s for every link vs the floor.
         gain: [m/s] ξ, the approach speed a pair may keep at d_i.
+        braking: [-] β, the share of a pair's deceleration capacity a_n (every joint braking for
+            it at its acceleration limit) that the braking profile ḋ ≥ −√(2 β a_n (d − d_s))
+            counts on; the rest is left to the other rows and the task.
     """
 
     enabled: bool = False
@@ -305,6 +308,7 @@ class CollisionParams:
     safety_distance: float = 0.03
     floor_margin: float = 0.03
     gain: float = 0.5
+    braking: float = 0.25
 
 
 @dataclass(frozen=True)
@@ -768,7 +772,7 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
         }
     )
     col = r.table("collision", required=False)
-    col.unknown({"enabled", "influence_distance", "safety_distance", "floor_margin", "gain"})
+    col.unknown({"enabled", "influence_distance", "safety_distance", "floor_margin", "gain", "braking"})
     d_s = col.number("safety_distance", d.collision.safety_distance, lo=0.0)
     d_floor = col.number("floor_margin", d.collision.floor_margin, lo=0.0)
     d_i = col.number("influence_distance", d.collision.influence_distance, positive=True)
@@ -830,6 +834,7 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
             safety_distance=d_s,
             floor_margin=d_floor,
             gain=col.number("gain", d.collision.gain, positive=True),
+            braking=col.number("braking", d.collision.braking, positive=True),
         ),
         path=path,
     )

@@ -5,7 +5,9 @@ For a monitored pair (a, b) at distance d with closest points p_a, p_b and n̂ =
 
     n̂ᵀ(J_{p_a} − J_{p_b}) v ≥ −ξ (d' − d_s)/(d_i − d_s)                       (damper)
 
-with d_s the safety distance (``collision.floor_margin`` for the floor), ξ the gain [m/s] and
+with d_s the safety distance (``collision.floor_margin`` for the floor), ξ the gain [m/s], raised
+to the braking profile −√(2 β a_n (d' − d_s)) where that is larger (a_n = Σ_j |C_j| A_j: see
+``_row_bounds``; a slow arm cannot follow the linear damper's deceleration near d_i), and
 d' = d − τ·max(0, −ḋ_prev) the distance left after the state's age τ at the approach speed the
 robot already has (ḋ_prev from the bounds' centre, the last command): like bounds (13), the rows
 account for the state's latency. A moving obstacle (its ``velocity`` v_b, world frame) closes the
@@ -178,6 +180,9 @@ class CollisionRows:
         self.latency = latency
         self.n_w = self.M.shape[1]
         self.n_a = geometry.arm.n
+        robot = geometry.robot  # A of v = [wheels, arm]: the braking profile's deceleration
+        self._accel = np.concatenate([np.asarray(robot.base.wheel_acceleration_max, dtype=float),
+                                      np.asarray(robot.arm.acceleration_max, dtype=float)])[: self.n_w + self.n_a]
         self.obstacles: list[_Obstacle] = []
         self.shapes: tuple[ShapeConfig, ...] = ()  # the obstacles in force, as given to set_obstacles
         self._names: dict[tuple[int, int], str] = {}
@@ -395,7 +400,8 @@ class CollisionRows:
             Rb = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
             for k in np.flatnonzero(IB <= -2).tolist():
                 shift[k] = float(NN[k] @ (Rb.T @ self.obstacles[-2 - int(IB[k])].velocity_w))
-        l, l_brake, damper = _all_bounds(C, v_prev, lb, ub, dist, d_s, d_i, p.gain, self.latency, shift)
+        l, l_brake, damper = _all_bounds(C, v_prev, lb, ub, dist, d_s, d_i, p.gain, self.latency, shift,
+                                         self._accel, p.braking)
         # two bodies of one pair of links: one row where they are parallel (the key: link a, and
         # link b, the floor or the obstacle; each fence row its own)
         nl = self._n_links
@@ -604,15 +610,16 @@ def _point_rows(
 @jit
 def _all_bounds(
     C: FloatArray, v_prev: FloatArray, lb: FloatArray, ub: FloatArray, d: FloatArray, d_s: FloatArray,
-    d_i: float, gain: float, latency: float, shift: FloatArray,
+    d_i: float, gain: float, latency: float, shift: FloatArray, accel: FloatArray, braking: float,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """(l, l_brake, damper) of every row (see the module docstring); ``shift``: n̂ᵀv_b of a row
-    against a moving obstacle (0 otherwise)."""
+    against a moving obstacle (0 otherwise); ``accel``: A of each column of v."""
     m = C.shape[0]
     l, l_brake, damper = np.empty(m), np.empty(m), np.empty(m)
     v0 = np.minimum(np.maximum(0.0, lb), ub)
     for k in range(m):
-        dk, best, brake = _row_bounds(C[k], v_prev, v0, lb, ub, d[k], d_s[k], d_i, gain, latency, shift[k])
+        dk, best, brake = _row_bounds(C[k], v_prev, v0, lb, ub, d[k], d_s[k], d_i, gain, latency, shift[k],
+                                      accel, braking)
         damper[k] = dk
         # a relaxed row would pass through a vertex of the box exactly: 1e-9 m/s below it, so that
         # no solver's tolerance reads the degenerate (feasible) problem as infeasible
@@ -624,17 +631,25 @@ def _all_bounds(
 @jit
 def _row_bounds(
     row: FloatArray, v_prev: FloatArray, v0: FloatArray, lb: FloatArray, ub: FloatArray,
-    d: float, d_s: float, d_i: float, gain: float, latency: float, shift: float,
+    d: float, d_s: float, d_i: float, gain: float, latency: float, shift: float, accel: FloatArray,
+    braking: float,
 ) -> tuple[float, float, float]:
-    """(the damper's bound, the most separating rate in lb ≤ v ≤ ub, the braking command's rate)."""
-    prev = best = brake = 0.0
+    """(the damper's bound, the most separating rate in lb ≤ v ≤ ub, the braking command's rate).
+
+    The damper's bound is the larger of the linear damper and the braking profile
+    −√(2 β a_n (d' − d_s)), a_n = Σ_j |C_j| A_j the fastest the pair's approach can be slowed
+    (every joint braking for it at its A)."""
+    prev = best = brake = a_n = 0.0
     for i in range(row.shape[0]):
         c = row[i]
         prev += c * v_prev[i]
         brake += c * v0[i]
         best += c * ub[i] if c > 0.0 else c * lb[i]
+        a_n += abs(c) * accel[i]
     d_eff = d - latency * max(0.0, shift - prev)  # the approach during the state's age (ḋ = prev − shift)
-    return -gain * (d_eff - d_s) / (d_i - d_s) + shift, best, brake
+    linear = -gain * (d_eff - d_s) / (d_i - d_s)
+    profile = -math.sqrt(2.0 * braking * a_n * max(d_eff - d_s, 0.0))
+    return max(linear, profile) + shift, best, brake
 
 
 @jit
