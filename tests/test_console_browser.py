@@ -78,7 +78,12 @@ def _drive(page: Any, url: str, obs: Any, tmp_path: Path) -> None:
 
     page.goto(url)
     wait_for("a canvas on the page", lambda: page.locator("canvas").count() > 0, timeout=60.0)
-    page.get_by_role("button", name="Track").wait_for(state="attached", timeout=60_000)
+    try:  # the panel comes over viser's websocket; on a loaded machine that has dropped (code 1006)
+        page.get_by_role("button", name="Track").wait_for(state="attached", timeout=120_000)
+    except Exception as e:  # playwright's TimeoutError: reload once, as an operator would
+        print(f"no panel after 120 s ({type(e).__name__}): reloading the page", flush=True)
+        page.reload()
+        page.get_by_role("button", name="Track").wait_for(state="attached", timeout=120_000)
     log = StatusLog(obs)
 
     def click(name: str) -> None:
