@@ -237,6 +237,21 @@ def test_no_monitored_pair_starts_inside_the_safety_distance(name: str) -> None:
                    for a, c, why in geo.excluded), geo.excluded
 
 
+def test_the_damper_bound_is_the_braking_profile_where_the_linear_damper_asks_too_much() -> None:
+    """ḋ ≥ max(−ξ (d − d_s)/(d_i − d_s), −√(2 β a_n (d − d_s))), a_n = Σ_j |C_j| A_j."""
+    from wmm_qp.limits.collision import _row_bounds
+
+    row, accel = np.array([0.0, 0.2, -0.1]), np.array([1.0, 1.0, 2.0])  # a_n = 0.4
+    zero, lo, hi = np.zeros(3), -np.ones(3), np.ones(3)
+
+    def bound(d: float) -> float:
+        return _row_bounds(row, zero, zero, lo, hi, d, 0.03, 0.3, 0.5, 0.0, 0.0, accel, 0.25)[0]
+
+    assert bound(0.25) == pytest.approx(-math.sqrt(2 * 0.25 * 0.4 * 0.22))  # far: the profile (−0.21, not −0.41)
+    assert bound(0.031) == pytest.approx(-0.5 * 0.001 / 0.27)  # near d_s: the linear damper
+    assert bound(0.02) == pytest.approx(0.5 * 0.01 / 0.27)  # inside d_s: it pushes apart
+
+
 def test_the_compiled_distances_agree_with_coal() -> None:
     """The hot path's own distances (capsule, sphere, box, plane) against coal's, on random poses."""
     import coal
