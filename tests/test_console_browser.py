@@ -8,6 +8,7 @@ Screenshots: ``WMM_QP_CONSOLE_SHOTS=docs/img .venv/bin/pytest tests/test_console
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import Any
 
@@ -120,14 +121,27 @@ def _drive(page: Any, url: str, obs: Any, tmp_path: Path) -> None:
     accepted0 = st.accepted.get("setpoint", 0)
     move_gizmo(url, target)
 
+    sent = [time.monotonic()]
+
     def near() -> bool:
         s, state = obs.latest_status(), obs.latest_state()
+        if state is not None and float(np.linalg.norm(np.asarray(state.ee_true) - target)) < 0.01:
+            return True
         if s is not None and s.resume_needed:  # a safe stop on a loaded machine: resume as an operator would
             click("Track")
             move_gizmo(url, target)
-        return state is not None and float(np.linalg.norm(np.asarray(state.ee_true) - target)) < 0.01
+            sent[0] = time.monotonic()
+        elif time.monotonic() - sent[0] > 3.0:  # the target brought to rest by a gap in the stream: drag again
+            move_gizmo(url, target)
+            sent[0] = time.monotonic()
+        return False
 
-    wait_for(f"the simulated EE at the gizmo's {target.round(3).tolist()}", near, timeout=60.0)
+    try:
+        wait_for(f"the simulated EE at the gizmo's {target.round(3).tolist()}", near, timeout=90.0)
+    except AssertionError as e:
+        st = obs.latest_state()
+        raise AssertionError(f"{e}: EE {None if st is None else np.round(st.ee_true, 4).tolist()}, "
+                             f"status {obs.latest_status()}") from None
     s = obs.latest_status()
     assert s is not None and s.accepted.get("setpoint", 0) > accepted0
     assert s.operator.startswith("console-")
