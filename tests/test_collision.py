@@ -203,10 +203,10 @@ def test_every_robot_with_urdf_geometry_stops_at_the_floor(name: str) -> None:
     (docs/robots.md): its file asks for a 0.3 m influence distance (with 0.15 m its hand stopped
     8 mm from its base: a collision for the referee).
 
-    With daqp, whose commands are the same in every process. proxsuite's differ in their last
-    bits from one process to the next (the same rows and state, another command at tick 1), and
-    on TIAGo that decides the run: in 1 of 6 processes its hand reached its base's hull (−1.6 mm),
-    an open defect of issue 13 (docs/model.md, "Collisions")."""
+    With daqp, whose commands are the same in every process. proxsuite, given the same QP byte
+    for byte, solves it in some processes and stops at its iteration cap in others, and on TIAGo
+    that decides the run: in 1 of 6 processes its hand reached its base's hull (−1.6 mm), an open
+    defect of issue 13 (docs/model.md, "Collisions")."""
     m = model(name)
     cfg = w.load_controller_config().with_(collision={"enabled": True}, qp={"solver": "daqp"})
     ctl = w.make_controller("qp", m, cfg)
