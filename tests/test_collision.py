@@ -292,6 +292,33 @@ def test_the_compiled_distances_agree_with_coal() -> None:
         assert d == pytest.approx(coal_d(coal.Box(*h), Mb, floor, pin.SE3.Identity()), abs=1e-7)
 
 
+def test_a_capsule_whose_segment_is_inside_a_box_is_left_to_coal() -> None:
+    """The kernel's depth is its deepest point's (−0.07 m here), but the capsule's penetration
+    depth must push the whole segment out through one face (−0.11 m, coal's). Rows built on the
+    kernel's let a Gen3 forearm deep in a wall go deeper (``wmm-qp verify --scene
+    configs/scenes/cluttered.toml --samples 2000``: 5 collisions, with daqp and with osqp)."""
+    import coal
+    import pinocchio as pin
+
+    from wmm_qp.limits.collision import Table, _pair_distances
+
+    along_x = pin.rpy.rpyToMatrix(0.0, math.pi / 2, 0.0)
+    capsule, wall = coal.Capsule(0.02, 0.08), coal.Box(0.1, 2.0, 2.0)  # segment x in ±0.04, wall x in ±0.05
+    A, B = Table(2), Table(1)
+    A.set(0, capsule, pin.SE3(along_x, np.zeros(3)), np.zeros(3))  # the segment inside the wall
+    A.set(1, capsule, pin.SE3(along_x, np.array([0.1, 0.0, 0.0])), np.zeros(3))  # only its radius inside
+    B.set(0, wall, pin.SE3.Identity(), np.zeros(3))
+    buf = (np.empty(2), np.empty((2, 3)), np.empty((2, 3)), np.empty((2, 3)), np.empty(2, dtype=np.bool_))
+    d, _, _, _, ok = _pair_distances(A, np.array([0, 1]), np.array([0, 0]), B, buf)
+    assert not ok[0] and ok[1]
+    assert d[0] == pytest.approx(-0.07)  # what the kernel would have used
+    req = coal.DistanceRequest()
+    deep = coal.distance(capsule, coal.Transform3s(along_x, np.zeros(3)), wall, coal.Transform3s(), req,
+                         coal.DistanceResult())
+    assert deep == pytest.approx(-0.11, abs=1e-6)
+    assert d[1] == pytest.approx(-0.01)  # exact: the segment outside
+
+
 def test_the_collision_bench_times_both_controllers_with_rows_active() -> None:
     """``wmm-qp bench --only collisions`` on a short run: both controllers timed on the same
     states, and the scene really puts rows in the QP (no timing asserted)."""

@@ -535,9 +535,11 @@ def _pairs_kernel(
             d[k] = swept_swept(a0[i], a1[i], ra[i], b0[j], b1[j], rb[j], P[k], Q[k], N[k])
         elif ka[i] == 0 and kb[j] == 1:
             d[k] = swept_box(a0[i], a1[i], ra[i], cb[j], Rb[j], hb[j], P[k], Q[k], N[k])
+            ok[k] = d[k] + ra[i] >= 0.0  # the segment itself inside the box: see swept_box
         elif ka[i] == 1 and kb[j] == 0:
             d[k] = swept_box(b0[j], b1[j], rb[j], ca[i], Ra[i], ha[i], Q[k], P[k], N[k])
             N[k] = -N[k]
+            ok[k] = d[k] + rb[j] >= 0.0
         else:
             ok[k] = False
 
