@@ -292,6 +292,24 @@ def test_the_compiled_distances_agree_with_coal() -> None:
         assert d == pytest.approx(coal_d(coal.Box(*h), Mb, floor, pin.SE3.Identity()), abs=1e-7)
 
 
+def test_no_pair_inside_its_safety_distance_is_left_out_of_the_rows(tmp_path: Path) -> None:
+    """More pairs inside d_s than MAX_ROWS (the Gen3 inside six boxes, 9 bodies each): every one
+    gets its row. The cap had cut them by distance, and left out a Panda's finger 3.8 mm from its
+    link5 while the whole robot was sampled inside a wall (verify: 120 collisions in 400 samples)."""
+    from wmm_qp.limits.collision import MAX_ROWS
+
+    boxes = "".join(f'[[obstacles]]\nid = "box{k}"\nkind = "box"\nsize = [{3 + k}, 3.0, 3.0]\nxyz = [0.0, 0.0, 0.0]\n\n'
+                    for k in range(6))
+    scene = scene_file(tmp_path, boxes)
+    ctl = qp()
+    ctl.set_scene(scene)  # type: ignore[attr-defined]
+    m = model()
+    ctl.step(w.RobotState(q_base=np.zeros(3), q_arm=m.config.arm.start), w.Reference("hold"))
+    rows = ctl.last_rows  # type: ignore[attr-defined]
+    inside = [n for n in rows.names if n.split("/")[1].startswith("box")]
+    assert len(inside) == 6 * len(ctl.collision.geo.bodies) > MAX_ROWS, (len(inside), rows.names)  # type: ignore[attr-defined]
+
+
 def test_a_capsule_whose_segment_is_inside_a_box_is_left_to_coal() -> None:
     """The kernel's depth is its deepest point's (−0.07 m here), but the capsule's penetration
     depth must push the whole segment out through one face (−0.11 m, coal's). Rows built on the
