@@ -39,6 +39,26 @@ def browser_missing() -> str | None:
     return None
 
 
+class Drag:
+    """Drags a console's target gizmo to ``target``, and again when asked or every ``every`` s: a
+    gap longer than the daemon's setpoint timeout in the console's 1 s stream brings the target to
+    rest (docs/protocol.md), and on a loaded machine an operator would drag again."""
+
+    def __init__(self, url: str, target: np.ndarray, every: float = 3.0) -> None:
+        self.url, self.target, self.every = url, target, every
+        self.now()
+
+    def now(self) -> None:
+        from wmm_qp_service.console.wire import move_gizmo
+
+        move_gizmo(self.url, self.target)
+        self.at = time.monotonic()
+
+    def if_due(self) -> None:
+        if time.monotonic() - self.at > self.every:
+            self.now()
+
+
 def wait_for(what: str, fn: Callable[[], T | None], timeout: float = 30.0, every: float = 0.1) -> T:
     """Poll ``fn`` until it returns something truthy; fail with ``what`` after ``timeout`` [s]."""
     end = time.monotonic() + timeout

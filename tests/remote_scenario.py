@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from console_helpers import console_process, wait_for
+from console_helpers import Drag, console_process, wait_for
 from wmm_qp_service.config import load_service_config
 from wmm_qp_service.console.link import RouterClient as Client
 from wmm_qp_service.console.wire import move_gizmo
@@ -46,19 +46,15 @@ def main() -> int:
             st2 = wait_for("r2's EE", lambda: (s := c2.latest_status()) and s.x and s)
             ee1_0 = np.asarray(wait_for("r1's state", c1.wait_state).ee_true)
             target = np.asarray(st2.x) + np.array([0.05, 0.03, -0.04])
-            move_gizmo(url, target)
-
-            sent = [time.monotonic()]
+            drag = Drag(url, target)
 
             def near() -> bool:
                 s = c2.latest_state()
                 if s is not None and float(np.linalg.norm(np.asarray(s.ee_true) - target)) < 0.01:
                     return True
-                # a safe stop, or the target brought to rest by a gap in the console's stream on a
-                # loaded machine: resume and drag again, as an operator would
-                if not track(c2) or time.monotonic() - sent[0] > 3.0:
-                    move_gizmo(url, target)
-                    sent[0] = time.monotonic()
+                if not track(c2):  # a safe stop on a loaded machine: resume and drag again
+                    drag.now()
+                drag.if_due()
                 return False
 
             try:

@@ -8,13 +8,13 @@ Screenshots: ``WMM_QP_CONSOLE_SHOTS=docs/img .venv/bin/pytest tests/test_console
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 from console_helpers import (
+    Drag,
     StatusLog,
     browser_missing,
     canvas_not_blank,
@@ -75,7 +75,6 @@ def dark_map(px: np.ndarray, cols: int = 60, rows: int = 20) -> str:
 
 
 def _drive(page: Any, url: str, obs: Any, tmp_path: Path) -> None:
-    from wmm_qp_service.console.wire import move_gizmo
 
     page.goto(url)
     wait_for("a canvas on the page", lambda: page.locator("canvas").count() > 0, timeout=60.0)
@@ -119,9 +118,7 @@ def _drive(page: Any, url: str, obs: Any, tmp_path: Path) -> None:
     st = wait_for("a status with the EE", lambda: (s := obs.latest_status()) and s.x and s)
     target = np.asarray(st.x) + np.array([0.06, -0.04, 0.05])
     accepted0 = st.accepted.get("setpoint", 0)
-    move_gizmo(url, target)
-
-    sent = [time.monotonic()]
+    drag = Drag(url, target)
 
     def near() -> bool:
         s, state = obs.latest_status(), obs.latest_state()
@@ -129,11 +126,8 @@ def _drive(page: Any, url: str, obs: Any, tmp_path: Path) -> None:
             return True
         if s is not None and s.resume_needed:  # a safe stop on a loaded machine: resume as an operator would
             click("Track")
-            move_gizmo(url, target)
-            sent[0] = time.monotonic()
-        elif time.monotonic() - sent[0] > 3.0:  # the target brought to rest by a gap in the stream: drag again
-            move_gizmo(url, target)
-            sent[0] = time.monotonic()
+            drag.now()
+        drag.if_due()
         return False
 
     try:

@@ -359,7 +359,8 @@ class QpController(Controller):
         self.collision: CollisionRows | None = None  # the dampers and the fence (limits/collision.py)
         if config.collision.enabled:
             geometry = robot_geometry(self.robot, model.arm)
-            self.collision = CollisionRows(geometry, model.base.M, config.collision, config.state_latency)
+            self.collision = CollisionRows(geometry, model.base.M, config.collision, config.state_latency,
+                                           self.bounds.a_max)
         self.last_rows: Rows | None = None  # the collision rows of the last tick
 
     @property

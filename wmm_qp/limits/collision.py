@@ -170,9 +170,12 @@ class CollisionRows:
         M: the base's 3 × n_wheels matrix (eq. (3)).
         params: d_i, d_s, the floor margin, ξ.
         latency: [s] τ, the state's age the rows account for (the controller's ``state_latency``).
+        accel: A of each column of v = [wheels, arm] (the controller's bounds (13)): the braking
+            profile's deceleration.
     """
 
-    def __init__(self, geometry: RobotGeometry, M: FloatArray, params: CollisionParams, latency: float) -> None:
+    def __init__(self, geometry: RobotGeometry, M: FloatArray, params: CollisionParams, latency: float,
+                 accel: FloatArray) -> None:
         self.geo = geometry
         self.M = np.asarray(M, dtype=float)
         own = geometry.robot.collision.influence_distance  # the robot file's, when larger
@@ -182,9 +185,7 @@ class CollisionRows:
         self.latency = latency
         self.n_w = self.M.shape[1]
         self.n_a = geometry.arm.n
-        robot = geometry.robot  # A of v = [wheels, arm]: the braking profile's deceleration
-        self._accel = np.concatenate([np.asarray(robot.base.wheel_acceleration_max, dtype=float),
-                                      np.asarray(robot.arm.acceleration_max, dtype=float)])[: self.n_w + self.n_a]
+        self._accel = np.asarray(accel, dtype=float)
         self.obstacles: list[_Obstacle] = []
         self.shapes: tuple[ShapeConfig, ...] = ()  # the obstacles in force, as given to set_obstacles
         self._names: dict[tuple[int, int], str] = {}
@@ -205,9 +206,7 @@ class CollisionRows:
         self._body_joint = np.array([where[b.joint] for b in bodies], dtype=int)
         # the broad phase: each row shape's bounding sphere (a cylinder's capsule reaches past the
         # cylinder's own sphere: culling on that would let a pair in already inside d_s)
-        row_shapes = [row_shape(b.shape) for b in bodies]
-        spheres = [bounding_sphere(shape) for shape in row_shapes]
-        self._radii = np.array([r for _, r in spheres], dtype=float)
+        self._radii = np.array([b.row_radius for b in bodies], dtype=float)
         self._pairs = np.array(geometry.self_pairs, dtype=int).reshape(-1, 2)
         self._pair_r = self._radii[self._pairs[:, 0]] + self._radii[self._pairs[:, 1]]
         self._floor_idx = np.array(geometry.floor_bodies, dtype=int)
@@ -215,7 +214,7 @@ class CollisionRows:
         # the compiled path: each body's primitive in its joint's frame, placed each tick
         self._shapes = Table(len(bodies))
         for k, b in enumerate(bodies):
-            self._shapes.set(k, row_shapes[k], b.placement, spheres[k][0])
+            self._shapes.set(k, b.row, b.placement, b.row_center)
         self._placed = Table(len(bodies))
         self._placed.kind[:] = self._shapes.kind
         self._placed.r[:], self._placed.h[:] = self._shapes.r, self._shapes.h

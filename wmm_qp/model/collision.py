@@ -98,6 +98,8 @@ class Body:
         placement: its pose in that joint's frame (joint 0: the base frame).
         shape: the coal geometry.
         center, radius: a bounding sphere in the body's own frame (the broad phase).
+        row, row_center, row_radius: the shape the controller's rows keep apart (``row_shape``)
+            and its bounding sphere, in the same frame.
     """
 
     name: str
@@ -107,11 +109,14 @@ class Body:
     shape: coal.CollisionGeometry
     center: FloatArray = field(default_factory=lambda: np.zeros(3))
     radius: float = 0.0
+    row: coal.CollisionGeometry = field(init=False)
+    row_center: FloatArray = field(init=False)
+    row_radius: float = field(init=False)
 
     def __post_init__(self) -> None:
-        self.shape.computeLocalAABB()
-        self.center = np.asarray(self.shape.aabb_center, dtype=float).copy()
-        self.radius = float(self.shape.aabb_radius)
+        self.center, self.radius = bounding_sphere(self.shape)
+        self.row = row_shape(self.shape)
+        self.row_center, self.row_radius = bounding_sphere(self.row)
 
 
 TOUCH_DISTANCE = 0.03
@@ -198,17 +203,16 @@ class RobotGeometry:
         hi = np.where(np.isfinite(arm.position_upper), arm.position_upper, np.pi)
         # decided on the shapes the controller's rows keep apart (a cylinder's bounding capsule):
         # a pair whose row shapes always touch would fight every task from the start
-        rows = [row_shape(b.shape) for b in self.bodies]
-        spheres = [bounding_sphere(shape) for shape in rows]
+        bodies = self.bodies
         rng = np.random.default_rng(0)
         close = np.zeros(len(candidates))
         for _ in range(TOUCH_SAMPLES):
             M = self.placements(rng.uniform(lo, hi))
-            c = [m.act(x) for m, (x, _) in zip(M, spheres, strict=True)]
+            c = [m.act(body.row_center) for m, body in zip(M, bodies, strict=True)]
             for k, (i, j) in enumerate(candidates):
-                if np.linalg.norm(c[i] - c[j]) - spheres[i][1] - spheres[j][1] >= TOUCH_DISTANCE:
+                if np.linalg.norm(c[i] - c[j]) - bodies[i].row_radius - bodies[j].row_radius >= TOUCH_DISTANCE:
                     continue  # the bounding spheres are apart: so are the shapes
-                close[k] += distance(rows[i], M[i], rows[j], M[j])[0] < TOUCH_DISTANCE
+                close[k] += distance(bodies[i].row, M[i], bodies[j].row, M[j])[0] < TOUCH_DISTANCE
         pairs = []
         for k, (i, j) in enumerate(candidates):
             if close[k] >= TOUCH_FRACTION * TOUCH_SAMPLES:
