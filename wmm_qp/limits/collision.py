@@ -117,6 +117,7 @@ class _Obstacle:
     radius: float
     plane: bool
     checked: FloatArray  # bool per body: the bodies this obstacle is checked against
+    checked_idx: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))  # their indices
     normal_w: FloatArray = field(default_factory=lambda: np.zeros(3))  # a plane's, world frame
     offset_w: float = 0.0
     placed: Table = field(default_factory=lambda: Table(1))  # in the base frame, this tick
@@ -154,7 +155,8 @@ def _obstacle(s: ShapeConfig, geometry: RobotGeometry) -> _Obstacle:
     shape = coal_shape(s)
     plane = s.kind == "plane"
     center, radius = (np.zeros(3), math.inf) if plane else bounding_sphere(row_shape(shape))
-    o = _Obstacle(s.name, shape, shape_pose(s), center, radius, plane, exempt_mask(geometry, s.exempt))
+    mask = exempt_mask(geometry, s.exempt)
+    o = _Obstacle(s.name, shape, shape_pose(s), center, radius, plane, mask, np.flatnonzero(mask).astype(np.int64))
     if plane:
         o.normal_w, o.offset_w = np.asarray(s.size, dtype=float), float(s.xyz[2])
     if s.velocity is not None:
@@ -190,7 +192,6 @@ class CollisionRows:
         self.shapes: tuple[ShapeConfig, ...] = ()  # the obstacles in force, as given to set_obstacles
         self._names: dict[tuple[int, int], str] = {}
         self._moving = False
-        self._obs_boxes = np.zeros(0, dtype=np.int64)
         self._obs_joint = np.zeros(0, dtype=np.int64)
         self._H_world = np.eye(4)[None].copy()  # world → base frame, refilled each tick
         self._obs: tuple = (np.zeros(0, dtype=np.int64), Table(0), Table(0), np.zeros(0),
@@ -234,6 +235,14 @@ class CollisionRows:
         links = sorted({b.link for b in bodies})
         self._body_link = np.array([links.index(b.link) for b in bodies], dtype=np.int64)
         self._n_links = len(links)
+        self._cand = self._candidates(0)
+
+    def _candidates(self, n_obstacles: int) -> tuple:
+        """The candidate buffer (d, p_a, p_b, n̂, ok, body a, the other side, d_s): room for every
+        monitored pair at once (self, floor, each obstacle against every body)."""
+        n = self._pairs.shape[0] + self._floor_idx.shape[0] + n_obstacles * len(self.geo.bodies)
+        return (np.empty(n), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.ones(n, dtype=np.bool_),
+                np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.empty(n))
 
     def set_scene(self, scene: Scene) -> None:
         self.set_obstacles(scene.obstacles)
@@ -258,9 +267,9 @@ class CollisionRows:
         radii = np.array([obs[k].radius for k in solid], dtype=float)
         self._obs = (np.array(solid, dtype=np.int64), world, placed, radii, checked,
                      [k for k, o in enumerate(obs) if o.plane])
-        self._obs_boxes = np.flatnonzero(world.kind == 1)  # rows of the table that are boxes
         self._obs_joint = np.zeros(len(solid), dtype=np.int64)  # every obstacle placed by the one H
         self.obstacles = obs
+        self._cand = self._candidates(len(obs))
         self._moving = any(bool(o.velocity_w.any()) for o in obs)
 
     # ------------------------------------------------------------------ per tick
@@ -284,50 +293,22 @@ class CollisionRows:
         """
         p, d_i = self.p, self.p.influence_distance
         n_v = self.n_w + self.n_a
-        out = Rows(np.zeros((0, n_v)), np.zeros(0))
         oMi = self._oMi
         for k, j in enumerate(self._joint_ids):  # the joints that carry bodies: their placements
             self._Hj[k] = oMi[j].homogeneous
         _place(self._Hj, self._body_joint, self._shapes, self._placed)
         pl = self._placed
-        bodies = self.geo.bodies
-        # every pair within d_i, as arrays: (d, p_a, p_b, n̂, body a, the other side: a body ≥ 0,
-        # the floor -1, obstacle k -2 - k; its d_s)
-        parts: list[tuple[FloatArray, FloatArray, FloatArray, FloatArray, IntArray, IntArray, float]] = []
-        best = [math.inf, 0, 0]
-
-        def collect(d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, I: IntArray, J: IntArray,
-                    d_s: float) -> None:
-            k = int(np.argmin(d))
-            if d[k] < best[0]:
-                best[:] = float(d[k]), int(I[k]), int(J[k])
-            near = d < d_i
-            if near.all():
-                parts.append((d, P, Q, N, I, J, d_s))
-            elif near.any():
-                parts.append((d[near], P[near], Q[near], N[near], I[near], J[near], d_s))
-
-        # robot vs robot (base frame; the base's motion cancels)
-        if self._pairs.shape[0]:
-            diff = pl.centre[self._pairs[:, 0]] - pl.centre[self._pairs[:, 1]]
-            gap = np.sqrt(np.einsum("ij,ij->i", diff, diff)) - self._pair_r  # (a norm: 3× slower)
-            cand = self._pairs[gap <= d_i]
-            if cand.shape[0]:
-                d, P, Q, N, ok = _pair_distances(pl, cand[:, 0], cand[:, 1], pl, self._buf(cand.shape[0]))
-                for k in np.flatnonzero(~ok).tolist():  # box-box and other shapes: coal
-                    i, j = int(cand[k, 0]), int(cand[k, 1])
-                    d[k], P[k], Q[k], N[k] = self._coal(bodies[i].shape, self._T(i), bodies[j].shape, self._T(j))
-                collect(d, P, Q, N, cand[:, 0], cand[:, 1], p.safety_distance)
-        # robot vs the floor z = floor_z (the same plane in the base frame)
-        if self._floor_idx.shape[0]:
-            gap = pl.centre[self._floor_idx, 2] - self._radii[self._floor_idx] - self.geo.floor_z
-            cand1 = self._floor_idx[gap <= d_i]
-            if cand1.shape[0]:
-                d, P, Q, N, ok = _plane_distances(pl, cand1, self._floor_n, self._floor_o, self._buf(cand1.shape[0]))
-                for k in np.flatnonzero(~ok).tolist():
-                    i = int(cand1[k])
-                    d[k], P[k], Q[k], N[k] = self._coal(bodies[i].shape, self._T(i), self._floor, self._identity)
-                collect(d, P, Q, N, cand1, np.full(cand1.shape[0], -1, dtype=np.int64), p.floor_margin)
+        # every pair the broad phase lets through, in one buffer: (d, p_a, p_b, n̂, ok (False: coal
+        # computes it), body a, the other side: a body ≥ 0, the floor -1, obstacle k -2 - k; its d_s)
+        d, P, Q, N, ok, I, J, DS = self._cand
+        n = 0
+        if self._pairs.shape[0]:  # robot vs robot (base frame; the base's motion cancels)
+            n = _self_pass(pl.kind, pl.a0, pl.a1, pl.r, pl.c, pl.R, pl.h, pl.centre, self._pairs, self._pair_r, d_i,
+                           p.safety_distance, d, P, Q, N, ok, I, J, DS, n)
+        if self._floor_idx.shape[0]:  # robot vs the floor z = floor_z (the same plane in the base frame)
+            n = _plane_pass(pl.kind, pl.a0, pl.a1, pl.r, pl.c, pl.R, pl.h, pl.centre, self._radii, self._floor_idx,
+                            True, self._floor_n, self._floor_o, d_i, -1, p.floor_margin, d, P, Q, N, ok, I, J, DS, n)
+        Rb = tb = None
         if self.obstacles:  # robot vs obstacles, in the base frame at this base pose
             c, s_ = math.cos(q_base[2]), math.sin(q_base[2])
             Rb = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
@@ -337,83 +318,82 @@ class CollisionRows:
                 H = self._H_world  # world → base frame
                 H[0, :3, :3], H[0, :3, 3] = Rb.T, -(Rb.T @ tb)
                 _place(H, self._obs_joint, world, placed)
-                diff3 = pl.centre[None, :, :] - placed.centre[:, None, :]
-                gap = np.sqrt(np.einsum("obi,obi->ob", diff3, diff3)) - self._radii[None, :] - radii[:, None]
-                boxes = self._obs_boxes
-                if boxes.shape[0]:  # a box: the distance of each body's bounding sphere to the box itself
-                    rel = np.einsum("oji,obj->obi", placed.R[boxes],
-                                    pl.centre[None, :, :] - placed.c[boxes][:, None, :])  # box frame
-                    out_ = np.maximum(np.abs(rel) - placed.h[boxes][:, None, :], 0.0)
-                    gap[boxes] = np.sqrt(np.einsum("obi,obi->ob", out_, out_)) - self._radii[None, :]
-                oi, bi = np.nonzero((gap <= d_i) & checked)
-                if oi.shape[0]:
-                    d, P, Q, N, ok = _pair_distances(pl, bi, oi, placed, self._buf(oi.shape[0]))
-                    for k in np.flatnonzero(~ok).tolist():  # box-box and other shapes: coal
-                        o, i = self.obstacles[int(solid[oi[k]])], int(bi[k])
-                        Mo = pin.SE3(Rb.T @ o.world.rotation, Rb.T @ (o.world.translation - tb))
-                        d[k], P[k], Q[k], N[k] = self._coal(bodies[i].shape, self._T(i), o.shape, transform(Mo))
-                    collect(d, P, Q, N, bi, -2 - solid[oi], p.safety_distance)
+                n = _solid_pass(pl.kind, pl.a0, pl.a1, pl.r, pl.c, pl.R, pl.h, pl.centre, self._radii,
+                                placed.kind, placed.a0, placed.a1, placed.r, placed.c, placed.R, placed.h,
+                                placed.centre, radii, checked, solid, d_i, p.safety_distance,
+                                d, P, Q, N, ok, I, J, DS, n)
             for oi_ in planes:
                 o = self.obstacles[oi_]
                 o.place(Rb, tb)
-                cand2 = np.flatnonzero(o.checked)
-                if not cand2.shape[0]:
-                    continue
-                d, P, Q, N, ok = _plane_distances(pl, cand2, o.normal_b, o.offset_b, self._buf(cand2.shape[0]))
-                for k in np.flatnonzero(~ok).tolist():  # coal's half-space, built when a body needs it
-                    i = int(cand2[k])
-                    o.shape = coal.Halfspace(-o.normal_b, -o.offset_b)  # coal: solid where n'·p ≤ d
-                    d[k], P[k], Q[k], N[k] = self._coal(bodies[i].shape, self._T(i), o.shape, o.transform())
-                collect(d, P, Q, N, cand2, np.full(cand2.shape[0], -2 - oi_, dtype=np.int64), p.safety_distance)
-        if math.isfinite(best[0]):
-            out.min_distance, out.closest = float(best[0]), self._name(int(best[1]), int(best[2]))
-        fC, fd, fnames = self._fence_rows(q_base, x_ee, J_ee, n_v)
-        if not parts and not fnames:
+                n = _plane_pass(pl.kind, pl.a0, pl.a1, pl.r, pl.c, pl.R, pl.h, pl.centre, self._radii, o.checked_idx,
+                                False, o.normal_b, o.offset_b, d_i, -2 - oi_, p.safety_distance,
+                                d, P, Q, N, ok, I, J, DS, n)
+        if n and not ok[:n].all():
+            self._coal_fill(n, Rb, tb)
+        nf = 0
+        fC = fd = None
+        fnames: list[str] = []
+        if _fence_near(self._fence_A, self._fence_c, float(q_base[0]), float(q_base[1]), self.n_w,
+                       self.fence.ee_lower, self.fence.ee_upper, x_ee, d_i):
+            fC, fd, fnames = self._fence_rows(q_base, x_ee, J_ee, n_v)
+            nf = len(fnames)
+        out = Rows(np.zeros((0, n_v)), np.zeros(0))
+        if not n and not nf:
             return out
-        if parts:
-            D = np.concatenate([part[0] for part in parts])
-            DS = np.concatenate([np.full(part[0].shape[0], part[6]) for part in parts])
-            margin = D - DS  # the nearest to its safety distance first; every pair inside it kept
-            order = np.argsort(margin, kind="stable")[: max(MAX_ROWS, int(np.count_nonzero(margin < 0.0)))]
-            PA = np.concatenate([part[1] for part in parts])[order]
-            PB = np.concatenate([part[2] for part in parts])[order]
-            NN = np.concatenate([part[3] for part in parts])[order]
-            IA = np.concatenate([part[4] for part in parts])[order]
-            IB = np.concatenate([part[5] for part in parts])[order]
-            DS, D = DS[order], D[order]
-        else:
-            D, DS = np.zeros(0), np.zeros(0)
-            IA = IB = np.zeros(0, dtype=np.int64)
+        C, D, DS_, IA, IB, NN, keys, best_k = _assemble(
+            d, P, Q, N, I, J, DS, n, d_i, MAX_ROWS, nf, n_v, np.asarray(self.geo.arm.data.J), self._support,
+            self._body_joint_ids, self.M, self.n_w, self._body_link, self._n_links, len(self.obstacles))
+        if best_k >= 0:
+            out.min_distance, out.closest = float(d[best_k]), self._name(int(I[best_k]), int(J[best_k]))
         m = D.shape[0]
-        C = np.zeros((m + len(fnames), n_v))
-        if m:
-            bj = self._body_joint_ids
-            jb = np.where(IB >= 0, bj[np.maximum(IB, 0)], 0)
-            _point_rows(np.asarray(self.geo.arm.data.J), self._support, bj[IA], jb, PA, PB, NN, IB < 0, self.M,
-                        self.n_w, C)
-        if fnames:
+        if not m and not nf:
+            return out
+        if nf:
+            assert fC is not None and fd is not None
             C[m:] = fC
-        dist = np.concatenate((D, fd))
-        d_s = np.concatenate((DS, np.zeros(len(fnames))))
+            dist, d_s = np.concatenate((D, fd)), np.concatenate((DS_, np.zeros(nf)))
+        else:
+            dist, d_s = D, DS_
         # a moving obstacle b: ḋ = n̂ᵀJ_a v − n̂ᵀv_b, so its rows ask n̂ᵀv_b more of the robot
         shift = np.zeros(dist.shape[0])
         if self._moving and m:
-            c, s_ = math.cos(q_base[2]), math.sin(q_base[2])
-            Rb = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
+            assert Rb is not None
             for k in np.flatnonzero(IB <= -2).tolist():
                 shift[k] = float(NN[k] @ (Rb.T @ self.obstacles[-2 - int(IB[k])].velocity_w))
         l, l_brake, damper = _all_bounds(C, v_prev, lb, ub, dist, d_s, d_i, p.gain, self.latency, shift,
                                          self._accel, p.braking)
         # two bodies of one pair of links: one row where they are parallel (the key: link a, and
         # link b, the floor or the obstacle; each fence row its own)
-        nl = self._n_links
-        other = np.where(IB >= 0, self._body_link[np.maximum(IB, 0)], nl - 1 - IB)
-        keys = np.concatenate((self._body_link[IA] * (nl + 2 + len(self.obstacles)) + other,
-                               -1 - np.arange(len(fnames))))
         keep = _distinct_rows(C, l, keys)
-        out.C, out.l, out.l_brake, out.damper, out.distances = C[keep], l[keep], l_brake[keep], damper[keep], dist[keep]
+        if keep.shape[0] == C.shape[0]:  # nothing merged: keep is 0, 1, …
+            out.C, out.l, out.l_brake, out.damper, out.distances = C, l, l_brake, damper, dist
+        else:
+            out.C, out.l, out.l_brake, out.damper = C[keep], l[keep], l_brake[keep], damper[keep]
+            out.distances = dist[keep]
         out.names = [self._name(int(IA[k]), int(IB[k])) if k < m else fnames[k - m] for k in keep.tolist()]
         return out
+
+    def _coal_fill(self, n: int, Rb: FloatArray | None, tb: FloatArray | None) -> None:
+        """The candidates the compiled distances left to coal (box-box, meshes, a capsule whose
+        segment is inside a box), computed by coal in place."""
+        d, P, Q, N, ok, I, J, _ = self._cand
+        bodies = self.geo.bodies
+        for k in np.flatnonzero(~ok[:n]).tolist():
+            i, j = int(I[k]), int(J[k])
+            if j >= 0:
+                got = self._coal(bodies[i].shape, self._T(i), bodies[j].shape, self._T(j))
+            elif j == -1:
+                got = self._coal(bodies[i].shape, self._T(i), self._floor, self._identity)
+            else:
+                assert Rb is not None and tb is not None
+                o = self.obstacles[-2 - j]
+                if o.plane:  # coal's half-space, built when a body needs it
+                    o.shape = coal.Halfspace(-o.normal_b, -o.offset_b)  # coal: solid where n'·p ≤ d
+                    got = self._coal(bodies[i].shape, self._T(i), o.shape, o.transform())
+                else:
+                    Mo = pin.SE3(Rb.T @ o.world.rotation, Rb.T @ (o.world.translation - tb))
+                    got = self._coal(bodies[i].shape, self._T(i), o.shape, transform(Mo))
+            d[k], P[k], Q[k], N[k] = got
 
     def _name(self, i: int, j: int) -> str:
         """A row's pair: "a/b" (bodies), "a/floor", "a/<obstacle id>" (j = -2 - its index)."""
@@ -424,9 +404,6 @@ class CollisionRows:
             other = bodies[j].name if j >= 0 else "floor" if j == -1 else self.obstacles[-2 - j].name
             name = self._names[key] = f"{bodies[i].name}/{other}"
         return name
-
-    def _buf(self, n: int) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, np.ndarray]:
-        return np.empty(n), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty(n, dtype=np.bool_)
 
     def _T(self, i: int) -> coal.Transform3s:
         """Body i's pose in the base frame as coal's (for the pairs coal computes)."""
@@ -525,25 +502,34 @@ def _place(Hj: FloatArray, joint: IntArray, local: Table, out: Table) -> None:
 
 
 @jit
+def _pair_one(
+    ka: IntArray, a0: FloatArray, a1: FloatArray, ra: FloatArray, ca: FloatArray, Ra: FloatArray, ha: FloatArray,
+    i: int, kb: IntArray, b0: FloatArray, b1: FloatArray, rb: FloatArray, cb: FloatArray, Rb: FloatArray,
+    hb: FloatArray, j: int, d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: np.ndarray, k: int,
+) -> None:
+    """Entry k ← the distance of A[i] to B[j] (ok False where coal must compute it)."""
+    ok[k] = True
+    if ka[i] == 0 and kb[j] == 0:
+        d[k] = swept_swept(a0[i], a1[i], ra[i], b0[j], b1[j], rb[j], P[k], Q[k], N[k])
+    elif ka[i] == 0 and kb[j] == 1:
+        d[k] = swept_box(a0[i], a1[i], ra[i], cb[j], Rb[j], hb[j], P[k], Q[k], N[k])
+        ok[k] = d[k] + ra[i] >= 0.0  # the segment itself inside the box: see swept_box
+    elif ka[i] == 1 and kb[j] == 0:
+        d[k] = swept_box(b0[j], b1[j], rb[j], ca[i], Ra[i], ha[i], Q[k], P[k], N[k])
+        N[k] = -N[k]
+        ok[k] = d[k] + rb[j] >= 0.0
+    else:
+        ok[k] = False
+
+
+@jit
 def _pairs_kernel(
     ka: IntArray, a0: FloatArray, a1: FloatArray, ra: FloatArray, ca: FloatArray, Ra: FloatArray, ha: FloatArray,
     kb: IntArray, b0: FloatArray, b1: FloatArray, rb: FloatArray, cb: FloatArray, Rb: FloatArray, hb: FloatArray,
     I: IntArray, J: IntArray, d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: np.ndarray,
 ) -> None:
     for k in range(I.shape[0]):
-        i, j = I[k], J[k]
-        ok[k] = True
-        if ka[i] == 0 and kb[j] == 0:
-            d[k] = swept_swept(a0[i], a1[i], ra[i], b0[j], b1[j], rb[j], P[k], Q[k], N[k])
-        elif ka[i] == 0 and kb[j] == 1:
-            d[k] = swept_box(a0[i], a1[i], ra[i], cb[j], Rb[j], hb[j], P[k], Q[k], N[k])
-            ok[k] = d[k] + ra[i] >= 0.0  # the segment itself inside the box: see swept_box
-        elif ka[i] == 1 and kb[j] == 0:
-            d[k] = swept_box(b0[j], b1[j], rb[j], ca[i], Ra[i], ha[i], Q[k], P[k], N[k])
-            N[k] = -N[k]
-            ok[k] = d[k] + rb[j] >= 0.0
-        else:
-            ok[k] = False
+        _pair_one(ka, a0, a1, ra, ca, Ra, ha, I[k], kb, b0, b1, rb, cb, Rb, hb, J[k], d, P, Q, N, ok, k)
 
 
 def _pair_distances(A: Table, I: IntArray, J: IntArray, B: Table, buf: tuple) -> tuple:
@@ -555,42 +541,34 @@ def _pair_distances(A: Table, I: IntArray, J: IntArray, B: Table, buf: tuple) ->
 
 
 @jit
-def _planes_kernel(
+def _plane_one(
     kind: IntArray, a0: FloatArray, a1: FloatArray, r: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
-    I: IntArray, normal: FloatArray, offset: float, d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray,
-    ok: np.ndarray,
+    i: int, normal: FloatArray, offset: float, d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray,
+    ok: np.ndarray, k: int,
 ) -> None:
-    for k in range(I.shape[0]):
-        i = I[k]
-        ok[k] = True
-        if kind[i] == 0:
-            d[k] = swept_plane(a0[i], a1[i], r[i], normal, offset, P[k], Q[k], N[k])
-        elif kind[i] == 1:
-            d[k] = box_plane(c[i], R[i], h[i], normal, offset, P[k], Q[k], N[k])
-        else:
-            ok[k] = False
-
-
-def _plane_distances(A: Table, I: IntArray, normal: FloatArray, offset: float, buf: tuple) -> tuple:
-    """Distances of A[I[k]] to the plane normal·x = offset (free side normal·x ≤ offset)."""
-    d, P, Q, N, ok = buf
-    _planes_kernel(A.kind, A.a0, A.a1, A.r, A.c, A.R, A.h, np.asarray(I, dtype=np.int64),
-                   np.asarray(normal, dtype=float), float(offset), d, P, Q, N, ok)
-    return d, P, Q, N, ok
+    """Entry k ← the distance of A[i] to the plane (ok False where coal must compute it)."""
+    ok[k] = True
+    if kind[i] == 0:
+        d[k] = swept_plane(a0[i], a1[i], r[i], normal, offset, P[k], Q[k], N[k])
+    elif kind[i] == 1:
+        d[k] = box_plane(c[i], R[i], h[i], normal, offset, P[k], Q[k], N[k])
+    else:
+        ok[k] = False
 
 
 @jit
 def _point_rows(
-    Jw: FloatArray, support: FloatArray, ja: IntArray, jb: IntArray, pa: FloatArray, pb: FloatArray,
-    n: FloatArray, world: np.ndarray, M: FloatArray, n_w: int, C: FloatArray,
+    Jw: FloatArray, support: FloatArray, bj: IntArray, IA: IntArray, IB: IntArray, pa: FloatArray, pb: FloatArray,
+    n: FloatArray, M: FloatArray, n_w: int, C: FloatArray,
 ) -> None:
-    """C[k] ← n̂ᵀ(J_{p_a} − J_{p_b}) of each pair, from the joints' world-frame (here: base-frame)
-    Jacobian Jw (6 × nv, Pinocchio's data.J: a point p of joint j moves at J_v + J_ω × p over the
-    columns the joint moves with); for pairs with the world, the base's motion of p_a on the wheels."""
-    for k in range(ja.shape[0]):
+    """C[k] ← n̂ᵀ(J_{p_a} − J_{p_b}) of each pair (body IA[k], and body IB[k] ≥ 0 or the world),
+    from the joints' world-frame (here: base-frame) Jacobian Jw (6 × nv, Pinocchio's data.J: a
+    point p of joint j moves at J_v + J_ω × p over the columns the joint moves with; ``bj``: each
+    body's joint); for pairs with the world, the base's motion of p_a on the wheels (eq. (5))."""
+    for k in range(IA.shape[0]):
         nk = n[k]
         for side in range(2):
-            j = ja[k] if side == 0 else jb[k]
+            j = bj[IA[k]] if side == 0 else bj[IB[k]] if IB[k] >= 0 else 0
             if j == 0:
                 continue
             p = pa[k] if side == 0 else pb[k]
@@ -604,11 +582,150 @@ def _point_rows(
                         nk[0] * Jw[0, i] + nk[1] * Jw[1, i] + nk[2] * Jw[2, i]
                         + c0 * Jw[3, i] + c1 * Jw[4, i] + c2 * Jw[5, i]
                     )
-        if world[k]:
+        if IB[k] < 0:
             p = pa[k]
             a2 = -nk[0] * p[1] + nk[1] * p[0]
             for j in range(n_w):
                 C[k, j] += nk[0] * M[0, j] + nk[1] * M[1, j] + a2 * M[2, j]
+
+
+@jit
+def _self_pass(
+    kind: IntArray, a0: FloatArray, a1: FloatArray, r: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
+    centre: FloatArray, pairs: IntArray, pair_r: FloatArray, d_i: float, d_s: float,
+    d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: np.ndarray, I: IntArray, J: IntArray,
+    DS: FloatArray, n: int,
+) -> int:
+    """The robot's own pairs whose bounding spheres are within d_i (the broad phase), their
+    distances appended to the candidates from entry n; returns the new count."""
+    for k in range(pairs.shape[0]):
+        i, j = pairs[k, 0], pairs[k, 1]
+        x, y, z = centre[i, 0] - centre[j, 0], centre[i, 1] - centre[j, 1], centre[i, 2] - centre[j, 2]
+        if not math.sqrt(x * x + y * y + z * z) - pair_r[k] <= d_i:
+            continue
+        _pair_one(kind, a0, a1, r, c, R, h, i, kind, a0, a1, r, c, R, h, j, d, P, Q, N, ok, n)
+        I[n], J[n], DS[n] = i, j, d_s
+        n += 1
+    return n
+
+
+@jit
+def _plane_pass(
+    kind: IntArray, a0: FloatArray, a1: FloatArray, r: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
+    centre: FloatArray, radii: FloatArray, idx: IntArray, cull: bool, normal: FloatArray, offset: float,
+    d_i: float, code: int, d_s: float,
+    d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: np.ndarray, I: IntArray, J: IntArray,
+    DS: FloatArray, n: int,
+) -> int:
+    """The bodies ``idx`` against the plane normal·x = offset (free side ≤), appended from entry n
+    (the other side coded ``code``); with ``cull`` only those whose bounding sphere is within d_i."""
+    for t in range(idx.shape[0]):
+        i = idx[t]
+        if cull:
+            gap = offset - (normal[0] * centre[i, 0] + normal[1] * centre[i, 1] + normal[2] * centre[i, 2]) - radii[i]
+            if not gap <= d_i:
+                continue
+        _plane_one(kind, a0, a1, r, c, R, h, i, normal, offset, d, P, Q, N, ok, n)
+        I[n], J[n], DS[n] = i, code, d_s
+        n += 1
+    return n
+
+
+@jit
+def _solid_pass(
+    kind: IntArray, a0: FloatArray, a1: FloatArray, r: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
+    centre: FloatArray, radii: FloatArray,
+    okind: IntArray, o0: FloatArray, o1: FloatArray, orad: FloatArray, oc: FloatArray, oR: FloatArray,
+    oh: FloatArray, ocentre: FloatArray, oradii: FloatArray, checked: np.ndarray, solid: IntArray,
+    d_i: float, d_s: float,
+    d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: np.ndarray, I: IntArray, J: IntArray,
+    DS: FloatArray, n: int,
+) -> int:
+    """Every checked body against every solid obstacle (placed in the base frame) within d_i: the
+    broad phase on the bodies' bounding spheres (against a box: the sphere's distance to the box
+    itself), appended from entry n (the other side coded −2 − the obstacle's index)."""
+    for o in range(okind.shape[0]):
+        for b in range(kind.shape[0]):
+            if not checked[o, b]:
+                continue
+            if okind[o] == 1:  # in the box's frame: the sphere's centre outside each slab
+                s2 = 0.0
+                for a in range(3):
+                    rel = (oR[o, 0, a] * (centre[b, 0] - oc[o, 0]) + oR[o, 1, a] * (centre[b, 1] - oc[o, 1])
+                           + oR[o, 2, a] * (centre[b, 2] - oc[o, 2]))
+                    e = max(abs(rel) - oh[o, a], 0.0)
+                    s2 += e * e
+                gap = math.sqrt(s2) - radii[b]
+            else:
+                x, y, z = centre[b, 0] - ocentre[o, 0], centre[b, 1] - ocentre[o, 1], centre[b, 2] - ocentre[o, 2]
+                gap = math.sqrt(x * x + y * y + z * z) - radii[b] - oradii[o]
+            if not gap <= d_i:
+                continue
+            _pair_one(kind, a0, a1, r, c, R, h, b, okind, o0, o1, orad, oc, oR, oh, o, d, P, Q, N, ok, n)
+            I[n], J[n], DS[n] = b, -2 - solid[o], d_s
+            n += 1
+    return n
+
+
+@jit
+def _assemble(
+    d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, I: IntArray, J: IntArray, DS: FloatArray, n: int,
+    d_i: float, max_rows: int, n_fence: int, n_v: int, Jw: FloatArray, support: FloatArray, bj: IntArray,
+    M: FloatArray, n_w: int, body_link: IntArray, n_links: int, n_obstacles: int,
+) -> tuple[FloatArray, FloatArray, FloatArray, IntArray, IntArray, FloatArray, IntArray, int]:
+    """Of the n candidates: the closest (its index, −1 if none), and the rows of those within d_i,
+    the nearest to their safety distance first, at most ``max_rows`` of them but every one inside
+    its safety distance (MAX_ROWS): (C with n_fence zero rows below, D, DS, IA, IB, n̂, the rows'
+    keys for :func:`_distinct_rows` (link a and the other side's link, the floor or the
+    obstacle; −1 − t for fence row t), the closest's index)."""
+    best_k, best = -1, math.inf
+    for k in range(n):
+        if d[k] < best:
+            best, best_k = d[k], k
+    near = np.empty(n, dtype=np.int64)
+    m = 0
+    for k in range(n):
+        if d[k] < d_i:
+            near[m] = k
+            m += 1
+    margin = np.empty(m)
+    inside = 0
+    for t in range(m):
+        margin[t] = d[near[t]] - DS[near[t]]
+        if margin[t] < 0.0:
+            inside += 1
+    order = np.argsort(margin, kind="mergesort")[: max(max_rows, inside)]
+    m = order.shape[0]
+    sel = near[order]
+    D, DSo, NN, PA, PB = np.empty(m), np.empty(m), np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3))
+    IA, IB = np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64)
+    keys = np.empty(m + n_fence, dtype=np.int64)
+    for t in range(m):
+        k = sel[t]
+        D[t], DSo[t], IA[t], IB[t] = d[k], DS[k], I[k], J[k]
+        for a in range(3):
+            NN[t, a], PA[t, a], PB[t, a] = N[k, a], P[k, a], Q[k, a]
+        other = body_link[IB[t]] if IB[t] >= 0 else n_links - 1 - IB[t]
+        keys[t] = body_link[IA[t]] * (n_links + 2 + n_obstacles) + other
+    for t in range(n_fence):
+        keys[m + t] = -1 - t
+    C = np.zeros((m + n_fence, n_v))
+    _point_rows(Jw, support, bj, IA, IB, PA, PB, NN, M, n_w, C)
+    return C, D, DSo, IA, IB, NN, keys, best_k
+
+
+@jit
+def _fence_near(A: FloatArray, c: FloatArray, qx: float, qy: float, n_w: int, lower: FloatArray,
+                upper: FloatArray, x: FloatArray, d_i: float) -> bool:
+    """Whether the base's origin is within d_i of a fence edge or the EE within d_i of its box."""
+    if n_w:
+        for k in range(A.shape[0]):
+            if c[k] - (A[k, 0] * qx + A[k, 1] * qy) < d_i:
+                return True
+    for a in range(3):  # noqa: SIM110 (a loop numba compiles)
+        if upper[a] - x[a] < d_i or x[a] - lower[a] < d_i:
+            return True
+    return False
 
 
 @jit
