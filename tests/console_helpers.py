@@ -157,6 +157,42 @@ class StatusLog:
     def mode_seen(self, mode: str, since: int) -> bool:
         return any(st.mode == mode for st in self.poll()[since:])
 
+    def summary(self, since: int, last: int = 12) -> str:
+        """The changes of (mode, safe stop, resume needed, last fault) in the statuses since
+        ``since``: what a failed wait prints."""
+        runs: list[tuple[Any, ...]] = []
+        for st in self.poll()[since:]:
+            key = (st.mode, st.safe_stop, st.resume_needed, st.last_fault)
+            if not runs or runs[-1] != key:
+                runs.append(key)
+        return f"{len(self.seen) - since} statuses; changes: " + "; ".join(
+            f"mode={m} safe_stop={s} resume_needed={r} last_fault={f!r}" for m, s, r, f in runs[-last:])
+
+
+def click_until_mode(page: Any, log: StatusLog, label: str, mode: str, timeout: float = 90.0,
+                     again: float = 10.0) -> int:
+    """Click the button ``label`` until the daemon's status shows ``mode``, again every ``again``
+    [s] as an operator would (a mode sent while the page's websocket reconnects, or during a safe
+    stop on a loaded machine, is lost or overruled: docs/protocol.md); fails after ``timeout`` [s]
+    with what the statuses showed. Returns the number of clicks."""
+    since = log.mark()
+    end, last, clicks = time.monotonic() + timeout, -float("inf"), 0
+    while not log.mode_seen(mode, since):
+        now = time.monotonic()
+        if now > end:
+            raise AssertionError(f"timed out after {timeout:g} s waiting for mode {mode} in the daemon's "
+                                 f"status after {clicks} clicks on {label!r}: {log.summary(since)}")
+        if now - last > again:
+            click_button(page, label)
+            clicks, last = clicks + 1, now
+        time.sleep(0.1)
+    return clicks
+
+
+def log_tails(folder: Path, chars: int = 1500) -> str:
+    """The ends of the ``*.log`` files in ``folder`` (the stack's and the console's logs)."""
+    return "\n".join(f"--- {f.name}:\n{f.read_text(errors='replace')[-chars:]}" for f in sorted(folder.glob("*.log")))
+
 
 def click_button(page: Any, text: str) -> None:
     """A real mouse click (DevTools input events) at the centre of the button labelled ``text``.

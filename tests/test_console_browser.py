@@ -20,7 +20,9 @@ from console_helpers import (
     canvas_not_blank,
     chromium_page,
     click_button,
+    click_until_mode,
     console_process,
+    log_tails,
     save_shot,
     scene_pixels,
     screenshot,
@@ -56,6 +58,7 @@ def test_console_in_chromium_drives_the_robot(tmp_path: Path) -> None:
             except Exception:
                 save_shot(screenshot(page), tmp_path, "failure.png")
                 print("browser console:", *browser_log[-20:], sep="\n  ")
+                print(log_tails(tmp_path))
                 raise
 
 
@@ -109,10 +112,7 @@ def _drive(page: Any, url: str, obs: Any, tmp_path: Path) -> None:
     print("3D view rendered", flush=True)
 
     for label, mode in (("DM Cartesian", "dm_cartesian"), ("Track", "track")):
-        since = log.mark()
-        click(label)
-        wait_for(f"mode {mode} in the daemon's status after a click on {label!r}",
-                 lambda mode=mode, since=since: log.mode_seen(mode, since), timeout=60.0)
+        click_until_mode(page, log, label, mode)
     print("mode buttons work", flush=True)
 
     st = wait_for("a status with the EE", lambda: (s := obs.latest_status()) and s.x and s)
@@ -141,6 +141,4 @@ def _drive(page: Any, url: str, obs: Any, tmp_path: Path) -> None:
     assert s.operator.startswith("console-")
     page.wait_for_timeout(1500)
     save_shot(screenshot(page), tmp_path, "console_moved.png")
-    since = log.mark()
-    click("STOP (hold)")
-    wait_for("mode hold after STOP", lambda: log.mode_seen("hold", since))
+    click_until_mode(page, log, "STOP (hold)", "hold")

@@ -9,6 +9,7 @@ operator's last move, then the console falls silent and the daemon holds its las
 from __future__ import annotations
 
 import math
+import sys
 import threading
 import time
 from functools import partial
@@ -238,6 +239,7 @@ class Console:
         direction = list(d / np.linalg.norm(d)) if mode.startswith("dm_") and np.linalg.norm(d) > 1e-9 else None
         self.link.set_mode(mode, direction)
         self.mode_clicks += 1
+        print(f"console: mode {mode} sent (click {self.mode_clicks})", file=sys.stderr, flush=True)
         with self._lock:
             self._target = None  # the daemon latches the target where the EE is
 
