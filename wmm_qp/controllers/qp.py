@@ -703,7 +703,8 @@ class QpController(Controller):
                 k = int(left[0]) if left.size else 0
                 what = "EE box" if k < n_box or rows is None else f"collision row {rows.names[k - n_box]}"
                 reason = f"{what}: the solution left it by {out / self.dt:.3g} m/s; projected back onto it"
-        if status == Status.OK and not self._closed_form_hit and task_residual(problem, z) > 1e-6:
-            status, reason = Status.SATURATED, self._cut_reason(rows, z[: self.n_v])
+        if not self._closed_form_hit and task_residual(problem, z) > 1e-6:  # the task cut: by which rows first
+            cut = self._cut_reason(rows, z[: self.n_v])
+            status, reason = Status.SATURATED, f"{cut}; {reason}" if reason else cut
         alpha = self.config.qp.dm_alpha if mode == Mode.DM_NULLSPACE else self.config.qp.alpha
         return self.finish(ctx, z[: self.n_v], xdot, status=status, reason=reason, alpha=alpha)

@@ -1,4 +1,24 @@
-"""proxsuite's dense ProxQP with a persistent, warm-started workspace (the default backend)."""
+"""proxsuite's dense ProxQP, cold-started on every solve (the default backend).
+
+Settings (measured on the collision-row QPs of ``wmm-qp verify`` and the TIAGo floor drive,
+benchmarks/collision/proxsuite_determinism.py):
+
+* eps_abs as configured (1e-9): on the hard collision QPs ProxQP reaches it on about half of
+  them (the rest go to DAQP); 1e-6 would double that but leaves rows ~6e-7 out and the task
+  velocity ~2e-8 off (tests/test_collision.py, tests/test_qp.py).
+* No warm start, no state: NO_INITIAL_GUESS and the preconditioner recomputed on every update, so a
+  solve depends on its QP alone (not on the order of the previous ones). Warm starts from the
+  huge multipliers of an infeasible QP had proxsuite stall, or stop "solved" off the optimum.
+* max_iter 30 (outer), max_iter_in 50: a feasible QP here solves in < 30 outer iterations; an
+  infeasible one (states sampled inside an obstacle) ran 200 × 1500 inner ones (seconds). A cap
+  reached is a failure: the controller re-solves with DAQP, which decides infeasibility exactly.
+
+Not bit-identical across processes: proxsuite's AVX2/AVX-512 builds (loaded when the CPU has them)
+give last bits that depend on the alignment of their heap buffers; its baseline build does not.
+Without warm starts these differences no longer decide between a solution and the cap on the
+collision QPs (benchmarks/collision/proxsuite_determinism.py: the same outcome in 5 processes), but
+in a closed loop a marginal QP can still go to DAQP in one process and not in another.
+"""
 
 from __future__ import annotations
 
@@ -9,12 +29,14 @@ from .base import QPBackend
 from .problem import QPProblem, QPSolution
 
 _OUT = proxsuite.proxqp.QPSolverOutput
+MAX_ITER = 30  # outer iterations
+MAX_ITER_IN = 50  # inner (semi-smooth Newton) iterations per outer one
 
 
 class ProxsuiteBackend(QPBackend):
     name = "proxsuite"
 
-    def __init__(self, eps_abs: float = 1e-9, max_iter: int = 200) -> None:
+    def __init__(self, eps_abs: float = 1e-9, max_iter: int = MAX_ITER) -> None:
         super().__init__(eps_abs, max_iter)
         self._qp: proxsuite.proxqp.dense.QP | None = None
         self._shape: tuple[int, int, int] | None = None
@@ -23,20 +45,6 @@ class ProxsuiteBackend(QPBackend):
         self._qp, self._shape = None, None
 
     def solve(self, problem: QPProblem) -> QPSolution:
-        sol = self._solve(problem)
-        if not sol.ok and self._qp is not None:
-            # A warm start from a very different previous solution (a jump in the reference)
-            # can stall ProxQP at its iteration cap although the problem solves cold in ~20
-            # iterations: retry once from a fresh workspace.
-            self.reset()
-            cold = self._solve(problem)
-            cold.iterations += sol.iterations
-            if cold.ok:
-                cold.status = f"{cold.status} (cold retry)"
-            return cold
-        return sol
-
-    def _solve(self, problem: QPProblem) -> QPSolution:
         try:
             shape = (problem.n, problem.n_eq, problem.n_in)
             C = problem.C if problem.n_in else None
@@ -45,13 +53,16 @@ class ProxsuiteBackend(QPBackend):
             if self._qp is None or shape != self._shape:
                 qp = proxsuite.proxqp.dense.QP(*shape, True)
                 s = qp.settings
-                s.eps_abs, s.eps_rel, s.max_iter, s.verbose = self.eps_abs, 0.0, self.max_iter, False
-                s.initial_guess = proxsuite.proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
+                s.eps_abs, s.eps_rel, s.max_iter, s.max_iter_in = self.eps_abs, 0.0, self.max_iter, MAX_ITER_IN
+                s.verbose = False
+                s.initial_guess = proxsuite.proxqp.InitialGuess.NO_INITIAL_GUESS
                 qp.init(problem.H, problem.g, problem.A, problem.b, C, l, u, problem.lb, problem.ub)
                 self._qp, self._shape = qp, shape
             else:
                 qp = self._qp
-                qp.update(problem.H, problem.g, problem.A, problem.b, C, l, u, problem.lb, problem.ub)
+                # the preconditioner of this QP, not of the first one of this shape
+                qp.update(problem.H, problem.g, problem.A, problem.b, C, l, u, problem.lb, problem.ub,
+                          update_preconditioner=True)
             qp.solve()
             info = qp.results.info
             ok = info.status == _OUT.PROXQP_SOLVED
