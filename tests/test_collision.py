@@ -206,8 +206,9 @@ def test_every_robot_with_urdf_geometry_stops_at_the_floor(name: str, solver: st
 
     proxsuite warm-started from the previous solve used to stop at its iteration cap on some of
     TIAGo's barely feasible stages in one process and solve them in another, and in 1 of 6
-    processes TIAGo's hand reached its base's hull (−1.6 mm); cold-started with its caps
-    (solvers/proxsuite_backend.py) it hands those stages to DAQP in every process."""
+    processes TIAGo's hand reached its base's hull (−1.6 mm); with its caps, and its workspace
+    dropped after a failure (solvers/proxsuite_backend.py), it hands those stages to DAQP in
+    every process."""
     m = model(name)
     cfg = w.load_controller_config().with_(collision={"enabled": True}, qp={"solver": solver})
     ctl = w.make_controller("qp", m, cfg)

@@ -1,23 +1,29 @@
-"""proxsuite's dense ProxQP, cold-started on every solve (the default backend).
+"""proxsuite's dense ProxQP, warm-started from the last solve while solves succeed (the default backend).
 
-Settings (measured on the collision-row QPs of ``wmm-qp verify`` and the TIAGo floor drive,
+Settings (measured on 180 collision-row QPs captured from ``wmm-qp verify`` with the cluttered
+scene, 82 of them without a solution, and on the TIAGo floor drive;
 benchmarks/collision/proxsuite_determinism.py):
 
 * eps_abs as configured (1e-9): on the hard collision QPs ProxQP reaches it on about half of
   them (the rest go to DAQP); 1e-6 would double that but leaves rows ~6e-7 out and the task
   velocity ~2e-8 off (tests/test_collision.py, tests/test_qp.py).
-* No warm start, no state: NO_INITIAL_GUESS and the preconditioner recomputed on every update, so a
-  solve depends on its QP alone (not on the order of the previous ones). Warm starts from the
-  huge multipliers of an infeasible QP had proxsuite stall, or stop "solved" off the optimum.
-* max_iter 30 (outer), max_iter_in 50: a feasible QP here solves in < 30 outer iterations; an
-  infeasible one (states sampled inside an obstacle) ran 200 × 1500 inner ones (seconds). A cap
-  reached is a failure: the controller re-solves with DAQP, which decides infeasibility exactly.
+* max_iter 30 (outer), max_iter_in 50 (inner, per outer one): a feasible QP here solves in < 30
+  outer iterations; one without a solution (a state sampled inside an obstacle) ran 200 × 1500
+  inner ones, seconds, before DAQP decided it. A cap reached is a failure: the controller
+  re-solves with DAQP, which decides infeasibility exactly.
+* Warm start (the previous solution and multipliers) while the solves succeed: on the paper's
+  circle a cold start costs ~130 µs more a full stage (``wmm-qp bench --only collisions``: the
+  tick without rows 193 → 323 µs). After a failure the workspace is dropped and the QP solved
+  once more cold: the huge multipliers a failed solve leaves had the next solves stall at the
+  cap, or stop "solved" off the optimum (|z − z_daqp| = 2.3e-2 once), and turned the last bits in
+  which proxsuite's processes differ into a solve in one process and the cap in another.
+* The preconditioner recomputed on every update (the update's default keeps the first QP's).
 
 Not bit-identical across processes: proxsuite's AVX2/AVX-512 builds (loaded when the CPU has them)
 give last bits that depend on the alignment of their heap buffers; its baseline build does not.
-Without warm starts these differences no longer decide between a solution and the cap on the
-collision QPs (benchmarks/collision/proxsuite_determinism.py: the same outcome in 5 processes), but
-in a closed loop a marginal QP can still go to DAQP in one process and not in another.
+On the collision QPs those bits no longer decide between a solution and the cap
+(benchmarks/collision/proxsuite_determinism.py: the same outcome in every process), but in a
+closed loop a marginal QP can still go to DAQP in one process and not in another.
 """
 
 from __future__ import annotations
@@ -45,6 +51,19 @@ class ProxsuiteBackend(QPBackend):
         self._qp, self._shape = None, None
 
     def solve(self, problem: QPProblem) -> QPSolution:
+        sol = self._solve(problem)
+        if not sol.ok:  # nothing of a failed solve carried over: the same QP again, cold
+            self.reset()
+            cold = self._solve(problem)
+            cold.iterations += sol.iterations
+            if cold.ok:
+                cold.status = f"{cold.status} (cold retry)"
+            else:
+                self.reset()
+            return cold
+        return sol
+
+    def _solve(self, problem: QPProblem) -> QPSolution:
         try:
             shape = (problem.n, problem.n_eq, problem.n_in)
             C = problem.C if problem.n_in else None
@@ -55,7 +74,7 @@ class ProxsuiteBackend(QPBackend):
                 s = qp.settings
                 s.eps_abs, s.eps_rel, s.max_iter, s.max_iter_in = self.eps_abs, 0.0, self.max_iter, MAX_ITER_IN
                 s.verbose = False
-                s.initial_guess = proxsuite.proxqp.InitialGuess.NO_INITIAL_GUESS
+                s.initial_guess = proxsuite.proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
                 qp.init(problem.H, problem.g, problem.A, problem.b, C, l, u, problem.lb, problem.ub)
                 self._qp, self._shape = qp, shape
             else:
