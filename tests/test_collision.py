@@ -393,3 +393,29 @@ def test_the_first_obstacle_near_the_arm_compiles_nothing_in_the_loop(tmp_path: 
     rows = int(out.stdout.split("rows ")[1].split()[0])
     assert rows > 0, out.stdout  # the obstacles were near: their rows were built
     assert "compiled after warm-up: {}" in out.stdout, out.stdout
+
+
+def test_a_braking_stage_no_solver_solves_commands_the_braking_command_not_a_safe_stop() -> None:
+    """The UR5 sampled at its position limits with its forearm inside its base (verify's
+    ``at_limit`` case, ~9 rows): the stage relaxed to admit the braking command v₀ has all its rows
+    within 1e-9 m/s of v₀ at a vertex of the box, and DAQP reads it as infeasible. v₀ meets every
+    row and bound by construction: it is commanded (``saturated``, the pair named), not a safe stop
+    (431 of 8,000 commands in the 2,000-sample verify with daqp before; docs/results.md)."""
+    from wmm_qp.verify import check_command, sample_states
+
+    m = model("ur5_omni.toml")
+    cfg = w.load_controller_config().with_(collision={"enabled": True}, qp={"solver": "daqp"})
+    ctl = w.make_controller("qp", m, cfg)
+    scene = load_scene(default_config_dir() / "scenes" / "cluttered.toml")
+    ctl.set_scene(scene)  # type: ignore[attr-defined]
+    p = cfg.collision
+    judge = CollisionJudge(m, scene, p.safety_distance, p.floor_margin)
+    braking, statuses = 0, set()
+    for s in sample_states(m, 12, 0, tuple(w.Mode), judge=judge, influence=p.influence_distance):
+        cmd = ctl.step(s.state, s.reference)
+        statuses.add(cmd.status.value)
+        braking += "the braking command" in cmd.reason
+        assert sum(check_command(m.config, ctl.dt, s.state, cmd, model=m, collision=judge).values()) == 0, s.case
+    assert braking >= 4, braking  # sample 11, at its limits, in every mode
+    assert "safe_stop" not in statuses, statuses
+    assert ctl.braking_stages == braking  # type: ignore[attr-defined]

@@ -344,6 +344,7 @@ class QpController(Controller):
         self.task_recovered = 0  # ... and turned out feasible (the penalty alone was too weak)
         self.task_without_objective = 0  # ... of which only with the DM/return terms dropped
         self.ee_box_corrections = 0  # commands the EE box re-check had to pull back into the box
+        self.braking_stages = 0  # stages every solver failed on, commanded the braking command that meets their rows
         self._templates: dict[tuple[int, int], QPProblem] = {}
         self._w_inv = 1.0 / weight_matrix_diag(qp.alpha, self.n_wheels, self.n_arm)  # W_x⁻¹, eq. (12)
         self._w_inv_dm = 1.0 / weight_matrix_diag(qp.dm_alpha, self.n_wheels, self.n_arm)  # in DM_NULLSPACE
@@ -399,7 +400,7 @@ class QpController(Controller):
 
     def clear_statistics(self) -> None:
         self.fallbacks = self.closed_form_hits = self.task_checks = 0
-        self.task_recovered = self.task_without_objective = self.ee_box_corrections = 0
+        self.task_recovered = self.task_without_objective = self.ee_box_corrections = self.braking_stages = 0
 
     # ------------------------------------------------------------------ building
     def box(self, ctx: TickContext) -> tuple[FloatArray, FloatArray]:
@@ -687,6 +688,18 @@ class QpController(Controller):
             if z is None and problem.g[: self.n_v].any():  # still failing: without the DM and return terms
                 problem.g[: self.n_v] = 0.0
                 z = self._solve(self._full, problem)
+        if z is None and rows is not None and rows.l.shape[0]:
+            # every solver read the braking stage as infeasible: its rows all pass within 1e-9 m/s of
+            # the braking command v₀ at a vertex of the box, degenerate for an active-set solver
+            # (the UR5 at its position limits, docs/results.md); v₀ itself meets every row and bound
+            v0 = np.clip(0.0, ctx.lo, ctx.hi)
+            e = problem.C[:, : self.n_v] @ v0
+            if bool(((e >= problem.l - EE_BOX_TOL) & (e <= problem.u + EE_BOX_TOL)).all()):
+                self.last_stage = "brake"
+                self.braking_stages += 1
+                return self.finish(ctx, v0, xdot, status=Status.SATURATED,
+                                   reason=f"{self._cut_reason(rows, v0)}: the braking command (qp ({self.solver}): "
+                                          "no solution of the stage that admits it)")
         if z is None:
             self.last_stage = "failed"
             return self.safe_stop(state, f"qp ({self.solver}): the solver failed")
