@@ -236,6 +236,9 @@ class CollisionRows:
         self._body_link = np.array([links.index(b.link) for b in bodies], dtype=np.int64)
         self._n_links = len(links)
         self._cand = self._candidates(0)
+        self._no_fence, self._no_fence_d = np.zeros((0, self.n_w + self.n_a)), np.zeros(0)  # read only
+        self._no_fence.setflags(write=False)
+        self._no_fence_d.setflags(write=False)
 
     def _candidates(self, n_obstacles: int) -> tuple:
         """The candidate buffer (d, p_a, p_b, n̂, ok, body a, the other side, d_s): room for every
@@ -330,13 +333,8 @@ class CollisionRows:
                                 d, P, Q, N, ok, I, J, DS, n)
         if n and not ok[:n].all():
             self._coal_fill(n, Rb, tb)
-        nf = 0
-        fC = fd = None
-        fnames: list[str] = []
-        if _fence_near(self._fence_A, self._fence_c, float(q_base[0]), float(q_base[1]), self.n_w,
-                       self.fence.ee_lower, self.fence.ee_upper, x_ee, d_i):
-            fC, fd, fnames = self._fence_rows(q_base, x_ee, J_ee, n_v)
-            nf = len(fnames)
+        fC, fd, fnames = self._fence_rows(q_base, x_ee, J_ee, n_v)
+        nf = len(fnames)
         out = Rows(np.zeros((0, n_v)), np.zeros(0))
         if not n and not nf:
             return out
@@ -349,7 +347,6 @@ class CollisionRows:
         if not m and not nf:
             return out
         if nf:
-            assert fC is not None and fd is not None
             C[m:] = fC
             dist, d_s = np.concatenate((D, fd)), np.concatenate((DS_, np.zeros(nf)))
         else:
@@ -422,6 +419,8 @@ class CollisionRows:
         """(rows, distances, names) of the fence dampers within the influence distance (d_s = 0)."""
         f, d_i = self.fence, self.p.influence_distance
         A, c = self._fence_A, self._fence_c
+        if not _fence_near(A, c, float(q_base[0]), float(q_base[1]), self.n_w, f.ee_lower, f.ee_upper, x, d_i):
+            return self._no_fence, self._no_fence_d, []  # the usual tick: one compiled call
         rows: list[FloatArray] = []
         dist: list[float] = []
         names: list[str] = []
