@@ -57,6 +57,52 @@ def test_bounds_inactive_qp_equals_weighted_pseudoinverse(
     np.testing.assert_allclose(cmd.v, expected, atol=1e-8, rtol=0)
 
 
+def _damped_arm() -> np.ndarray:
+    """The arm nearly stretched (σ_min(J_m) < 0.06 < 0.08: the singularity damping acts)."""
+    from wmm_qp.pseudoinverse import sigma_min
+
+    q = Q0.copy()
+    for q4 in np.linspace(1.0, 0.0, 400):  # unfold the elbow towards the stretched singularity
+        q[3] = q4
+        if sigma_min(model().kinematics(np.zeros(3), q).J_m) < 0.06:
+            return q
+    raise AssertionError("no damped configuration found")
+
+
+@pytest.mark.parametrize("closed_form", [True, False])
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_the_damping_prices_the_base_rotation_like_the_arm(solver: str, closed_form: bool) -> None:
+    """Near a singularity the arm's cost is scaled by s = 1 + κ(λ/λ_max)² and so is the base's
+    yaw (a rank-one term on the wheels, QpController.base_rotation_weight); the base's
+    translation keeps its W_x⁻¹ price. With the bounds inactive every path (closed form by
+    Sherman–Morrison, every solver) gives v = H⁻¹Jᵀ(J H⁻¹Jᵀ)⁻¹ ẋ of that H."""
+    qa = _damped_arm()
+    qb = np.array([0.3, -0.2, 0.7])
+    kin = model().kinematics(qb, qa)
+    xdot = np.array([0.01, -0.02, 0.005])
+    ctl = qp(solver, arm_first=False, closed_form_first=closed_form)
+    ctx = ctl.context(w.RobotState(qb, qa), w.Reference("track", x_d=kin.x, xd_d=xdot), need_gradient=False)
+    scale = ctl.singular_scale(ctx)
+    assert scale > 10.0
+    n_w = ctl.n_wheels
+    M, M_pinv = model().base.M, model().base.M_pinv
+    H = np.diag(ctl.cost_diagonal(ctx, w.Mode.TRACK))
+    rot = np.zeros(ctl.n_v)
+    rot[:n_w] = M[2]
+    H += ctl.base_rotation_weight(ctx, w.Mode.TRACK) * np.outer(rot, rot)
+    w_b = 1.0 / weight_matrix_diag(ctl.config.qp.alpha, n_w, 7)[0]
+    yaw, trans = M_pinv[:, 2], M_pinv[:, 0]  # the wheel speeds of a pure unit yaw, of a unit v_x
+    np.testing.assert_allclose(yaw @ H[:n_w, :n_w] @ yaw, scale * w_b * (yaw @ yaw), rtol=1e-12)
+    np.testing.assert_allclose(trans @ H[:n_w, :n_w] @ trans, w_b * (trans @ trans), rtol=1e-12)
+    Hi_Jt = np.linalg.solve(H, kin.J.T)
+    expected = Hi_Jt @ np.linalg.solve(kin.J @ Hi_Jt, xdot)
+    state = w.RobotState(qb, qa, v_arm=expected[n_w:], wheel_speeds=expected[:n_w])  # bounds inactive
+    cmd = ctl.step(state, w.Reference("track", x_d=kin.x, xd_d=xdot))
+    assert cmd.status == w.Status.DAMPED, cmd.reason
+    assert ctl.closed_form_hits == int(closed_form)
+    np.testing.assert_allclose(cmd.v, expected, atol=1e-8, rtol=0)
+
+
 # 2 ------------------------------------------------------------------------------------------
 ARM = model().config.arm
 LO = np.where(np.isfinite(ARM.position_lower), ARM.position_lower, -np.pi)

@@ -33,7 +33,10 @@ multiplied by 1 + κ·(λ/λ_max)² (κ = ``qp.singular_arm_weight``, λ from th
 damping law), so arm motion grows expensive as the arm approaches its singularity and the
 base takes over, the task still met. The joint velocity bounds (13) already rule out
 the unbounded joint rates DLS exists to prevent. (The arm-first stage is unaffected: scaling
-every arm joint's cost alike does not change its optimum.)
+every arm joint's cost alike does not change its optimum.) The base's yaw is priced up by the same
+factor (``base_rotation_weight``: ½ c ω² with ω the yaw row of the base's M, eq. (3)), so that the
+damping hands the arm's work to the base's translation and not to its rotation; the wheel block of
+the cost is then diag(W_x⁻¹) + c·rot rotᵀ, which the closed form inverts by Sherman–Morrison.
 
 The penalty alone is exact only while ρ₁ exceeds the task's multiplier, which near a
 singularity or with a large DM gradient (∝ H2³) it may not. So whenever a stage leaves slack,
@@ -110,21 +113,44 @@ def _closed_form(
     u: FloatArray,
     lb: FloatArray,
     ub: FloatArray,
+    rot: FloatArray,
+    c: float,
     z: FloatArray,
 ) -> bool:
-    """:meth:`QpController.closed_form` compiled: z ← the optimum, True iff every KKT condition holds."""
+    """:meth:`QpController.closed_form` compiled: z ← the optimum, True iff every KKT condition holds.
+
+    H's block on v is D + c·rot rotᵀ (D diagonal, c ≥ 0: the base's rotation cost of
+    :meth:`QpController.base_rotation_weight`), inverted by Sherman–Morrison:
+    H⁻¹ = D⁻¹ − β (D⁻¹rot)(D⁻¹rot)ᵀ, β = c / (1 + c rotᵀD⁻¹rot).
+    """
     m = A.shape[0]  # r, the task's rows
     n = z.shape[0] - 2 * m
-    # G = J D⁻¹ Jᵀ (r×r) and r = b + J D⁻¹ g, J = A[:, :n], D = diag(H)[:n]
+    d, d_inv = np.empty(n), np.empty(n)
+    for i in range(n):
+        d[i] = H[i, i] - c * rot[i] * rot[i]
+        d_inv[i] = 1.0 / d[i]
+    beta, ug, jr = 0.0, 0.0, np.zeros(m)  # β, rotᵀD⁻¹g, J D⁻¹ rot
+    if c > 0.0:
+        q = 0.0
+        for i in range(n):
+            q += rot[i] * d_inv[i] * rot[i]
+            ug += rot[i] * d_inv[i] * g[i]
+            for a in range(m):
+                jr[a] += A[a, i] * d_inv[i] * rot[i]
+        beta = c / (1.0 + c * q)
+    # G = J H⁻¹ Jᵀ (r×r) and r = b + J H⁻¹ g, J = A[:, :n]
     G = np.zeros((m, m))
     r = b.copy()
     for i in range(n):
-        d_inv = 1.0 / H[i, i]
         for a in range(m):
-            jd = A[a, i] * d_inv
+            jd = A[a, i] * d_inv[i]
             r[a] += jd * g[i]
-            for c in range(m):
-                G[a, c] += jd * A[c, i]
+            for e in range(m):
+                G[a, e] += jd * A[e, i]
+    for a in range(m):
+        r[a] -= beta * jr[a] * ug
+        for e in range(m):
+            G[a, e] -= beta * jr[a] * jr[e]
     # λ = G⁻¹ r (G symmetric)
     if m == 3:
         det, l0, l1, l2 = solve_sym3(G[0, 0], G[0, 1], G[0, 2], G[1, 1], G[1, 2], G[2, 2], r[0], r[1], r[2])
@@ -140,11 +166,16 @@ def _closed_form(
         if not abs(lam[a]) <= rho1:
             return False
     z[:] = 0.0
-    for i in range(n):  # v = D⁻¹(Jᵀλ − g) inside its bounds
+    w = np.empty(n)  # Jᵀλ − g
+    uw = 0.0  # rotᵀD⁻¹(Jᵀλ − g)
+    for i in range(n):
         jl = 0.0
         for a in range(m):
             jl += A[a, i] * lam[a]
-        vi = (jl - g[i]) / H[i, i]
+        w[i] = jl - g[i]
+        uw += rot[i] * d_inv[i] * w[i]
+    for i in range(n):  # v = H⁻¹(Jᵀλ − g) inside its bounds
+        vi = (w[i] - beta * rot[i] * uw) / d[i]
         if not (lb[i] <= vi <= ub[i]):
             return False
         z[i] = vi
@@ -172,6 +203,8 @@ def _fill_stage(
     lo: FloatArray,
     hi: FloatArray,
     cost: FloatArray,
+    rot: FloatArray,
+    c: float,
     H: FloatArray,
     A: FloatArray,
     b: FloatArray,
@@ -181,7 +214,9 @@ def _fill_stage(
 ) -> None:
     """A stage's H, A, b, lb, ub over the last len(cost) columns of v = [v_b; v_m]. The columns
     before them (the wheels in stage 1; none in stage 2) are held at w_hold, the admissible
-    speed nearest 0, and their motion leaves the stage's task: b = ẋ_ref − J_held w_hold."""
+    speed nearest 0, and their motion leaves the stage's task: b = ẋ_ref − J_held w_hold.
+    H's block on them is diag(cost) + c·rot rotᵀ, written whole (a template may serve both
+    stages: a fixed base's)."""
     first, n = w_hold.shape[0], cost.shape[0]
     for j in range(first):
         w_hold[j] = min(max(lo[j], 0.0), hi[j])
@@ -193,7 +228,9 @@ def _fill_stage(
         for i in range(n):
             A[a, i] = J[a, first + i]
     for i in range(n):
-        H[i, i] = cost[i]
+        for j in range(n):
+            H[i, j] = c * rot[i] * rot[j]
+        H[i, i] += cost[i]
         lb[i], ub[i] = lo[first + i], hi[first + i]
 
 
@@ -349,6 +386,16 @@ class QpController(Controller):
         self._w_inv = 1.0 / weight_matrix_diag(qp.alpha, self.n_wheels, self.n_arm)  # W_x⁻¹, eq. (12)
         self._w_inv_dm = 1.0 / weight_matrix_diag(qp.dm_alpha, self.n_wheels, self.n_arm)  # in DM_NULLSPACE
         self._n_s = 2 * self.r  # s⁺, s⁻ ∈ Rʳ
+        # The base's rotation, ω = rot·v_b (the yaw row of the base's M, eq. (3)), and its price in
+        # W_x⁻¹'s wheel cost: ‖M⁺ e_ω‖², the squared wheel speeds of a pure yaw of 1 rad/s
+        base = model.base
+        self._rot = np.zeros(self.n_v)
+        self._rot[: self.n_wheels] = base.M[2]
+        self._rot.setflags(write=False)
+        self._rot_price = float(np.sum(base.M_pinv[:, 2] ** 2)) if self.n_wheels else 0.0
+        self._no_rot = np.zeros(self.n_arm)  # stage 1: no wheel columns
+        self._no_rot.setflags(write=False)
+        self._stage_rot: dict[tuple[int, int], tuple[FloatArray, float]] = {}  # a template's c·rot rotᵀ
         self._no_rows = np.zeros((0, self.n_v))  # no EE box rows (read only)
         self._no_rows.setflags(write=False)
         self._v_n_max = 10.0 * self.robot.arm.velocity_max
@@ -442,16 +489,46 @@ class QpController(Controller):
         """(ρ₁, ρ₂): the slack's exact penalty and quadratic weight."""
         return self.config.qp.slack_l1, self.config.qp.slack_weight
 
+    def singular_scale(self, ctx: TickContext) -> float:
+        """1 + κ·(λ/λ_max)²: the factor the singularity damping puts on the arm's cost (κ =
+        ``qp.singular_arm_weight``, λ of the variable-damping law; 1 away from singularities)."""
+        if ctx.damping == 0.0 or self.config.damping_max <= 0.0:
+            return 1.0
+        return 1.0 + self.config.qp.singular_arm_weight * (ctx.damping / self.config.damping_max) ** 2
+
     def cost_diagonal(self, ctx: TickContext, mode: Mode) -> FloatArray:
         """Diagonal of the cost on v: W_x⁻¹ (eq. (12); ``qp.dm_alpha`` in DM_NULLSPACE), the arm
-        block damped near singularities."""
+        block damped near singularities (:meth:`singular_scale`)."""
         w_inv = self._w_inv_dm if mode == Mode.DM_NULLSPACE else self._w_inv
-        if ctx.damping == 0.0 or self.config.damping_max <= 0.0:
+        scale = self.singular_scale(ctx)
+        if scale == 1.0:
             return w_inv
-        scale = 1.0 + self.config.qp.singular_arm_weight * (ctx.damping / self.config.damping_max) ** 2
         d = w_inv.copy()
         d[self.n_wheels :] *= scale
         return d
+
+    def base_rotation_weight(self, ctx: TickContext, mode: Mode) -> float:
+        """c of the cost's rank-one term ½ c ω², ω = rot·v_b the base's yaw rate: the damping
+        applied to the base's rotation as to the arm.
+
+        Near a singularity the arm's cost rises (:meth:`cost_diagonal`) so that the base takes
+        over the motion the arm can no longer make, which only the base's translation supplies (a
+        yaw turns the EE about the base's vertical axis, as the arm's own joints can). Damping the
+        arm alone would leave the yaw at W_x⁻¹'s price while the arm's grows up to 1 + κ: the
+        yaw, which moves a stretched-out EE ~its reach per rad, then takes a share of every EE
+        motion the arm used to make (on the Gen3, joint 1's). So the yaw's price is scaled alike:
+        c = (scale − 1)·w_b·‖M⁺ e_ω‖², w_b the wheels' entry of W_x⁻¹ (eq. (12)), ‖M⁺ e_ω‖² the
+        squared wheel speeds of a pure unit yaw (eq. (3)); the yaw then costs scale × its W_x⁻¹
+        price (exactly, on a base whose yaw pattern is orthogonal to its translations: Mecanum,
+        the symmetric omni, diff drive), the split between arm and base rotation stays eq. (12)'s,
+        and the base's translation alone gets relatively cheaper. 0 away from singularities (so
+        the QP still equals eq. (11) there) and without wheels.
+        """
+        scale = self.singular_scale(ctx)
+        if scale == 1.0 or not self.n_wheels:
+            return 0.0
+        w_inv = self._w_inv_dm if mode == Mode.DM_NULLSPACE else self._w_inv
+        return (scale - 1.0) * float(w_inv[0]) * self._rot_price  # W_x⁻¹ of eq. (12), M of eq. (3)
 
     def reference_velocity(self, ctx: TickContext, reference: Reference) -> FloatArray:
         """ẋ_ref of the mode, its error term K_x (x_d − x) (eq. (18)) saturated at
@@ -540,7 +617,9 @@ class QpController(Controller):
         p = self._template(self.n_arm, k)
         w_hold = np.empty(self.n_wheels)
         arm = self.robot.arm
-        _fill_stage(ctx.kin.J, xdot, ctx.lo, ctx.hi, self._w_inv[self.n_wheels :], p.H, p.A, p.b, p.lb, p.ub, w_hold)
+        _fill_stage(ctx.kin.J, xdot, ctx.lo, ctx.hi, self._w_inv[self.n_wheels :], self._no_rot, 0.0,
+                    p.H, p.A, p.b, p.lb, p.ub, w_hold)
+        self._stage_rot[(self.n_arm, k)] = (self._no_rot, 0.0)
         p.g[: self.n_arm] = 0.0
         _add_return_term(ctx.kin.q_arm, arm.position_lower, arm.position_upper, self._return_gain, p.g)
         if k:  # l ≤ C_arm v_m + C_w w_hold, the damper relaxed to what the arm alone can do (limits/collision.py)
@@ -564,7 +643,9 @@ class QpController(Controller):
             u = np.concatenate((u, np.full(rows.l.shape[0], INF)))
         p = self._template(self.n_v, C.shape[0])
         cost = self.cost_diagonal(ctx, mode)
-        _fill_stage(ctx.kin.J, xdot, ctx.lo, ctx.hi, cost, p.H, p.A, p.b, p.lb, p.ub, _NO_HOLD)
+        c = self.base_rotation_weight(ctx, mode)
+        _fill_stage(ctx.kin.J, xdot, ctx.lo, ctx.hi, cost, self._rot, c, p.H, p.A, p.b, p.lb, p.ub, _NO_HOLD)
+        self._stage_rot[(self.n_v, C.shape[0])] = (self._rot, c)
         p.g[: self.n_v] = 0.0
         if mode == Mode.DM_NULLSPACE:
             assert ctx.grad_q is not None
@@ -595,15 +676,19 @@ class QpController(Controller):
     def closed_form(self, problem: QPProblem) -> FloatArray | None:
         """The QP's optimum if no bound is active and the slack is zero, else None.
 
-        With D = diag(H) on v (diagonal by construction), the candidate
-        v = D⁻¹(Jᵀλ − g), λ = (J D⁻¹ Jᵀ)⁻¹(b + J D⁻¹ g), s = 0 satisfies stationarity and the
-        task; it is the (unique) optimum by the KKT conditions iff lb ≤ v ≤ ub, l ≤ C v ≤ u and
-        |λᵢ| ≤ ρ₁ (the exact penalty's subgradient condition). This is an active-set solver's
-        first iterate: exact, no tolerance involved.
+        With H = D + c·rot rotᵀ on v (D diagonal; c·rot rotᵀ the stage's base-rotation term, 0
+        unless damped, recorded by the stage's builder), the candidate v = H⁻¹(Jᵀλ − g),
+        λ = (J H⁻¹ Jᵀ)⁻¹(b + J H⁻¹ g), s = 0 satisfies stationarity and the task (H⁻¹ by
+        Sherman–Morrison); it is the (unique) optimum by the KKT conditions iff lb ≤ v ≤ ub,
+        l ≤ C v ≤ u and |λᵢ| ≤ ρ₁ (the exact penalty's subgradient condition). This is an
+        active-set solver's first iterate: exact, no tolerance involved.
         """
         z = np.empty(problem.n)
+        n = problem.n - self._n_s
+        rot, c = self._stage_rot.get((n, problem.n_in), (self._no_rot if n == self.n_arm else self._rot, 0.0))
         ok = _closed_form(
-            problem.H, problem.g, problem.A, problem.b, problem.C, problem.l, problem.u, problem.lb, problem.ub, z
+            problem.H, problem.g, problem.A, problem.b, problem.C, problem.l, problem.u, problem.lb, problem.ub,
+            rot, c, z,
         )
         return z if ok else None
 
