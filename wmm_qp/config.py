@@ -265,7 +265,8 @@ class QpConfig:
             a large error (the robot pushed off its hold target) is recovered at this speed,
             not at K_x·error with the arm at its speed limits.
         singular_arm_weight: near an arm singularity the arm's cost is multiplied by
-            1 + singular_arm_weight·(λ/λ_max)², so the base takes over (the QP's damping).
+            1 + singular_arm_weight·(λ/λ_max)², and the base's yaw's by the same factor, so the
+            base's translation takes over (the QP's damping).
         closed_form_first: try the closed-form optimum (no bound active, zero slack) before the
             solver; it is taken only when it satisfies every KKT condition, so it is exact.
         eps_abs: absolute tolerance handed to iterative backends.
