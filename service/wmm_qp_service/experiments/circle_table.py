@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
@@ -134,6 +135,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--from-json", type=Path, default=None, help="only print the table of the JSON in this folder")
     a = ap.parse_args(argv)
+    if a.plots is not None:  # before the runs, not after: a missing matplotlib must not cost them
+        try:
+            import matplotlib  # noqa: F401
+        except ImportError:
+            print("circle_table: --plots needs matplotlib: pip install 'wmm-qp[plots]'", file=sys.stderr)
+            return 2
     if a.from_json is not None:
         print(table({label(c, w): json.loads((a.from_json / f"circle_{plot_tag(c, a.radius, w)}.json").read_text())
                      for c, w in RUNS}))  # fmt: skip
