@@ -395,7 +395,9 @@ class QpController(Controller):
         self._rot_price = float(np.sum(base.M_pinv[:, 2] ** 2)) if self.n_wheels else 0.0
         self._no_rot = np.zeros(self.n_arm)  # stage 1: no wheel columns
         self._no_rot.setflags(write=False)
-        self._stage_rot: dict[tuple[int, int], tuple[FloatArray, float]] = {}  # a template's c·rot rotᵀ
+        # (rot, c) of the problem the builders filled last (H's block on v: diag + c·rot rotᵀ); every
+        # problem is solved right after it is built, so this is the one closed_form() reads
+        self._cost_rank1: tuple[FloatArray, float] = (self._no_rot, 0.0)
         self._no_rows = np.zeros((0, self.n_v))  # no EE box rows (read only)
         self._no_rows.setflags(write=False)
         self._v_n_max = 10.0 * self.robot.arm.velocity_max
@@ -619,7 +621,7 @@ class QpController(Controller):
         arm = self.robot.arm
         _fill_stage(ctx.kin.J, xdot, ctx.lo, ctx.hi, self._w_inv[self.n_wheels :], self._no_rot, 0.0,
                     p.H, p.A, p.b, p.lb, p.ub, w_hold)
-        self._stage_rot[(self.n_arm, k)] = (self._no_rot, 0.0)
+        self._cost_rank1 = (self._no_rot, 0.0)
         p.g[: self.n_arm] = 0.0
         _add_return_term(ctx.kin.q_arm, arm.position_lower, arm.position_upper, self._return_gain, p.g)
         if k:  # l ≤ C_arm v_m + C_w w_hold, the damper relaxed to what the arm alone can do (limits/collision.py)
@@ -645,7 +647,7 @@ class QpController(Controller):
         cost = self.cost_diagonal(ctx, mode)
         c = self.base_rotation_weight(ctx, mode)
         _fill_stage(ctx.kin.J, xdot, ctx.lo, ctx.hi, cost, self._rot, c, p.H, p.A, p.b, p.lb, p.ub, _NO_HOLD)
-        self._stage_rot[(self.n_v, C.shape[0])] = (self._rot, c)
+        self._cost_rank1 = (self._rot, c)
         p.g[: self.n_v] = 0.0
         if mode == Mode.DM_NULLSPACE:
             assert ctx.grad_q is not None
@@ -684,8 +686,7 @@ class QpController(Controller):
         active-set solver's first iterate: exact, no tolerance involved.
         """
         z = np.empty(problem.n)
-        n = problem.n - self._n_s
-        rot, c = self._stage_rot.get((n, problem.n_in), (self._no_rot if n == self.n_arm else self._rot, 0.0))
+        rot, c = self._cost_rank1
         ok = _closed_form(
             problem.H, problem.g, problem.A, problem.b, problem.C, problem.l, problem.u, problem.lb, problem.ub,
             rot, c, z,
