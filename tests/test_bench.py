@@ -125,8 +125,14 @@ def test_jitter_section_the_empty_loop_at_both_rates(capsys: pytest.CaptureFixtu
     consistent (no timing asserts): a tick that wakes more than a period late is a deadline miss
     at the next wait (but the last tick's), and no tick starts before its deadline."""
     assert main(["bench", "--json", "--only", "jitter", "--ticks", "60"]) == 0
-    j = json.loads(capsys.readouterr().out)["jitter"]
+    out = json.loads(capsys.readouterr().out)
+    j = out["jitter"]
     assert set(j) == {"500", "1000"}
+    a = out["step_after_idle"]  # ctl.step after each idle: as many of each, ratios of the p50s
+    assert a["ticks_each"] == 60 and a["idle_us"] == 800.0
+    for idle in ("none", "sleep", "spin"):
+        assert 0.0 < a[idle]["p50"] <= a[idle]["p99"]
+    assert a["sleep_over_none_p50"] == pytest.approx(a["sleep"]["p50"] / a["none"]["p50"], abs=0.02)
     for rate, r in j.items():
         assert r["rate_hz"] == float(rate) and r["ticks"] == 60 and r["scheduling"]
         assert 0 <= r["late_over_a_period"] <= r["deadline_misses"] + 1 and r["deadline_misses"] <= 60

@@ -49,6 +49,18 @@ class Robot:
                 self.pending.append((self.t_next + 50e-6, msg))  # 50 µs transport
             self.t_next += DT
 
+    def block(self, timeout: float) -> bool:
+        """The mailbox's wait: the clock runs (in 5 µs steps) until a state has arrived, or by
+        ``timeout``."""
+        end = self.clock.t + timeout
+        while True:
+            self.advance()
+            if self.pending and self.pending[0][0] <= self.clock.t:
+                return True
+            if self.clock.t >= end:
+                return False
+            self.clock.t = min(end, self.clock.t + 5e-6)
+
     def poll(self) -> object | None:
         self.advance()
         newest = None
@@ -57,8 +69,8 @@ class Robot:
         return newest
 
 
-def drive(n: int, drop: set[int], state_timeout: float = 0.05) -> tuple[ControlCore, Robot, list[w.Command | None],
-                                                                          StateLoop[object]]:
+def drive(n: int, drop: set[int], state_timeout: float = 0.05,
+          blocking: bool = False) -> tuple[ControlCore, Robot, list[w.Command | None], StateLoop[object]]:
     svc = ServiceConfig().with_(loop={"rate_hz": RATE, "trigger": "state"},
                                 watchdog={"state_timeout": state_timeout})
     core = ControlCore(svc, w.load_controller_config(), w.load_robot_config())
@@ -70,7 +82,8 @@ def drive(n: int, drop: set[int], state_timeout: float = 0.05) -> tuple[ControlC
         m = robot.poll()
         return m if m is not None and core.on_state(m, clock()) else None  # type: ignore[arg-type]
 
-    loop: StateLoop[object] = StateLoop(RATE, poll, clock=clock, sleep=clock.sleep)
+    loop: StateLoop[object] = StateLoop(RATE, poll, clock=clock, sleep=clock.sleep,
+                                        block=robot.block if blocking else None)
     now = loop.start()
     core.on_mode(ModeMsg(robot="wmm", mode="hold"))
     cmds: list[w.Command | None] = []
@@ -86,16 +99,18 @@ def drive(n: int, drop: set[int], state_timeout: float = 0.05) -> tuple[ControlC
     return core, robot, cmds, loop
 
 
-def test_each_state_gets_its_command_before_the_robots_next_step() -> None:
-    _core, robot, cmds, loop = drive(300, drop=set())
+@pytest.mark.parametrize("blocking", [False, True], ids=["polling", "blocking"])
+def test_each_state_gets_its_command_before_the_robots_next_step(blocking: bool) -> None:
+    _core, robot, cmds, loop = drive(300, drop=set(), blocking=blocking)
     assert loop.watchdog_ticks == 0 and loop.deadline_misses == 0
     # state k's command is the one applied at step k + 1 (the Plant's seq counts from 1)
     assert all(robot.applied[k + 1] == k for k in range(2, 280))
     assert all(c is not None and c.status != w.Status.SAFE_STOP for c in cmds[1:])
 
 
-def test_a_lost_state_takes_the_prediction_path_and_every_step_gets_one_new_command() -> None:
-    core, robot, cmds, loop = drive(300, drop={100, 200})
+@pytest.mark.parametrize("blocking", [False, True], ids=["polling", "blocking"])
+def test_a_lost_state_takes_the_prediction_path_and_every_step_gets_one_new_command(blocking: bool) -> None:
+    core, robot, cmds, loop = drive(300, drop={100, 200}, blocking=blocking)
     assert loop.watchdog_ticks == 2  # 1.5 periods after the last state: between two robot steps
     assert all(c is not None and c.status != w.Status.SAFE_STOP for c in cmds[1:])
     assert not core.safe
@@ -105,8 +120,9 @@ def test_a_lost_state_takes_the_prediction_path_and_every_step_gets_one_new_comm
     assert all(robot.applied[k] == robot.applied[k - 1] + 1 for k in steps[3:290])
 
 
-def test_no_state_for_state_timeout_is_a_safe_stop() -> None:
-    core, _robot, cmds, _loop = drive(200, drop=set(range(50, 400)))
+@pytest.mark.parametrize("blocking", [False, True], ids=["polling", "blocking"])
+def test_no_state_for_state_timeout_is_a_safe_stop(blocking: bool) -> None:
+    core, _robot, cmds, _loop = drive(200, drop=set(range(50, 400)), blocking=blocking)
     assert core.safe and cmds[-1] is not None and cmds[-1].status == w.Status.SAFE_STOP
     assert "state stale" in core.last_fault
     # before the timeout the watchdog ticks predicted (no safe stop within state_timeout)
@@ -114,8 +130,9 @@ def test_no_state_for_state_timeout_is_a_safe_stop() -> None:
     assert first_stop > 50 + 20
 
 
-def test_bounds_latency_margin_follows_the_measured_state_age() -> None:
-    core, _robot, _cmds, _loop = drive(200, drop=set())
+@pytest.mark.parametrize("blocking", [False, True], ids=["polling", "blocking"])
+def test_bounds_latency_margin_follows_the_measured_state_age(blocking: bool) -> None:
+    core, _robot, _cmds, _loop = drive(200, drop=set(), blocking=blocking)
     wd = core.svc.watchdog
     timeout = wd.command_hold - wd.state_age_max
     assert core.cfg.state_latency == pytest.approx(wd.command_hold)  # the worst case, before a measure

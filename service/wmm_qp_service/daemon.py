@@ -47,7 +47,7 @@ from .protocol import (
     TelemetryMsg,
     encode,
 )
-from .rate_loop import LoopTiming, RateLoop, StateLoop, realtime_priority
+from .rate_loop import LoopTiming, Mailbox, RateLoop, StateLoop, realtime_priority
 from .smoother import OrientationTarget, SetpointSmoother, VelocityEstimator
 from .tick_stages import STAGES, TickStages
 from .transport import ROLE_DAEMON, open_session
@@ -867,7 +867,18 @@ class Daemon:
               file=sys.stderr, flush=True)
         ring = zenoh.handlers.RingChannel
         fifo = zenoh.handlers.FifoChannel
-        sub_state = session.declare_subscriber(k.state, ring(1))
+        clock, clock_ns, wall = time.perf_counter, time.perf_counter_ns, time.time
+        state_trigger = svc.loop.trigger == "state"
+        # The state trigger's states: a callback on Zenoh's own thread stamps each one and hands
+        # it over (the newest wins), the control thread sleeps until then (no polling, no spin)
+        inbox: Mailbox[tuple[float, zenoh.Sample]] = Mailbox()
+
+        def on_state_sample(sample: zenoh.Sample) -> None:
+            inbox.put((wall(), sample))
+
+        sub_state = (session.declare_subscriber(k.state, zenoh.handlers.Callback(on_state_sample, indirect=False))
+                     if state_trigger else None)
+        ring_state = None if state_trigger else session.declare_subscriber(k.state, ring(1))
         sub_setpoint = session.declare_subscriber(k.setpoint, ring(1))
         sub_mode = session.declare_subscriber(k.mode, fifo(256))
         sub_obstacles = session.declare_subscriber(k.obstacles, ring(1))  # the latest set wins
@@ -889,7 +900,6 @@ class Daemon:
         period = 1.0 / svc.loop.rate_hz
         stages = self.stages
         core.stages = stages
-        clock, clock_ns, wall = time.perf_counter, time.perf_counter_ns, time.time
         v_state = self.v_state
         rx = [0, 0, 0]  # [ns] a state's poll start, decoded, accepted (the breakdown's stages)
         rx_wall = [math.nan]  # [s] the daemon's receipt time of the last accepted state
@@ -897,10 +907,16 @@ class Daemon:
         def poll_state() -> StateMsg | None:
             """The newest state if one arrived, validated and accepted (``core.on_state``)."""
             t0 = clock_ns() if stages is not None else 0
-            s = sub_state.try_recv()
-            if s is None:
-                return None
-            t_rx = wall()  # its receipt (the telemetry's state_rx)
+            if state_trigger:
+                got = inbox.take()
+                if got is None:
+                    return None
+                t_rx, s = got  # its receipt on Zenoh's thread (the telemetry's state_rx)
+            else:
+                assert ring_state is not None
+                if (r := ring_state.try_recv()) is None:
+                    return None
+                t_rx, s = wall(), r  # its receipt (the telemetry's state_rx)
             data = s.payload.to_bytes()
             if stages is not None:
                 rx[0], rx[1] = t0, clock_ns()
@@ -913,8 +929,8 @@ class Daemon:
             return m
 
         state_loop: StateLoop[StateMsg] | None = None
-        if svc.loop.trigger == "state":
-            state_loop = StateLoop(svc.loop.rate_hz, poll_state)
+        if state_trigger:
+            state_loop = StateLoop(svc.loop.rate_hz, poll_state, block=inbox.wait)
         loop: LoopTiming = state_loop or RateLoop(svc.loop.rate_hz, svc.loop.spin_us * 1e-6)
         self.loop = loop
         core.follow_state_age = state_loop is not None
@@ -1007,10 +1023,11 @@ class Daemon:
             core.say = _say
             gc.unfreeze()
             final = core.status(loop, self.rejected(), self.accepted())
-            for ent in (token, lease_token, sub_state, sub_setpoint, sub_mode, sub_obstacles, queryable, alive_sub,
-                        pub_cmd, pub_status, pub_tel):
+            for ent in (token, lease_token, sub_state, ring_state, sub_setpoint, sub_mode, sub_obstacles, queryable,
+                        alive_sub, pub_cmd, pub_status, pub_tel):
                 with contextlib.suppress(Exception):
-                    ent.undeclare()
+                    if ent is not None:
+                        ent.undeclare()
             if stages is not None and self.breakdown is not None:
                 with contextlib.suppress(Exception):
                     stages.write(self.breakdown, {"trigger": svc.loop.trigger, "rate_hz": svc.loop.rate_hz,

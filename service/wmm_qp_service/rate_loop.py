@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import math
 import os
+import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from typing import Generic, TypeVar
 
@@ -39,6 +41,44 @@ def realtime_priority(priority: int) -> str:
     except (AttributeError, OSError) as e:  # not Linux, or not permitted
         return f"normal scheduling (SCHED_FIFO {priority} refused: {getattr(e, 'strerror', e)})"
     return f"SCHED_FIFO {priority}"
+
+
+class Mailbox(Generic[T]):
+    """The newest item handed over by another thread (a Zenoh callback), and a wait for it.
+
+    :meth:`put` (the producer's thread: it only stores and signals) replaces what was not taken
+    yet, as a ring of depth 1 does; :meth:`take` (the loop's thread) never blocks; :meth:`wait`
+    blocks until a :meth:`put` or the timeout. The loop's thread sleeps in the kernel instead of
+    polling: a state-triggered daemon costs the CPU of its ticks, not of its waiting.
+    """
+
+    def __init__(self) -> None:
+        self._box: deque[T] = deque(maxlen=1)  # append and popleft are atomic under the GIL
+        self._event = threading.Event()
+        self.put_count = 0
+
+    def put(self, item: T) -> None:
+        """Store ``item`` (the older one, if not taken, is dropped) and wake the waiter."""
+        self._box.append(item)
+        self.put_count += 1
+        self._event.set()
+
+    def take(self) -> T | None:
+        """The newest item not taken yet, or None (never blocks)."""
+        try:
+            return self._box.popleft()
+        except IndexError:
+            return None
+
+    def wait(self, timeout: float) -> bool:
+        """Block until a :meth:`put` since the last wait, or ``timeout`` [s]; True: signalled.
+
+        A True return may find nothing to :meth:`take` (taken already): callers poll again.
+        """
+        signalled = self._event.wait(max(0.0, timeout))
+        if signalled:
+            self._event.clear()  # before the take: a put after it signals the next wait
+        return signalled
 
 
 class LoopTiming:
@@ -190,8 +230,10 @@ class StateLoop(LoopTiming, Generic[T]):
     periods since the last tick (a *watchdog tick*: :attr:`fresh` is False, the daemon takes the
     prediction path; after ``state_timeout`` without a state its watchdog stops the robot).
 
-    Waiting costs little CPU and little latency: states come once per robot cycle, so the loop
-    sleeps until ``lead`` before the next one is due (the last arrival plus a period), then polls
+    Waiting, with ``block`` (the daemon's: :meth:`Mailbox.wait`, its Zenoh callback's signal),
+    sleeps in the kernel until the source signals a state or the watchdog is due: no CPU spent
+    waiting, and the wake-up is the source's. Without ``block`` the loop
+    sleeps until ``lead`` before the next state is due (the last arrival plus a period), then polls
     the source in a tight loop (``spin_max`` at most, then in naps of ``nap``: a lost state
     costs no spinning). ``lead`` adapts: a state that was already waiting at the first poll
     (it came while the loop slept) widens it by ``lead_up``; every state caught while polling
@@ -208,7 +250,9 @@ class StateLoop(LoopTiming, Generic[T]):
     Args:
         rate_hz: [Hz] the robot's cycle rate (the commands' Δt).
         poll: returns the newest state if one arrived since the last call, else None (never
-            blocks; the daemon's ring channel ``try_recv``).
+            blocks: the daemon's :meth:`Mailbox.take` and its decoding).
+        block: wait up to the given time [s] for the source to signal a new state (may return
+            early, signalled or not: the loop polls again); None = sleep, then poll (``lead``).
         wait_periods: a watchdog tick after this many periods without a state (> 1, so that a
             state arriving with jitter does not race the watchdog: two commands within one
             robot cycle, one overwritten).
@@ -224,7 +268,8 @@ class StateLoop(LoopTiming, Generic[T]):
     trigger = "state"
 
     def __init__(self, rate_hz: float, poll: Callable[[], T | None], wait_periods: float = 1.5,
-                 min_gap_periods: float = 0.5, clock: Callable[[], float] = time.perf_counter,
+                 min_gap_periods: float = 0.5, block: Callable[[float], object] | None = None,
+                 clock: Callable[[], float] = time.perf_counter,
                  sleep: Callable[[float], None] = time.sleep, lead_min: float = 50e-6,
                  lead_max: float | None = None, spin_max: float | None = None, nap: float = 50e-6,
                  window: int = 2048) -> None:
@@ -235,6 +280,7 @@ class StateLoop(LoopTiming, Generic[T]):
             raise ValueError("min_gap_periods must be in [0, 1)")
         self._poll = poll
         self._sleep = sleep
+        self._block = block
         self.wait_s = wait_periods * self.period
         self.min_gap = min_gap_periods * self.period
         self.lead_min = lead_min
@@ -285,6 +331,8 @@ class StateLoop(LoopTiming, Generic[T]):
             self.deadline_misses += 1
         self.item, self.fresh = None, False
         watchdog = self.trigger_time + self.wait_s
+        if self._block is not None:
+            return self._wait_blocking(watchdog)
         poll_from = min(self.due(now) - self.lead, watchdog)
         slept = poll_from > now
         if slept:
@@ -311,9 +359,34 @@ class StateLoop(LoopTiming, Generic[T]):
         elif not first:  # caught while polling: its arrival is known to a poll's time
             self.lead = max(self.lead_min, self.lead - self.lead_down)
         self.last_arrival = t_poll  # (when it was already waiting: an upper bound)
+        return self._triggered(item, t_poll)
+
+    def _wait_blocking(self, watchdog: float) -> float:
+        """:meth:`wait` with ``block``: poll, block until signalled or the watchdog, poll again."""
+        clock, block = self._clock, self._block
+        assert block is not None
+        t_poll = clock()
+        while (item := self._poll()) is None:
+            now = clock()
+            if now >= watchdog:  # no state for wait_periods: the watchdog tick (the prediction path)
+                self.watchdog_ticks += 1
+                self.deadline_misses += 1
+                self.trigger_time = self.tick_start = now
+                return now
+            block(watchdog - now)
+            t_poll = clock()
+        self.last_arrival = t_poll
+        return self._triggered(item, t_poll)
+
+    def _triggered(self, item: T, t_poll: float) -> float:
+        """A state's tick: it starts at ``t_poll`` (the poll that returned ``item``), or once
+        ``min_gap`` has passed since the previous tick's start (held; the newest state kept)."""
+        clock = self._clock
         self.trigger_time = t_poll
         earliest = self.tick_start + self.min_gap
         while (now := clock()) < earliest:  # faster than the loop's rate: held, the newest kept
+            if self._block is not None:
+                self._block(earliest - now)
             if (newer := self._poll()) is not None:
                 item = newer
         self.item, self.fresh = item, True

@@ -14,6 +14,13 @@ Whatever it misses, the daemon misses too, whatever its work costs. Reported:
 - the CPU time the hypervisor took from this guest meanwhile: *steal*, the ``cpu`` line of
   ``/proc/stat``, summed over all CPUs (a virtual machine's host running other guests);
 - the scheduling the loop got, and the load average before and after.
+
+And ``step_after_idle`` (:func:`step_after_idle`, the result's key beside ``jitter``): the same
+``ctl.step`` (the paper's robot, tracking a circle in ``track``) timed back to back, after
+sleeping 0.8 of a 1 kHz period (as a loop that sleeps between ticks does), and after spinning
+as long; p50/p99 each and the
+ratios of the p50s to the back-to-back one. What a tick costs depends on what the core did
+before it (caches, frequency, a virtual CPU descheduled while idle), whatever the code.
 """
 
 from __future__ import annotations
@@ -35,6 +42,45 @@ def run(ticks: int, rates: tuple[float, ...] = (500.0, 1000.0)) -> dict[str, Any
     priority; {rate as text: :func:`run_one`'s result}."""
     loop_cfg = load_service_config().loop
     return {f"{r:g}": run_one(ticks, r, loop_cfg.spin_us, loop_cfg.rt_priority) for r in rates}
+
+
+IDLE_S = 0.8e-3
+"""[s] the idle time between two timed steps (0.8 of a 1 kHz period)."""
+
+
+def step_after_idle(ticks: int) -> dict[str, Any]:
+    """``ctl.step`` of the default robot and controller config (its solver, ``track``) timed
+    ``ticks`` times after each of three idles: none, a sleep of :data:`IDLE_S`, a spin of
+    :data:`IDLE_S`; the three take turns in rounds of 500 ticks (a change of the machine's load
+    meanwhile touches them alike)."""
+    import wmm_qp as w
+
+    from .controller import CleanCase
+
+    robot, cfg = w.load_robot_config(), w.load_controller_config()
+    idles = ("none", "sleep", "spin")
+    cases = {i: CleanCase(robot, cfg, cfg.qp.solver) for i in idles}
+    per_round = max(1, min(500, ticks))
+    for _ in range(max(1, ticks // per_round)):
+        for idle, case in cases.items():
+            for _ in range(per_round):
+                if idle == "sleep":
+                    time.sleep(IDLE_S)
+                elif idle == "spin":
+                    end = time.perf_counter() + IDLE_S
+                    while time.perf_counter() < end:
+                        pass
+                case.run(1)
+    out: dict[str, Any] = {"idle_us": IDLE_S * 1e6, "solver": cfg.qp.solver,
+                           "ticks_each": len(cases["none"].samples)}
+    p50 = {}
+    for idle, case in cases.items():
+        us = np.array(case.samples[min(50, per_round // 2):]) * 1e-3  # (the first: the warm-up)
+        p50[idle] = float(np.percentile(us, 50))
+        out[idle] = {"p50": round(p50[idle], 1), "p99": round(float(np.percentile(us, 99)), 1)}
+    out["sleep_over_none_p50"] = round(p50["sleep"] / p50["none"], 2)
+    out["spin_over_none_p50"] = round(p50["spin"] / p50["none"], 2)
+    return out
 
 
 def run_one(ticks: int, rate_hz: float, spin_us: float, rt_priority: int) -> dict[str, Any]:

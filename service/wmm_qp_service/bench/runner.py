@@ -144,6 +144,8 @@ def run_bench(
     if "jitter" in sections:
         print("jitter: the daemon's fixed-rate loop with no work (the machine's floor)", file=sys.stderr, flush=True)
         out["jitter"] = jitter.run(ticks)
+        print("jitter: ctl.step after no idle, a sleep, a spin", file=sys.stderr, flush=True)
+        out["step_after_idle"] = jitter.step_after_idle(min(ticks, 5000))
     out["targets"] = targets(out)
     return out
 

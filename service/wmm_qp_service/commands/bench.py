@@ -135,6 +135,10 @@ def _print_report(r: dict[str, Any]) -> None:
         print(f"jitter     {rate:>5s} Hz, no work, {j['scheduling']}: {j['deadline_misses']} deadline misses in "
               f"{j['ticks']} ticks ({j['misses_per_10k']} per 10k), late {j['late_us']} µs, "
               f"steal {j['steal_percent']} %")
+    if (a := r.get("step_after_idle")) is not None:
+        print(f"step idle  ctl.step p50/p99 µs: back to back {a['none']['p50']}/{a['none']['p99']}, after a "
+              f"{a['idle_us']:g} µs sleep {a['sleep']['p50']}/{a['sleep']['p99']} (×{a['sleep_over_none_p50']}), "
+              f"after a spin {a['spin']['p50']}/{a['spin']['p99']} (×{a['spin_over_none_p50']})")
     print(f"targets    {r['targets']}")
 
 
