@@ -348,11 +348,8 @@ class StateLoop(LoopTiming, Generic[T]):
             if now > spin_until:  # a late or lost state: nap, do not burn the core
                 self._sleep(min(self.nap, watchdog - now))
             t_poll = clock()
-        if item is None:  # no state for wait_periods: the watchdog tick (the prediction path)
-            self.watchdog_ticks += 1
-            self.deadline_misses += 1
-            self.trigger_time = self.tick_start = now
-            return now
+        if item is None:
+            return self._watchdog_tick(now)
         if first and slept:  # it was already waiting: it came while the loop slept
             self.early += 1
             self.lead = min(self.lead_max, self.lead + self.lead_up)
@@ -368,15 +365,19 @@ class StateLoop(LoopTiming, Generic[T]):
         t_poll = clock()
         while (item := self._poll()) is None:
             now = clock()
-            if now >= watchdog:  # no state for wait_periods: the watchdog tick (the prediction path)
-                self.watchdog_ticks += 1
-                self.deadline_misses += 1
-                self.trigger_time = self.tick_start = now
-                return now
+            if now >= watchdog:
+                return self._watchdog_tick(now)
             block(watchdog - now)
             t_poll = clock()
         self.last_arrival = t_poll
         return self._triggered(item, t_poll)
+
+    def _watchdog_tick(self, now: float) -> float:
+        """No state for ``wait_periods``: the watchdog tick (the prediction path) starts ``now``."""
+        self.watchdog_ticks += 1
+        self.deadline_misses += 1
+        self.trigger_time = self.tick_start = now
+        return now
 
     def _triggered(self, item: T, t_poll: float) -> float:
         """A state's tick: it starts at ``t_poll`` (the poll that returned ``item``), or once

@@ -18,8 +18,7 @@ Whatever it misses, the daemon misses too, whatever its work costs. Reported:
 And ``step_after_idle`` (:func:`step_after_idle`, the result's key beside ``jitter``): the same
 ``ctl.step`` (the paper's robot, tracking a circle in ``track``) timed back to back, after
 sleeping 0.8 of a 1 kHz period (as a loop that sleeps between ticks does), and after spinning
-as long; p50/p99 each and the
-ratios of the p50s to the back-to-back one. What a tick costs depends on what the core did
+as long; p50/p99 each and the ratios of the p50s to the back-to-back one. What a tick costs depends on what the core did
 before it (caches, frequency, a virtual CPU descheduled while idle), whatever the code.
 """
 
