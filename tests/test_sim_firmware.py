@@ -152,7 +152,7 @@ def test_the_sim_refuses_an_old_seq_and_a_new_holder_starts_a_new_stream() -> No
     assert node.accept(command(node, "d1", seq=5)) is None and node.refused["seq"] == 1  # replayed
     assert node.accept(command(node, "d1", seq=4)) is None and node.refused["seq"] == 2
     assert node.accept(command(node, "d1", seq=6)) is not None
-    node.sim.referee._prev = (np.zeros(7), np.zeros(4), 0.0, 6, 0.0)
+    node.sim.referee._prev = (np.zeros(7), np.zeros(4), 0.0, 6, 0.0, 0.0)
     node.on_lease("d1", False)
     node.on_lease("d2", True)
     assert node.accept(command(node, "d2", seq=1)) is not None  # its own seq count

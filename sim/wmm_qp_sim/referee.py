@@ -20,7 +20,12 @@ what one count means:
   receipts plus ``period_max`` and one sim step (``SimCommand.received``, the adapter's
   monotonic clock; ``period_max`` absorbs the transport's batching and jitter), so a sender
   cannot widen the window much by claiming a long period or skipping seq numbers; when the
-  command gives no period (in-process experiments), the time since the previous command.
+  command gives no period (in-process experiments), the time since the previous command. In a
+  stream that a stale or protective stop ended (its commands reach the robot late and the
+  firmware refuses them: none is executed) the cap is the time between the two commands'
+  sending stamps (``SimCommand.sent``, the sender's clock) instead: a sender's transmit queue
+  that was starved and then flushed delivers commands sent 100 ms apart within a millisecond,
+  and their arrival says nothing about how fast the controller changed them.
   A new stream — the first command, the first of a new ``SimCommand.stream`` id (the sender
   started again from the robot's measured rates), the first of a new lease holder, or, for
   commands without a stream id, the first after a stale or protective stop — is judged against
@@ -64,7 +69,8 @@ class Referee:
         self.last_event = ""  # what the last counted violation was (for the sim's log)
         self._soft_break = False
         self._stream: int | None = None
-        self._prev: tuple[FloatArray, FloatArray, float, int | None, float | None] | None = None
+        self._stopped: int | None = None  # the stream the last stale or protective stop ended
+        self._prev: tuple[FloatArray, FloatArray, float, int | None, float | None, float | None] | None = None
 
     def reset(self) -> None:
         """Zero every count and forget the previous command."""
@@ -72,6 +78,7 @@ class Referee:
         self._prev = None
         self._soft_break = False
         self._stream = None
+        self._stopped = None
 
     def break_stream(self, hard: bool = True) -> None:
         """The robot stopped following the command stream.
@@ -84,6 +91,7 @@ class Referee:
             self._prev = None
         else:
             self._soft_break = True
+            self._stopped = self._stream
 
     def _exceeds(self, value: FloatArray, limit: FloatArray | float) -> int:
         return int(
@@ -110,6 +118,7 @@ class Referee:
         received: float | None = None,
         step: float = 0.0,
         stream: int | None = None,
+        sent: float | None = None,
     ) -> None:
         """Judge a command as received at sim time t [s].
 
@@ -123,6 +132,8 @@ class Referee:
             received: [s] monotonic time of receipt (caps Δt at the real time between receipts).
             step: [s] the sim's step (added to that cap: receipts are quantised to steps).
             stream: the sender's stream id (see the module docstring), or None.
+            sent: [s] the sender's stamp of the command (its own clock: only differences are
+                used), or None.
         """
         self.counts["velocity"] += self._exceeds(v_cmd, self.v_max)
         self.counts["wheel_speed"] += self._exceeds(w_cmd, self.w_max)
@@ -135,12 +146,15 @@ class Referee:
             base_v, base_w = v_exec, w_exec
             held = None if period is None else min(period, self.period_max)
         else:
-            base_v, base_w, t_prev, seq_prev, rx_prev = prev
+            base_v, base_w, t_prev, seq_prev, rx_prev, sent_prev = prev
             if period is not None:
                 period = min(period, self.period_max)
                 gap = seq - seq_prev if (seq is not None and seq_prev is not None) else 1
                 held = period * max(gap, 1)
-                if received is not None and rx_prev is not None:
+                stopped = stream is not None and stream == self._stopped  # not executed: the sender's clock
+                if stopped and sent is not None and sent_prev is not None:
+                    held = min(held, sent - sent_prev + self.period_max + step)
+                elif received is not None and rx_prev is not None:
                     held = min(held, received - rx_prev + self.period_max + step)
             else:
                 held = t - t_prev
@@ -155,4 +169,4 @@ class Referee:
                 since = "the executed rates (a new stream)" if prev is None else f"command seq {prev[3]}"
                 self.last_event = (f"acceleration: command seq {seq} changed by {ratio:.2f} A·Δt "
                                    f"over Δt = {held * 1e3:.2f} ms from {since}")
-        self._prev = (v_cmd.copy(), w_cmd.copy(), t, seq, received)
+        self._prev = (v_cmd.copy(), w_cmd.copy(), t, seq, received, sent)

@@ -9,7 +9,14 @@ violation (:mod:`.referee`). It never raises from ``step``: a malformed command 
 
 Stale commands: when no new command has arrived for ``config.stale_timeout`` seconds, the
 sim brakes every joint and wheel to rest by itself at its acceleration limit
-(``SimState.stale_stop`` is True until the next command).
+(``SimState.stale_stop`` is True until the next command it accepts).
+
+A stop ends the stream it stopped: after a stale or protective stop the firmware refuses every
+further command of that stream (``SimCommand.stream``; counted in ``refused_commands``) and
+resumes only on a new stream. A command of the old stream that reaches the robot late (it sat
+in a frozen sender's transmit queue, or in a congested link) would otherwise restart the robot
+at rates its sender computed before the stop, while the sender, having seen the stop, starts a
+new stream from the robot at rest: the two would meet as a jump.
 """
 
 from __future__ import annotations
@@ -45,6 +52,7 @@ class SimCommand:
             the time that really passed), or None.
         stream: the sender's stream id (a new one is judged against the executed rates), or
             None (then a stale or protective stop starts a new stream).
+        sent: [s] the sender's stamp (its own clock), or None.
     """
 
     wheel_speeds: FloatArray
@@ -53,6 +61,7 @@ class SimCommand:
     seq: int | None = None
     received: float | None = None
     stream: int | None = None
+    sent: float | None = None
 
     def __post_init__(self) -> None:
         self.wheel_speeds = np.asarray(self.wheel_speeds, dtype=float).reshape(-1)
@@ -227,6 +236,8 @@ class SimRobot:
         self.protective_stops = 0
         self.protective_reason = ""
         self.refused = 0
+        self.stream: int | None = None  # the stream of the last command received (and not refused for it)
+        self.stopped_stream: int | None = None  # the stream a stale or protective stop ended
         self.tau = np.zeros(self.n_arm)
         self.force = np.zeros(3)
         self.stalled_joint: int | None = None
@@ -251,6 +262,7 @@ class SimRobot:
             self._receive(command, dt)
         elif self.t - self.t_last_command >= self.config.stale_timeout - 1e-12 and not self.stale:
             self.stale = True
+            self.stopped_stream = self.stream
             self.referee.break_stream(hard=False)
         if self.stale or self.protective:
             v, w = self._braked(dt)
@@ -278,15 +290,32 @@ class SimRobot:
                 self.referee.last_event = f"collision: {self.collision.closest} at {self.collision.min_distance:.4f} m"
         return self.state()
 
+    def coast(self, steps: int, dt: float) -> bool:
+        """Advance ``steps`` steps of dt [s] in one go when they cannot change anything: the
+        robot rests in its own (stale or protective) stop and receives no command meanwhile.
+
+        Returns:
+            False (nothing done) unless the robot is at rest in its own stop.
+        """
+        if not (self.stale or self.protective) or self.v_arm.any() or self.wheels.any():
+            return False
+        self.t += steps * dt
+        return True
+
     def _receive(self, command: SimCommand, dt: float) -> None:
         """A valid command arrived: the referee judges it as received, then the firmware."""
         arm, wheels = command.arm_rates, command.wheel_speeds
         self.referee.on_command(self.t, arm, wheels, self.v_arm, self.wheels, period=command.period,
                                 seq=command.seq, received=command.received, step=dt,
-                                stream=command.stream)
+                                stream=command.stream, sent=command.sent)
         self.n_commands += 1
         self.t_last_command = self.t
+        if (self.config.firmware and command.stream is not None and (self.stale or self.protective)
+                and command.stream == self.stopped_stream):
+            self.refused += 1  # the stop ended this stream: only a new one resumes
+            return
         self.stale = False
+        self.stream = command.stream
         if self.config.firmware:
             bad_v = np.flatnonzero(np.abs(arm) > self._v_tol)
             bad_w = np.flatnonzero(np.abs(wheels) > self._w_tol)
@@ -308,6 +337,7 @@ class SimRobot:
     def _protective_stop(self, why: str) -> None:
         if not self.protective:
             self.protective_stops += 1
+            self.stopped_stream = self.stream
         self.protective = True
         self.protective_reason = why
         self.referee.break_stream(hard=False)

@@ -1,8 +1,13 @@
 """The sim process (``wmm-qp sim``): the pure :class:`SimRobot` behind Zenoh.
 
-Runs the sim at its own rate (1 kHz) with absolute deadlines, takes every command received since
-the last step (ring channel of ``COMMAND_QUEUE``, oldest first, each validated on receipt and
-judged by the referee as received; the latest is executed), publishes the state every tick (odometry
+Runs the sim at its own rate (1 kHz) on the wall clock: step k is the robot at ``t0 + k·dt``, and
+a wake-up that finds the process behind (a loaded host, or the process frozen) runs every step it
+missed before publishing, so the simulated robot lives through the time its process did not: it
+kept executing its last command, and past ``stale_timeout`` braked by itself, as a real robot
+would have (:class:`CommandInbox`, :meth:`SimNode.advance`). Commands are stamped when they reach
+the process (a callback on Zenoh's thread) and applied at the step their arrival falls in, each
+validated and judged by the referee as received (the latest of a step is executed). The state is
+published once per wake-up (odometry
 and ground truth, torques, the referee's violation counts) and holds a liveliness token.
 When commands go stale the pure model brakes the robot to rest by itself. A client may place
 a box in the scene at run time (``sim/box``, :class:`~wmm_qp_service.protocol.BoxMsg`, FIFO,
@@ -32,11 +37,13 @@ fixed time before publishing it (a slow link).
 from __future__ import annotations
 
 import contextlib
+import math
 import secrets
 import sys
 import threading
 import time
 from collections import Counter, deque
+from collections.abc import Callable
 
 import numpy as np
 import zenoh
@@ -53,13 +60,49 @@ from wmm_qp.scene import Scene, load_scene
 from .config import BoxConfig, SimConfig
 from .robot import SimCommand, SimRobot, SimState
 
-COMMAND_QUEUE = 64
-"""Commands kept between two sim steps (the oldest dropped beyond). Each is judged as received:
-with only the latest kept (a ring of one), a sim that stalled (a loaded machine) and then
-received a burst judged the burst's last command against the one before the stall, over the
-few milliseconds between their receipts, and a new stream whose first command was overwritten
-by its second against the robot's rates over one period (the TIAGo and UR5 demos at 1 kHz
-counted both)."""
+COMMAND_QUEUE = 1024
+"""Commands kept between two wake-ups of the step loop (the oldest dropped beyond): every one is
+judged as received, so none may be lost between the transport and the referee. 1024 holds a
+second of commands at 1 kHz: a longer stall of the sim's process drops the oldest (counted in
+:attr:`CommandInbox.dropped`)."""
+
+
+class CommandInbox:
+    """Commands stamped on arrival (by Zenoh's callback thread), taken by the step loop in order.
+
+    The stamp is the time the command reached this process: a command that arrived before the
+    process froze keeps its time, one that arrived after is stamped after (the referee's window
+    between two commands never spans less than the real time between their arrivals).
+
+    Args:
+        depth: commands kept (the oldest dropped beyond, counted).
+        clock: monotonic clock [s] (the step loop's).
+    """
+
+    def __init__(self, depth: int = COMMAND_QUEUE, clock: Callable[[], float] = time.monotonic) -> None:
+        self._q: deque[tuple[float, bytes]] = deque(maxlen=depth)  # append, popleft: atomic under the GIL
+        self._clock = clock
+        self.dropped = 0
+
+    def put(self, data: bytes) -> None:
+        """A command's payload arrived now (the producer's thread)."""
+        if len(self._q) == self._q.maxlen:
+            self.dropped += 1
+        self._q.append((self._clock(), data))
+
+    def next_arrival(self) -> float:
+        """[s] the oldest pending command's arrival time (inf: none)."""
+        try:
+            return self._q[0][0]
+        except IndexError:
+            return math.inf
+
+    def take_until(self, t: float) -> list[tuple[float, bytes]]:
+        """The pending commands that arrived at or before ``t`` [s], oldest first."""
+        out = []
+        while self._q and self._q[0][0] <= t:
+            out.append(self._q.popleft())
+        return out
 
 
 class SimNode:
@@ -98,7 +141,11 @@ class SimNode:
                                   n_wheels=robot.n_wheels)
         self.validate_box = Validator(BoxMsg, svc.robot, svc.validation)
         self.validate_obstacles = Validator(ObstaclesMsg, svc.robot, svc.validation)
-        self.loop = RateLoop(sim_cfg.rate_hz, spin_s)
+        self.loop = RateLoop(sim_cfg.rate_hz, spin_s, clock=time.monotonic)  # the inbox's clock
+        self.t0 = 0.0  # [s] monotonic time of step 0 (run() sets it)
+        self.steps = 0  # steps run since t0
+        self.publications = 0  # states published (their seq)
+        self.caught_up = 0  # steps run to catch up with the wall clock (beyond one per wake-up)
         self.cmd_seq = -1
         self.instance = secrets.token_hex(8)
         self.leases: dict[str, None] = {}  # alive lease holders, in the order they appeared
@@ -127,8 +174,12 @@ class SimNode:
         else:
             self.leases.pop(holder, None)
 
-    def accept(self, data: bytes) -> SimCommand | None:
+    def accept(self, data: bytes, received: float | None = None) -> SimCommand | None:
         """Validate a command and check that it comes from the lease holder for this instance.
+
+        Args:
+            data: the payload.
+            received: [s] monotonic time it reached this process (None: now).
 
         Returns the command for the pure model, or None (rejected or refused, counted).
         """
@@ -151,7 +202,9 @@ class SimNode:
         self._holder_seq = msg.seq
         self.cmd_seq = msg.seq
         return SimCommand(wheel_speeds=np.array(msg.wheel_speeds), arm_rates=np.array(msg.arm_rates),
-                          period=msg.period, seq=msg.seq, received=time.monotonic(), stream=msg.stream)
+                          period=msg.period, seq=msg.seq,
+                          received=time.monotonic() if received is None else received, stream=msg.stream,
+                          sent=msg.stamp)
 
     def take(self, commands: list[SimCommand], dt: float) -> SimCommand | None:
         """The commands received since the last step, oldest first: every one but the latest is
@@ -168,6 +221,41 @@ class SimNode:
             if c.is_valid(self.robot.n_wheels, self.robot.n_arm):  # step() ignores invalid ones too
                 self.sim._receive(c, dt)  # a command superseded within this step: received, not executed
         return commands[-1]
+
+    def advance(self, now: float, inbox: CommandInbox) -> SimState:
+        """Run every step due by ``now`` [s] (step k is due at ``t0 + k·dt``; at least one), each
+        receiving the commands that arrived before its end; returns the state after the last.
+
+        Normally one step is due per wake-up. After a stall of this process the missed steps run
+        now, in order: the robot executed its held command in them, went stale past
+        ``stale_timeout`` and braked, as a real robot's firmware would have. Steps in which the
+        robot rests in its own stop and no command arrives are skipped in one go
+        (:meth:`SimRobot.coast`).
+
+        Args:
+            now: [s] monotonic time (the inbox's clock).
+            inbox: the arrival-stamped commands.
+        """
+        dt = self.cfg.dt
+        due = max(1, int((now - self.t0) / dt + 1e-9) + 1 - self.steps)
+        st: SimState | None = None
+        while due > 0:
+            end = self.t0 + (self.steps + 1) * dt  # this step's end: commands that arrived by then
+            if due > 1 and (arrival := inbox.next_arrival()) > end:
+                quiet = due - 1 if math.isinf(arrival) else int((arrival - self.t0) / dt) - self.steps
+                idle = min(due - 1, max(1, quiet))
+                if self.sim.coast(idle, dt):
+                    self.steps += idle
+                    self.caught_up += idle
+                    due -= idle
+                    continue
+            arrivals = inbox.take_until(math.inf if due == 1 else end)
+            commands = [c for t, data in arrivals if (c := self.accept(data, t)) is not None]
+            st = self.sim.step(self.take(commands, dt), dt)
+            self.steps += 1
+            self.caught_up += due > 1
+            due -= 1
+        return st if st is not None else self.sim.state()
 
     def place_box(self, data: bytes) -> bool:
         """Validate a box request and put the box in the scene (False: rejected, counted)."""
@@ -222,7 +310,12 @@ class SimNode:
         """Run until ``stop`` is set (or ``max_ticks``); returns the final state."""
         with open_session(self.svc, ROLE_SIM) as session:
             k = self.keys
-            sub = session.declare_subscriber(k.cmd, zenoh.handlers.RingChannel(COMMAND_QUEUE))
+            inbox = CommandInbox(clock=time.monotonic)
+
+            def on_command(sample: zenoh.Sample) -> None:  # Zenoh's thread: stamp and store only
+                inbox.put(sample.payload.to_bytes())
+
+            sub = session.declare_subscriber(k.cmd, zenoh.handlers.Callback(on_command, indirect=False))
             sub_box = session.declare_subscriber(k.sim_box, zenoh.handlers.FifoChannel(16))
             sub_obstacles = session.declare_subscriber(k.obstacles, zenoh.handlers.RingChannel(1))
             pub = session.declare_publisher(k.state, express=True,
@@ -233,10 +326,10 @@ class SimNode:
                                                                 history=True)
             self.scheduling = realtime_priority(self.rt_priority)
             print(f"wmm-qp sim: step loop: {self.scheduling}", file=sys.stderr, flush=True)
-            dt = self.cfg.dt
             st = self.sim.state()
             counted, said = 0, 0
-            self.loop.start()
+            now = self.t0 = self.loop.start()
+            self.steps = 0
             try:
                 while not stop.is_set() and (max_ticks is None or self.loop.ticks < max_ticks):
                     while (a := lease_sub.try_recv()) is not None:
@@ -245,20 +338,17 @@ class SimNode:
                         self.place_box(b.payload.to_bytes())
                     if (o := sub_obstacles.try_recv()) is not None:  # the referee checks the live set too
                         self.set_obstacles(o.payload.to_bytes())
-                    received = []
-                    while (s := sub.try_recv()) is not None:  # oldest first
-                        if (c := self.accept(s.payload.to_bytes())) is not None:
-                            received.append(c)
-                    st = self.sim.step(self.take(received, dt), dt)
+                    st = self.advance(now, inbox)
                     if (total := sum(st.violations.values())) != counted and said < 50:
                         counted, said = total, said + 1  # the first 50 events, for the log
                         print(f"wmm-qp sim: referee: {st.violations} at t = {st.t:.3f} s; last: "
                               f"{self.sim.referee.last_event}; stale {st.stale_stop}, protective "
                               f"{st.protective_stop}", file=sys.stderr, flush=True)
-                    for payload in self.outgoing(encode(self.state_msg(st, self.loop.ticks)),
+                    self.publications += 1
+                    for payload in self.outgoing(encode(self.state_msg(st, self.publications)),
                                                  time.monotonic()):
                         pub.put(payload)
-                    self.loop.wait()
+                    now = self.loop.wait()
             finally:
                 for ent in (token, lease_sub, sub, sub_box, sub_obstacles, pub):
                     with contextlib.suppress(Exception):
