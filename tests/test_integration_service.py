@@ -62,8 +62,19 @@ def test_stream_tracked_mode_change_smooth_and_malformed_rejected(service_stack:
         errs = [m.ee_error for m in tel if m.mode == "track" and np.isfinite(m.ee_error)]
         assert len(errs) > 100
         assert max(errs) < 0.02  # ground truth within 2 cm of the smoothed target
-        st = until(lambda: c.wait_state(2.0))
-        assert np.linalg.norm(np.array(st.ee_true) - last) < 0.01
+        # The EE reaches the last target. On a loaded host a stall may have faulted the stream and
+        # the daemon holds until a resume (as the docs' client does: resend the mode), so wait for
+        # the state asserted instead of asserting it at a fixed time.
+
+        def arrived() -> StateMsg | None:
+            c.send_setpoint(last)
+            s = c.latest_status()
+            if s is not None and s.resume_needed:
+                c.set_mode("track")
+            st = c.wait_state(2.0)
+            return st if st is not None and np.linalg.norm(np.array(st.ee_true) - last) < 0.01 else None
+
+        until(arrived, timeout=60.0, period=0.02)
         # ---- mode changes take effect without a command jump
         c.telemetry()
         for mode in ("hold", "dm_nullspace", "track", "dm_cartesian", "hold"):
