@@ -179,3 +179,47 @@ def test_a_bad_robot_file_through_the_console_script(tmp_path, case: str) -> Non
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1
     assert f"{path}: {key}:" in r.stderr
+
+
+# ---------------------------------------------------------------- the robot id
+ID_COMMANDS = {  # every command that talks to a robot over Zenoh, with its required arguments
+    "sim": [], "serve": [], "teleop": [], "mode": ["hold"], "status": [], "console": [],
+}
+
+
+@pytest.mark.parametrize("command", list(ID_COMMANDS))
+def test_every_command_takes_the_robot_id_from_the_robot_files_name(tmp_path, command: str) -> None:  # type: ignore[no-untyped-def]
+    """--robot-config F with F's name X: the id is X, whatever configs/service.toml's robot says
+    (a sim started with F and a client given F, or --robot X, meet on <prefix>/X); --robot wins."""
+    from service_robots import gen3_file
+    from wmm_qp_service.cli import build_parser
+    from wmm_qp_service.cli_common import service_config
+    from wmm_qp_service.config import load_service_config
+
+    assert load_service_config().robot == "wmm"  # the shipped service config names another id
+    f = gen3_file(tmp_path, "fixed", name="cell_7")
+    extra = ID_COMMANDS[command]
+
+    def robot_id(*argv: str) -> str:
+        return service_config(build_parser(command).parse_args([command, *extra, *argv])).robot
+
+    assert robot_id("--robot-config", str(f)) == "cell_7"
+    assert robot_id("--robot-config", str(f), "--robot", "other") == "other"
+    assert robot_id() == "wmm"  # the default robot file's name
+    nameless = tmp_path / "nameless.toml"
+    nameless.write_text("\n".join(x for x in f.read_text().splitlines() if not x.startswith("name =")))
+    svc = tmp_path / "service.toml"
+    svc.write_text('robot = "from_service"\n')
+    assert robot_id("--robot-config", str(nameless), "--service-config", str(svc)) == "from_service"
+    assert robot_id("--robot-config", str(f), "--service-config", str(svc)) == "cell_7"
+
+
+def test_demo_and_soak_run_their_robot_under_its_files_name(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """demo and soak start their own sim and daemon: the robot file's name is their id too."""
+    from service_robots import gen3_file
+    from wmm_qp_service.processes import isolated_config
+
+    import wmm_qp as w
+
+    robot = w.load_robot_config(gen3_file(tmp_path, "fixed", name="cell_7"))
+    assert isolated_config(robot=robot).robot == "cell_7"
