@@ -223,3 +223,30 @@ def test_demo_and_soak_run_their_robot_under_its_files_name(tmp_path) -> None:  
 
     robot = w.load_robot_config(gen3_file(tmp_path, "fixed", name="cell_7"))
     assert isolated_config(robot=robot).robot == "cell_7"
+
+
+# ---------------------------------------------------------------- verdict line and progress
+def test_verify_prints_progress_on_stderr_and_keeps_stdout_json(capsys: pytest.CaptureFixture[str]) -> None:
+    """Progress (not a terminal: one line per update) and the verdict line go to stderr; stdout
+    is the JSON alone, with the verdict fields."""
+    code, out, err = run(capsys, "verify", "--samples", "3", "--json")
+    d = json.loads(out)
+    assert code == 0 and d["verdict"] == "PASS" and d["verdict_reason"].startswith("0 violations")
+    lines = err.strip().splitlines()
+    assert "verify: 3/3 samples, 0 violations" in err, err
+    assert lines[-1] == "PASS: " + d["verdict_reason"] and "verify:" not in out
+
+
+def test_verify_ends_with_one_fail_line_naming_the_violations(capsys: pytest.CaptureFixture[str]) -> None:
+    """The traditional controller breaks bounds: FAIL, exit 1, the kinds counted on the last line."""
+    code, out, _ = run(capsys, "verify", "--controller", "traditional", "--samples", "14")
+    last = out.strip().splitlines()[-1]
+    assert code == 1 and last.startswith("FAIL: ") and " violations (" in last, last
+
+
+@pytest.mark.parametrize("command", ["demo", "verify", "soak"])
+def test_the_judged_commands_document_their_exit_codes_in_help(capsys: pytest.CaptureFixture[str],
+                                                               command: str) -> None:
+    code, out, _ = run(capsys, command, "--help")
+    text = " ".join(out.split())
+    assert code == 0 and "0 PASS" in text and "1 FAIL" in text and "2 bad input or usage" in text, text
