@@ -250,3 +250,14 @@ def test_the_judged_commands_document_their_exit_codes_in_help(capsys: pytest.Ca
     code, out, _ = run(capsys, command, "--help")
     text = " ".join(out.split())
     assert code == 0 and "0 PASS" in text and "1 FAIL" in text and "2 bad input or usage" in text, text
+
+
+def test_experiment_and_bench_print_progress_on_stderr_only(capsys: pytest.CaptureFixture[str]) -> None:
+    """Not a terminal, --json: progress lines on stderr, the JSON alone on stdout."""
+    code, out, err = run(capsys, "experiment", "circle", "--duration", "0.5", "--json")
+    assert code == 0 and json.loads(out)["experiment"] == "circle"
+    assert "circle: 100%" in err, err
+    code, out, err = run(capsys, "bench", "--only", "oneshot", "--ticks", "5", "--solver", available_solvers()[0],
+                         "--json")
+    assert code == 0 and "oneshot" in json.loads(out)
+    assert "bench: section 1/1: oneshot" in err and "bench: done, 1/1 sections" in err, err
