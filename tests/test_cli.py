@@ -179,3 +179,85 @@ def test_a_bad_robot_file_through_the_console_script(tmp_path, case: str) -> Non
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1
     assert f"{path}: {key}:" in r.stderr
+
+
+# ---------------------------------------------------------------- the robot id
+ID_COMMANDS = {  # every command that talks to a robot over Zenoh, with its required arguments
+    "sim": [], "serve": [], "teleop": [], "mode": ["hold"], "status": [], "console": [],
+}
+
+
+@pytest.mark.parametrize("command", list(ID_COMMANDS))
+def test_every_command_takes_the_robot_id_from_the_robot_files_name(tmp_path, command: str) -> None:  # type: ignore[no-untyped-def]
+    """--robot-config F with F's name X: the id is X, whatever configs/service.toml's robot says
+    (a sim started with F and a client given F, or --robot X, meet on <prefix>/X); --robot wins."""
+    from service_robots import gen3_file
+    from wmm_qp_service.cli import build_parser
+    from wmm_qp_service.cli_common import service_config
+    from wmm_qp_service.config import load_service_config
+
+    assert load_service_config().robot == "wmm"  # the shipped service config names another id
+    f = gen3_file(tmp_path, "fixed", name="cell_7")
+    extra = ID_COMMANDS[command]
+
+    def robot_id(*argv: str) -> str:
+        return service_config(build_parser(command).parse_args([command, *extra, *argv])).robot
+
+    assert robot_id("--robot-config", str(f)) == "cell_7"
+    assert robot_id("--robot-config", str(f), "--robot", "other") == "other"
+    assert robot_id() == "wmm"  # the default robot file's name
+    nameless = tmp_path / "nameless.toml"
+    nameless.write_text("\n".join(x for x in f.read_text().splitlines() if not x.startswith("name =")))
+    svc = tmp_path / "service.toml"
+    svc.write_text('robot = "from_service"\n')
+    assert robot_id("--robot-config", str(nameless), "--service-config", str(svc)) == "from_service"
+    assert robot_id("--robot-config", str(f), "--service-config", str(svc)) == "cell_7"
+
+
+def test_demo_and_soak_run_their_robot_under_its_files_name(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """demo and soak start their own sim and daemon: the robot file's name is their id too."""
+    from service_robots import gen3_file
+    from wmm_qp_service.processes import isolated_config
+
+    import wmm_qp as w
+
+    robot = w.load_robot_config(gen3_file(tmp_path, "fixed", name="cell_7"))
+    assert isolated_config(robot=robot).robot == "cell_7"
+
+
+# ---------------------------------------------------------------- verdict line and progress
+def test_verify_prints_progress_on_stderr_and_keeps_stdout_json(capsys: pytest.CaptureFixture[str]) -> None:
+    """Progress (not a terminal: one line per update) and the verdict line go to stderr; stdout
+    is the JSON alone, with the verdict fields."""
+    code, out, err = run(capsys, "verify", "--samples", "3", "--json")
+    d = json.loads(out)
+    assert code == 0 and d["verdict"] == "PASS" and d["verdict_reason"].startswith("0 violations")
+    lines = err.strip().splitlines()
+    assert "verify: 3/3 samples, 0 violations" in err, err
+    assert lines[-1] == "PASS: " + d["verdict_reason"] and "verify:" not in out
+
+
+def test_verify_ends_with_one_fail_line_naming_the_violations(capsys: pytest.CaptureFixture[str]) -> None:
+    """The traditional controller breaks bounds: FAIL, exit 1, the kinds counted on the last line."""
+    code, out, _ = run(capsys, "verify", "--controller", "traditional", "--samples", "14")
+    last = out.strip().splitlines()[-1]
+    assert code == 1 and last.startswith("FAIL: ") and " violations (" in last, last
+
+
+@pytest.mark.parametrize("command", ["demo", "verify", "soak"])
+def test_the_judged_commands_document_their_exit_codes_in_help(capsys: pytest.CaptureFixture[str],
+                                                               command: str) -> None:
+    code, out, _ = run(capsys, command, "--help")
+    text = " ".join(out.split())
+    assert code == 0 and "0 PASS" in text and "1 FAIL" in text and "2 bad input or usage" in text, text
+
+
+def test_experiment_and_bench_print_progress_on_stderr_only(capsys: pytest.CaptureFixture[str]) -> None:
+    """Not a terminal, --json: progress lines on stderr, the JSON alone on stdout."""
+    code, out, err = run(capsys, "experiment", "circle", "--duration", "0.5", "--json")
+    assert code == 0 and json.loads(out)["experiment"] == "circle"
+    assert "circle: 100%" in err, err
+    code, out, err = run(capsys, "bench", "--only", "oneshot", "--ticks", "5", "--solver", available_solvers()[0],
+                         "--json")
+    assert code == 0 and "oneshot" in json.loads(out)
+    assert "bench: section 1/1: oneshot" in err and "bench: done, 1/1 sections" in err, err

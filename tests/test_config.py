@@ -87,7 +87,9 @@ def test_robot_config_errors_name_file_and_key(tmp_path: Path) -> None:
 
 
 BAD_ROBOT_FILES = {  # (replace this, with this) → the key the error must name, and a word of its reason
-    "frame the URDF lacks": (('ee_frame = "end_effector_link"', 'ee_frame = "tool0"'), "arm.ee_frame", "no frame"),
+    "frame the URDF lacks": (('ee_frame = "end_effector_link"', 'ee_frame = "tool0"'), "arm.ee_frame", "no link"),
+    "ee_frame a joint, not a link": (('ee_frame = "end_effector_link"', 'ee_frame = "end_effector"'), "arm.ee_frame",
+                                     "is a joint of the URDF, not a link (its child link: 'end_effector_link')"),
     "joint not in the URDF": (('"joint_7"]', '"joint_8"]'), "arm.joints", "no joint"),
     "joints not one chain": (('joints = ["joint_1", "joint_2"', 'joints = ["joint_2", "joint_1"'), "arm.joints",
                              "order"),

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -24,6 +25,11 @@ def test_demo_json_summary() -> None:
     assert d["dm_end"] > d["dm_start"]  # the DM phases raised DM along x
     assert [p["phase"] for p in d["phases"]][:3] == ["hold", "dm_cartesian", "dm_nullspace"]
     assert d["exit_codes"] == {"sim": 0, "daemon": 0}
+    # the verdict: in the JSON, and as the last line of stderr naming the kept logs
+    assert d["verdict"] == "PASS" and d["verdict_reason"].endswith(f"logs: {d['logs']}")
+    assert out.stderr.strip().splitlines()[-1] == f"PASS: {d['verdict_reason']}"
+    assert (Path(d["logs"]) / "daemon.log").is_file() and (Path(d["logs"]) / "sim.log").is_file()
+    assert "demo: phase 3/7 dm_nullspace" in out.stderr  # progress on stderr
 
 
 def test_demo_rejects_bad_arguments() -> None:

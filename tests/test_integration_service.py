@@ -197,3 +197,30 @@ def test_a_stack_of_another_robot(tmp_path: Any, base: str) -> None:
     finally:
         codes = stack.stop()
     assert codes == {"sim": 0, "daemon": 0}
+
+
+def test_a_sim_started_with_a_robot_file_is_found_under_its_name(tmp_path: Any) -> None:
+    """``wmm-qp sim --robot-config F`` (no --robot; configs/service.toml names robot "wmm") serves
+    under F's name: a client given ``--robot <that name>`` receives its states."""
+    import subprocess
+    import sys
+
+    from service_robots import gen3_file
+    from wmm_qp_service.cli import build_parser
+    from wmm_qp_service.cli_common import service_config
+    from wmm_qp_service.processes import free_port
+
+    path = gen3_file(tmp_path, "fixed", name="cell_7")
+    ends = ["--prefix", f"idtest{time.monotonic_ns() % 10**9}",
+            "--sim-endpoint", f"tcp/127.0.0.1:{free_port()}", "--daemon-endpoint", f"tcp/127.0.0.1:{free_port()}"]
+    with open(tmp_path / "sim.log", "wb") as log:
+        sim = subprocess.Popen([sys.executable, "-m", "wmm_qp_service.cli", "sim", "--robot-config", str(path),
+                                *ends], stdin=subprocess.DEVNULL, stdout=log, stderr=log)
+    try:
+        svc = service_config(build_parser("status").parse_args(["status", "--robot", "cell_7", *ends]))
+        with Client(svc, name="test") as c:
+            st = until(lambda: c.wait_state(1.0), timeout=3 * TIMEOUT)  # a first start compiles
+            assert st.robot == "cell_7" and len(st.q_arm) == 7
+    finally:
+        sim.terminate()
+        sim.wait(timeout=10)

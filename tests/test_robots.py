@@ -323,3 +323,85 @@ def test_W_of_eq_8_takes_tau_ref_from_the_rotary_joints() -> None:
     W = r.arm.default_W()
     assert W[1:].min() == pytest.approx(1.0) and W[1:].max() == pytest.approx(39.0 / 3.0)
     assert W[0] == pytest.approx(39.0 / 2000.0)
+
+
+# ------------------------------------------------------------------ arm.ee_frame and the tool offset
+OFFSET_XYZ, OFFSET_RPY = [0.02, -0.03, 0.15], [0.3, -0.2, 0.5]
+
+
+def _gen3_with(tmp_path: Path, name: str, **arm: str) -> Path:
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from service_robots import gen3_file
+
+    return gen3_file(tmp_path, "omni", name=name, **arm)
+
+
+def test_a_tool_offset_places_the_task_point_at_flange_pose_composed_with_the_offset(tmp_path: Path) -> None:
+    """x_tool = p_flange + R_flange t, R_tool = R_flange R(rpy), in the world, for the whole robot."""
+    plain = w.WmmModel(w.load_robot_config(_gen3_with(tmp_path, "flange")))
+    tool = w.WmmModel(w.load_robot_config(_gen3_with(
+        tmp_path, "tool", ee_offset_xyz=str(OFFSET_XYZ), ee_offset_rpy=str(OFFSET_RPY))))
+    assert tool.config.arm.ee_offset_xyz.tolist() == OFFSET_XYZ
+    rng = np.random.default_rng(11)
+    for _ in range(5):
+        q_base = np.array([*rng.uniform(-1, 1, 2), rng.uniform(-np.pi, np.pi)])
+        q_arm = robot("gen3_mecanum.toml").arm.start + rng.normal(0, 0.4, 7)
+        p_f, R_f = plain.ee_pose(q_base, q_arm)
+        p_t, R_t = tool.ee_pose(q_base, q_arm)
+        np.testing.assert_allclose(p_t, p_f + R_f @ OFFSET_XYZ, atol=1e-12)
+        np.testing.assert_allclose(R_t, R_f @ pin.rpy.rpyToMatrix(np.array(OFFSET_RPY)), atol=1e-12)
+        np.testing.assert_allclose(tool.ee_position(q_base, q_arm), p_t, atol=1e-12)
+        assert np.linalg.norm(p_t - p_f) == pytest.approx(np.linalg.norm(OFFSET_XYZ), abs=1e-12)
+
+
+def test_a_tool_offsets_jacobians_and_hessian_match_finite_differences(tmp_path: Path) -> None:
+    """The task point's J (eq. (5), wheels and joints, pose rows too) and ∂J/∂q (the DM's gradient (9))
+    by central differences at a random configuration."""
+    m = w.WmmModel(w.load_robot_config(_gen3_with(
+        tmp_path, "tool", ee_offset_xyz=str(OFFSET_XYZ), ee_offset_rpy=str(OFFSET_RPY))))
+    rng = np.random.default_rng(5)
+    q_base = np.array([*rng.uniform(-1, 1, 2), rng.uniform(-np.pi, np.pi)])
+    q_arm = robot("gen3_mecanum.toml").arm.start + rng.normal(0, 0.4, 7)
+    kin = m.kinematics(q_base, q_arm, pose=True)
+    h = 1e-6
+    P = m.base.P(q_base[2])
+    for i in range(m.n_v):
+        step = (h * P[:, i], 0 * q_arm) if i < m.n_wheels else (0 * q_base, h * np.eye(7)[i - m.n_wheels])
+        (x1, R1), (x0, R0) = m.ee_pose(q_base + step[0], q_arm + step[1]), m.ee_pose(q_base - step[0],
+                                                                                   q_arm - step[1])
+        np.testing.assert_allclose(kin.J[:3, i], (x1 - x0) / (2 * h), atol=1e-8)
+        np.testing.assert_allclose(kin.J[3:, i], pin.log3(R1 @ R0.T) / (2 * h), atol=1e-8)
+    arm = m.arm
+    arm.position_jacobian(q_arm)
+    D = arm.jacobian_derivatives(q_arm)
+    fd = np.array([(arm.position_jacobian(q_arm + h * e)[1] - arm.position_jacobian(q_arm - h * e)[1]) / (2 * h)
+                   for e in np.eye(7)])
+    assert np.linalg.norm(D - fd) / np.linalg.norm(fd) < 1e-6
+
+
+def test_ee_frame_naming_a_joint_is_one_error_listing_the_links(tmp_path: Path) -> None:
+    """joint_7 is a joint (its frame sits where bracelet_link starts): not a task frame. The error
+    names the file, arm.ee_frame, the joint's child link and the links to choose from."""
+    p = _gen3_with(tmp_path, "joint", ee_frame='"joint_7"')
+    with pytest.raises(w.ConfigError) as e:
+        w.load_robot_config(p)
+    msg = str(e.value)
+    assert e.value.key == "arm.ee_frame" and str(p) in msg and "\n" not in msg
+    assert "'joint_7' is a joint" in msg and "'bracelet_link'" in msg and "end_effector_link" in msg
+
+
+def test_ee_frame_naming_a_link_and_a_joint_means_the_link(tmp_path: Path) -> None:
+    """A URDF whose fixed joint has its child link's name (the Unitree Z1's gripperStator): the
+    name means the link; the model is the one of the plainly named URDF."""
+    urdf = (ROBOTS / "gen3_7dof.urdf").read_text()
+    assert urdf.count('<joint name="end_effector" type="fixed">') == 1
+    u = tmp_path / "twin.urdf"
+    u.write_text(urdf.replace('<joint name="end_effector" type="fixed">',
+                              '<joint name="end_effector_link" type="fixed">'))
+    twin = w.WmmModel(w.load_robot_config(_gen3_with(tmp_path, "twin", urdf=f'"{u}"')))
+    plain = w.WmmModel(w.load_robot_config(_gen3_with(tmp_path, "plain")))
+    q_base, q_arm = np.array([0.1, 0.2, 0.3]), Q0 + 0.1
+    np.testing.assert_allclose(twin.kinematics(q_base, q_arm).J, plain.kinematics(q_base, q_arm).J, atol=1e-14)
+    np.testing.assert_allclose(twin.ee_position(q_base, q_arm), plain.ee_position(q_base, q_arm), atol=1e-14)

@@ -98,7 +98,7 @@ class ArmConfig:
 
     Attributes:
         urdf: path of the arm's URDF.
-        ee_frame: name of the end-effector frame.
+        ee_frame: name of the end-effector link (a URDF link, not a joint; the tool flange).
         joints: the controlled joints, in order (from the URDF's root towards ``ee_frame``).
         joint_types: "revolute", "continuous" or "prismatic", per joint.
         locked: every other joint of the URDF and the value it is locked at [rad or m].
@@ -110,6 +110,8 @@ class ArmConfig:
         torque_limit: [N·m or N] effort limits (W of eq. (8), the push experiment).
         torque_weight: W of eq. (8) the robot's file gives, or None (then τ_ref/τ_lim,i).
         start: [rad or m] where the sim and the experiments start.
+        ee_offset_xyz: [m] the task point in the ``ee_frame`` link's frame (e.g. the tool tip).
+        ee_offset_rpy: [rad] the task frame's orientation in it (roll, pitch, yaw; pose task).
     """
 
     urdf: Path
@@ -126,6 +128,8 @@ class ArmConfig:
     torque_limit: FloatArray
     torque_weight: FloatArray | None
     start: FloatArray
+    ee_offset_xyz: FloatArray = field(default_factory=lambda: _ro([0.0, 0.0, 0.0]))
+    ee_offset_rpy: FloatArray = field(default_factory=lambda: _ro([0.0, 0.0, 0.0]))
 
     @property
     def n(self) -> int:
@@ -546,6 +550,8 @@ def load_robot_config(path: Path | str | None = None) -> RobotConfig:
         {
             "urdf",
             "ee_frame",
+            "ee_offset_xyz",
+            "ee_offset_rpy",
             "joints",
             "locked",
             "mount_xyz",
@@ -618,6 +624,8 @@ def load_robot_config(path: Path | str | None = None) -> RobotConfig:
         torque_limit=_ro(tau),
         torque_weight=weight,
         start=start,
+        ee_offset_xyz=a.vector("ee_offset_xyz", 3, [0.0, 0.0, 0.0]),
+        ee_offset_rpy=a.vector("ee_offset_rpy", 3, [0.0, 0.0, 0.0]),
     )
     base = _load_base(r.table("base"))
     collision = _load_collision(r.table("collision", required=False), path, full, chain.joints)

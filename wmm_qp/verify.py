@@ -388,7 +388,7 @@ def verify_controller(
         model: the robot.
         n: number of random states.
         seed: RNG seed.
-        progress: optional callable(i, n) called after each state.
+        progress: optional callable(i, n, violations) called after each state (violations: so far).
         ee_box: (lower, upper) [m] of eq. (17), refereed in DM_CARTESIAN; default: the box of the
             controller's ``config`` (``ee_box_lower``, ``ee_box_upper``), if it has one.
         scene: obstacles and fence: when given, every command is also refereed for collisions
@@ -435,5 +435,5 @@ def verify_controller(
         if (k + 1) % len(modes) == 0:
             rep.samples += 1
             if progress is not None:
-                progress(rep.samples, n)  # type: ignore[operator]
+                progress(rep.samples, n, rep.violations)  # type: ignore[operator]
     return rep

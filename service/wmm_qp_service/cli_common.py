@@ -10,14 +10,14 @@ from types import FrameType
 
 from wmm_qp import ConfigError
 
-from .config import ServiceConfig, check_name, load_service_config
+from .config import ServiceConfig, check_name, load_service_config, resolve_robot_id
 
 
 def add_service_arguments(p: argparse.ArgumentParser) -> None:
     """--service-config, --robot, --prefix, --daemon-endpoint, --sim-endpoint, --zenoh-config."""
     g = p.add_argument_group("service")
     g.add_argument("--service-config", metavar="TOML", help="service config (default: configs/service.toml)")
-    g.add_argument("--robot", help="robot id (default: from the service config)")
+    g.add_argument("--robot", help="robot id (default: the robot file's name, else the service config's robot)")
     g.add_argument("--prefix", help="key-expression prefix (default: from the service config)")
     g.add_argument("--daemon-endpoint", metavar="EP", help="e.g. tcp/127.0.0.1:7448")
     g.add_argument("--sim-endpoint", metavar="EP", help="e.g. tcp/127.0.0.1:7447")
@@ -27,11 +27,12 @@ def add_service_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def service_config(args: argparse.Namespace) -> ServiceConfig:
-    """The service config with the command line's overrides applied."""
+    """The service config with the command line's overrides applied; its robot id is
+    :func:`~wmm_qp_service.config.resolve_robot_id`'s (``--robot``, else the ``name`` of
+    ``--robot-config`` or of the default robot file, else the service config's)."""
     cfg = load_service_config(getattr(args, "service_config", None))
-    changes: dict[str, object] = {}
-    if getattr(args, "robot", None):
-        changes["robot"] = check_name(args.robot, "--robot")
+    changes: dict[str, object] = {
+        "robot": resolve_robot_id(cfg, getattr(args, "robot", None), getattr(args, "robot_config", None))}
     if getattr(args, "prefix", None):
         changes["prefix"] = check_name(args.prefix, "--prefix")
     z: dict[str, object] = {}
@@ -46,7 +47,7 @@ def service_config(args: argparse.Namespace) -> ServiceConfig:
         z["sim_endpoint"] = args.sim_endpoint
     if z:
         changes["zenoh"] = z
-    return cfg.with_(**changes) if changes else cfg
+    return cfg.with_(**changes)
 
 
 def stop_on_signals() -> threading.Event:

@@ -152,7 +152,9 @@ class ServiceConfig:
 
     Attributes:
         robot: robot id carried by every message; "" (the default) = the robot description's
-            ``name`` (:meth:`with_robot`), so each robot file has its own keys.
+            ``name`` (:meth:`with_robot`), so each robot file has its own keys. The command line
+            resolves it with :func:`resolve_robot_id` (``--robot``, else the robot file's
+            ``name``, else this), so this is the id of a robot file that sets no ``name``.
         prefix: first segment(s) of every key expression (``<prefix>/<robot>/...``).
     """
 
@@ -194,10 +196,39 @@ class ServiceConfig:
 def default_robot_id() -> str:
     """The ``name`` of the default robot file (:func:`wmm_qp.default_robot_file`), read without
     resolving its URDF; "wmm" when it sets none (the default of :func:`wmm_qp.load_robot_config`)."""
-    name = read_toml(default_robot_file()).get("name", "wmm")
+    return robot_file_name(default_robot_file()) or "wmm"
+
+
+def robot_file_name(path: Path) -> str | None:
+    """The ``name`` a robot file sets (read without resolving its URDF), or None when it sets none.
+
+    Raises:
+        ConfigError: the file cannot be read, or its ``name`` is not a key segment.
+    """
+    name = read_toml(path).get("name")
+    if name is None:
+        return None
     if not isinstance(name, str) or not _NAME.match(name):
-        raise ConfigError(default_robot_file(), "name", "must be a non-empty key segment (letters, digits, _ -)")
+        raise ConfigError(path, "name", f"must be a non-empty key segment (letters, digits, _ -), got {name!r}")
     return name
+
+
+def resolve_robot_id(service: ServiceConfig, robot: str | None = None, robot_file: Path | None = None) -> str:
+    """The robot id a command uses, the same for every command (docs/protocol.md "Keys"):
+
+    1. ``robot`` (``--robot``) when given;
+    2. else the ``name`` of the robot file (``robot_file``, ``--robot-config``; None: the default
+       robot file) when it sets one — so a sim started with a robot file is found by a client
+       given the same file, or ``--robot <its name>``;
+    3. else the service config's ``robot``; else "wmm".
+
+    Raises:
+        ConfigError: an id that is not a key segment (naming the flag or the file's ``name``).
+    """
+    if robot:
+        return check_name(robot, "--robot")
+    name = robot_file_name(robot_file if robot_file is not None else default_robot_file())
+    return name or service.robot or "wmm"
 
 
 def _section(root: TomlTable, name: str, cls: Any, base: Any) -> Any:

@@ -1,5 +1,9 @@
 """The manipulator on Pinocchio: pose of the EE frame, its Jacobian and Hessian, in the base frame.
 
+The "EE frame" is the task point: the ``ee_frame`` link moved by the tool offset
+(``ee_offset_xyz``, ``ee_offset_rpy``; zero by default), a frame added to the reduced model, so
+kinematics, Jacobians, Hessians (the DM's gradient) and the collision rows all use it.
+
 Built once from the robot description: Pinocchio's reduced model of the chosen joints (every
 other joint of the URDF locked), its root placed at the mount (DESIGN.md §7: p_mount + R_mount
 p_m(q_m), R_mount J_arm), so every quantity here is already expressed in the base frame. The
@@ -40,6 +44,12 @@ def mount_placement(config: ArmConfig) -> pin.SE3:
     return pin.SE3(pin.rpy.rpyToMatrix(rpy), np.asarray(config.mount_xyz, dtype=float))
 
 
+def ee_offset_placement(config: ArmConfig) -> pin.SE3:
+    """The task point in the ``ee_frame`` link's frame (``ee_offset_xyz``, ``ee_offset_rpy``)."""
+    rpy = np.asarray(config.ee_offset_rpy, dtype=float)
+    return pin.SE3(pin.rpy.rpyToMatrix(rpy), np.asarray(config.ee_offset_xyz, dtype=float))
+
+
 class ArmModel:
     """Pinocchio model of the arm, expressed in the base frame.
 
@@ -57,12 +67,12 @@ class ArmModel:
         for name in config.joints:
             if not full.existJointName(name):
                 raise ConfigError(where, "arm.joints", f"the URDF has no joint named {name!r}")
-        if not full.existFrame(config.ee_frame):
-            raise ConfigError(where, "arm.ee_frame", f"the URDF has no frame named {config.ee_frame!r}")
+        urdf_io.ee_frame_id(where, full, config.ee_frame)  # a link, not a joint: else one line
         self.mount = mount_placement(config)
         self.model = urdf_io.reduced_model(full, config.joints, dict(config.locked), self.mount)
+        self.flange_id = urdf_io.ee_frame_id(where, self.model, config.ee_frame)
+        self.frame_id = urdf_io.add_task_frame(self.model, self.flange_id, ee_offset_placement(config))
         self.data = self.model.createData()
-        self.frame_id = self.model.getFrameId(config.ee_frame)
         ids = [self.model.getJointId(n) for n in config.joints]
         if self.model.nv != len(ids):
             raise ConfigError(where, "arm.joints", f"the reduced model has {self.model.nv} DOF, not {len(ids)}")

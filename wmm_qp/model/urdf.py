@@ -146,11 +146,59 @@ def _kind(model: pin.Model, j: int) -> str | None:
     return None
 
 
+_LINKS_LISTED = 40
+"""At most this many link names in an ``arm.ee_frame`` error (TIAGo has over 80)."""
+
+
+def _links(model: pin.Model) -> str:
+    names = [f.name for f in model.frames if f.type == pin.FrameType.BODY]
+    more = len(names) - _LINKS_LISTED
+    return ", ".join(names[:_LINKS_LISTED]) + (f" and {more} more" if more > 0 else "")
+
+
+def ee_frame_id(robot_file: Path | str, model: pin.Model, ee_frame: str) -> int:
+    """Pinocchio's id of the link ``arm.ee_frame`` names (its BODY frame).
+
+    A URDF may give a link and a joint the same name (the Unitree Z1's ``gripperStator`` is both):
+    the name then means the link, the only kind of frame ``arm.ee_frame`` accepts. A joint's
+    frame is not accepted even where it coincides with its child link's: name the link.
+
+    Raises:
+        ConfigError: no link of that name (a joint of that name, or no frame at all), or several
+            links of that name — naming the links to choose from.
+    """
+    matches = [i for i, f in enumerate(model.frames) if f.name == ee_frame]
+    bodies = [i for i in matches if model.frames[i].type == pin.FrameType.BODY]
+    if len(bodies) == 1:
+        return bodies[0]
+    if len(bodies) > 1:
+        why = f"{len(bodies)} links are named {ee_frame!r}: rename one in the URDF"
+    elif matches:  # a joint (or another kind of frame) of that name, and no link
+        children = [f.name for f in model.frames if f.type == pin.FrameType.BODY and f.parentFrame in matches]
+        hint = f" (its child link: {children[0]!r})" if children else ""
+        why = f"{ee_frame!r} is a joint of the URDF, not a link{hint}: name a link"
+    else:
+        why = f"the URDF has no link named {ee_frame!r}"
+    raise ConfigError(robot_file, "arm.ee_frame", f"{why}; links: {_links(model)}")
+
+
+def add_task_frame(model: pin.Model, ee_frame: int, offset: pin.SE3) -> int:
+    """Add the task point's frame to ``model``: ``offset`` (``arm.ee_offset_xyz``, ``arm.ee_offset_rpy``)
+    relative to the frame ``ee_frame``, on the same joint. Positions, orientations, Jacobians and
+    Hessians of this frame are those of the task point (the tool tip rather than the flange).
+
+    Returns:
+        Its frame id.
+    """
+    ee = model.frames[ee_frame]
+    frame = pin.Frame("wmm_qp_task_point", int(ee.parentJoint), int(ee_frame), ee.placement * offset,
+                      pin.FrameType.OP_FRAME)
+    return int(model.addFrame(frame, False))
+
+
 def chain_to(robot_file: Path, model: pin.Model, ee_frame: str) -> list[int]:
     """Joint ids (Pinocchio's) of the actuated joints from the root to ``ee_frame``, root first."""
-    if not model.existFrame(ee_frame):
-        raise ConfigError(robot_file, "arm.ee_frame", f"the URDF has no frame named {ee_frame!r}")
-    j = model.frames[model.getFrameId(ee_frame)].parentJoint
+    j = model.frames[ee_frame_id(robot_file, model, ee_frame)].parentJoint
     ids = []
     while j > 0:
         if model.joints[j].nv > 0:

@@ -10,6 +10,7 @@ import wmm_qp as w
 from wmm_qp.config import TASK_KINDS
 from wmm_qp.solvers import available_solvers
 
+from ..progress import ProgressLine
 from . import collision, controller, daemon, e2e, jitter, oneshot, pink_race, scaling
 from .machine import machine_info
 from .stats import now_ns
@@ -116,36 +117,56 @@ def run_bench(
     out: dict[str, Any] = {"machine": machine_info(), "robot": robot.name, "robot_file": str(robot.path),
                            "task": cfg.task.kind, "ticks": ticks, "rate_hz": cfg.rate_hz}  # fmt: skip
     sections = tuple(s for s in (SECTIONS if only is None else (only,)) if s not in (skip or ()))
+    bar = ProgressLine("bench")
+    done = 0
+
+    def say(what: str) -> None:  # each section takes seconds: its start is always shown
+        bar.done(f"section {done + 1}/{len(sections)}: {what}")
+
     if "controller" in sections:
+        say(f"controller: the step of every solver in every mode, {ticks} ticks each")
         res = controller.run(robot, cfg, solvers, modes, ticks, breakdown, max_seconds)
         out["controller"] = res
         if "track" in modes:
             out["tick_us"] = controller.tick_table(res, "track")
+        done += 1
     if "oneshot" in sections:
+        say("oneshot: one QP solved from scratch per solver")
         out["oneshot"] = oneshot.run(robot, cfg, solvers, min(ticks, 5000))
+        done += 1
     if "pink" in sections:
+        say("pink: the race with pink's solve_ik")
         race = pink_race.run(robot, cfg, ticks, max_seconds)
         out["pink"] = race
         if race.get("available"):
             out["pink_tick_us"] = {k: race["pink"]["tick_us"][k] for k in ("p50", "p99")}
+        done += 1
     if "scaling" in sections:
+        say("scaling: the step against the arm's size")
         out["scaling"] = scaling.run(robot, cfg, solvers, min(ticks, 10000), max_seconds)
+        done += 1
     if "robots" in sections:
+        say("robots: the step of every shipped robot")
         out["robots"] = run_robots(cfg, solvers, ticks, max_seconds)
+        done += 1
     if "e2e" in sections:
-        print("e2e: daemon + sim over Zenoh", file=sys.stderr, flush=True)
+        say("e2e: daemon + sim over Zenoh")
         out["e2e"] = e2e.run(ticks, robot=robot, controller_file=controller_file)
+        done += 1
     if "daemon" in sections:
-        print("daemon: the daemon's tick, stage by stage, over Zenoh", file=sys.stderr, flush=True)
+        say("daemon: the daemon's tick, stage by stage, over Zenoh")
         out["daemon"] = daemon.run(ticks, robot=robot, controller_file=controller_file)
+        done += 1
     if "collisions" in sections:
-        print("collisions: the track-mode step with and without the collision rows", file=sys.stderr, flush=True)
+        say("collisions: the track-mode step with and without the collision rows")
         out["collisions"] = collision.run(robot, cfg, min(ticks, 10000), max_seconds)
+        done += 1
     if "jitter" in sections:
-        print("jitter: the daemon's fixed-rate loop with no work (the machine's floor)", file=sys.stderr, flush=True)
+        say("jitter: the daemon's fixed-rate loop with no work (the machine's floor), then ctl.step after idling")
         out["jitter"] = jitter.run(ticks)
-        print("jitter: ctl.step after no idle, a sleep, a spin", file=sys.stderr, flush=True)
         out["step_after_idle"] = jitter.step_after_idle(min(ticks, 5000))
+        done += 1
+    bar.done(f"done, {done}/{len(sections)} sections")
     out["targets"] = targets(out)
     return out
 

@@ -80,9 +80,10 @@ def load_configs(args: argparse.Namespace) -> tuple[RobotConfig, ControllerConfi
 
 
 def robot_service_config(args: argparse.Namespace) -> tuple[RobotConfig, ServiceConfig]:
-    """The robot description and the service config with the command line's overrides, its
-    robot id filled from the robot's name when neither ``--robot`` nor the service config set one."""
+    """The robot description and the service config with the command line's overrides; the robot
+    id is ``--robot``, else the robot file's ``name``, else the service config's (the same for
+    every command: :func:`wmm_qp_service.config.resolve_robot_id`)."""
     from ..cli_common import service_config
 
-    robot = load_robot(args)
-    return robot, service_config(args).with_robot(robot)
+    robot = load_robot(args)  # a bad file: its one-line error first
+    return robot, service_config(args)

@@ -21,6 +21,8 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
+from ..progress import ProgressLine
+from ..verdict import EXIT_CODES_HELP, Verdict, judge
 from .common import add_robot_argument, add_scene_argument, load_robot, load_scene_arg
 
 HELP = "start sim and daemon on loopback, drive every mode, print a summary"
@@ -30,10 +32,13 @@ PHASES = (("hold", 1.0), ("dm_cartesian", 4.0), ("dm_nullspace", 9.0), ("track_h
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.epilog = EXIT_CODES_HELP + " A process that crashes or does not stop is a FAIL too."
     parser.add_argument("--duration", type=float, default=30.0, help="[s] scenario length")
     parser.add_argument("--rate", type=float, default=500.0, help="[Hz] control rate")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
-    parser.add_argument("--logs", metavar="DIR", help="keep the processes' logs here")
+    parser.add_argument("--logs", metavar="DIR",
+                        help="write the sim's and the daemon's logs here (default: a fresh folder under the "
+                             "temporary directory, kept and named on the verdict line)")
     parser.add_argument("--controller-config", type=Path, default=None, metavar="FILE",
                         help="the daemon's controller.toml (default: configs/controller.toml)")
     add_robot_argument(parser)
@@ -66,23 +71,33 @@ def run(args: argparse.Namespace) -> int:
 
     meters: list[CpuMeter] = []  # started when the stack is up (start-up is not the loop's CPU)
     cpu: dict[str, float | None] = {}
+    bar = ProgressLine("demo")
     try:
+        bar.update(f"starting the sim and the daemon (logs: {log_dir})")
         stack.start()
-        summary = _drive(svc, args.duration, args.json,
+        summary = _drive(svc, args.duration, bar,
                          on_ready=lambda: meters.append(CpuMeter({n: p.pid for n, p in stack.procs.items()})))
         if meters:
             cpu = meters[0].shares()
     finally:
+        bar.update("stopping the sim and the daemon")
         codes = stack.stop()
+    bar.close()
+    failures = _process_failures(codes)
     if summary is None:
-        print(f"wmm-qp demo: error: the daemon or the sim did not come up (logs: {log_dir})",
-              file=sys.stderr)
-        return 1
+        verdict = judge({}, failures=["the daemon or the sim did not come up", *failures], logs=log_dir)
+        _say_verdict(verdict, args.json, {"logs": str(log_dir), "exit_codes": codes})
+        return verdict.exit_code
+    verdict = judge(summary["violations"], failures=failures,
+                    deadline_misses=int(summary["loop"].get("deadline_misses") or 0),
+                    faults=summary["faults"] or {}, protective_stops=int(summary["protective_stops"] or 0),
+                    logs=log_dir)
     summary["exit_codes"] = codes
     summary["cpu_pct"], summary["cpu_how"] = cpu, CPU_HOW
     summary["logs"] = str(log_dir)
     summary["robot"] = {"name": robot.name, "file": str(robot.path), "n_arm": robot.n_arm,
                         "n_wheels": robot.n_wheels, "base_kind": robot.base.kind, "task": ctl.task.kind}
+    summary |= verdict.json_fields()
     if args.json:
         print(json.dumps(_finite_or_none(summary), allow_nan=False))
     else:
@@ -98,9 +113,29 @@ def run(args: argparse.Namespace) -> int:
               f"DM along x {summary['dm_start']:.3f} → {summary['dm_end']:.3f}")
         print(f"      rejected {summary['rejected']}; faults {summary['faults'] or 'none'}; "
               f"protective stops {summary['protective_stops']}; processes exited {codes}")
-    ok = (summary["violations_total"] == 0 and not summary["protective_stops"]
-          and all(c == 0 for c in codes.values()))
-    return 0 if ok else 1
+    _say_verdict(verdict, args.json)
+    return verdict.exit_code
+
+
+def _process_failures(codes: dict[str, int | None]) -> list[str]:
+    """What went wrong with the processes themselves (a crash, a hang at the end): each a FAIL."""
+    out = []
+    for name, code in codes.items():
+        if code is None:
+            out.append(f"the {name} did not stop on SIGINT (killed)")
+        elif code != 0:
+            out.append(f"the {name} exited with status {code}")
+    return out
+
+
+def _say_verdict(verdict: Verdict, as_json: bool, fields: dict[str, Any] | None = None) -> None:
+    """The verdict line: last on stdout; with --json on stderr (the JSON alone on stdout)."""
+    if as_json:
+        if fields is not None:  # no summary: the verdict is the JSON
+            print(json.dumps({**fields, **verdict.json_fields()}))
+        print(verdict.line(), file=sys.stderr, flush=True)
+    else:
+        print(verdict.line(), flush=True)
 
 
 def _delta(a: dict[str, int], b: dict[str, int]) -> dict[str, int]:
@@ -126,7 +161,7 @@ class _Operator:
     quiet_until = 0.0  # [s, wall] statuses stamped before this predate the last mode message
 
 
-def _drive(svc: Any, duration: float, quiet: bool,
+def _drive(svc: Any, duration: float, bar: ProgressLine,
            on_ready: Any = None) -> dict[str, Any] | None:
     import numpy as np
 
@@ -134,8 +169,8 @@ def _drive(svc: Any, duration: float, quiet: bool,
     from ..teleop import hold_stream, stream_circle, stream_haptic, wait
 
     scale = duration / sum(d for _, d in PHASES)
-    say = (lambda m: None) if quiet else (lambda m: print(m, file=sys.stderr, flush=True))
     with Client(svc, name="demo", telemetry=True) as c:
+        bar.update("waiting for the daemon (a first start compiles its kernels)")
         info = c.wait_for_daemon(90.0)  # a fresh install compiles its kernels at first start
         end = time.monotonic() + 30.0
         while info is not None and not info.status.state_ok and time.monotonic() < end:
@@ -149,8 +184,14 @@ def _drive(svc: Any, duration: float, quiet: bool,
         per_phase: list[dict[str, Any]] = []
         statuses: Counter[str] = Counter()  # controller statuses of the current phase
         op = _Operator()
+        phase = ""
+
+        def violations_now() -> str:
+            s = c.latest_state()
+            return f"phase {phase}, {sum(s.violations.values()) if s is not None else '?'} violations so far"
 
         def drain() -> None:
+            bar.update(violations_now)
             for m in c.telemetry():
                 statuses[m.status] += 1
                 if math.isfinite(m.ee_error):
@@ -171,10 +212,10 @@ def _drive(svc: Any, duration: float, quiet: bool,
         faults0 = dict(info.status.faults)
         st0 = c.latest_state() or c.wait_state(2.0)
         viol0 = dict(st0.violations) if st0 is not None else {}
-        for name, d in PHASES:
+        for k, (name, d) in enumerate(PHASES):
             d *= scale
             mode = name.split("_track")[0] if not name.startswith("track") else "track"
-            say(f"demo: {name} for {d:.1f} s")
+            phase = f"{k + 1}/{len(PHASES)} {name} ({d:.1f} s)"
             c.set_mode(mode)
             op.mode, op.resumes, op.quiet_until = mode, 0, time.time() + 0.2
             statuses.clear()

@@ -120,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
                           ctl_cfg=ctl_cfg, wheel_units=args.wheel_units, scene=scene)
 
     first = setup()  # a config error (a W of another length, a solver missing) before anything runs
-    tty = not args.json or sys.stderr.isatty()
+    show_progress = True  # progress on stderr, also with --json (stdout stays the JSON alone)
     tag = args.controller
     result: dict[str, Any] = {"experiment": args.name, "robot": robot.name, "task": ctl_cfg.task.kind,
                               "controller": args.controller}
@@ -134,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
         from ..experiments.realtime import run_push_realtime
 
         rt_runs = run_push_realtime(setup, args.controller, args.solver, args.duration or push.DEFAULT_DM_DURATION,
-                                 slip=not args.no_slip, seed=args.seed, rate_hz=args.rate, progress=tty,
+                                 slip=not args.no_slip, seed=args.seed, rate_hz=args.rate, progress=show_progress,
                                  log_dir=args.process_logs, controller_file=args.controller_config)  # fmt: skip
         result["realtime"] = {name: r.pop("realtime") for name, r in rt_runs.items()}
         reasons = [r.pop("controller_reasons") for r in rt_runs.values()]
@@ -147,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
         traces: dict[str, Any] = {}
     elif args.realtime:
         s = first
-        rt = _realtime(args, s, tty)
+        rt = _realtime(args, s, show_progress)
         tr = rt.trace
         result["realtime"] = rt.service
         result["duration"] = float(tr.t[-1] - tr.t[0]) + 1.0 / rt.service["rate_hz"]
@@ -169,7 +169,7 @@ def run(args: argparse.Namespace) -> int:
     elif args.name == "circle":
         s = first
         radius = circle.RADIUS if args.radius is None else args.radius
-        tr = circle.run_circle(s, args.duration or circle.DEFAULT_DURATION, progress=tty, radius=radius)
+        tr = circle.run_circle(s, args.duration or circle.DEFAULT_DURATION, progress=show_progress, radius=radius)
         result |= {"duration": float(tr.t[-1] + s.ctl_cfg.dt), **circle.circle_metrics(tr)}
         traces = {"": tr}
         if args.plots:
@@ -179,7 +179,7 @@ def run(args: argparse.Namespace) -> int:
     elif args.name == "dm":
         s = first
         duration = args.duration or dm.DEFAULT_DURATION
-        tr = dm.run_dm(s, args.direction, duration, progress=tty)
+        tr = dm.run_dm(s, args.direction, duration, progress=show_progress)
         result |= {
             "duration": duration,
             **dm.dm_metrics(tr, s, args.direction, dm.cartesian_end(duration)),
@@ -191,7 +191,7 @@ def run(args: argparse.Namespace) -> int:
 
             plot_dm(tr, args.plots, tag)
     else:
-        runs = push.run_push(setup, args.duration or push.DEFAULT_DM_DURATION, progress=tty)
+        runs = push.run_push(setup, args.duration or push.DEFAULT_DM_DURATION, progress=show_progress)
         for name, (s, tr, i0) in runs.items():
             result[name] = push.push_metrics(s, tr, i0)
         result["box"] = {"mass": push.MASS, "mu": push.MU, "target": push.TARGET}
@@ -222,7 +222,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _realtime(args: argparse.Namespace, s: Any, tty: bool) -> Any:
+def _realtime(args: argparse.Namespace, s: Any, show_progress: bool) -> Any:
     """Run circle or dm through the daemon and the sim (a one-line error if they fail)."""
     from ..experiments import circle, dm
     from ..experiments.realtime import run_realtime
@@ -238,7 +238,7 @@ def _realtime(args: argparse.Namespace, s: Any, tty: bool) -> Any:
         slip=not args.no_slip,
         seed=args.seed,
         rate_hz=args.rate,
-        progress=tty,
+        progress=show_progress,
         log_dir=args.process_logs,
         controller_file=args.controller_config,
     )

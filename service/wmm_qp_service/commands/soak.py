@@ -10,16 +10,21 @@ import time
 from pathlib import Path
 from typing import Any
 
+from ..progress import ProgressLine
+from ..verdict import EXIT_CODES_HELP, judge
 from .common import add_robot_argument, load_robot
 
 HELP = "run sim + daemon + client for a long time and report drift in time and memory"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.epilog = EXIT_CODES_HELP + " A process that crashes or does not stop is a FAIL too."
     parser.add_argument("--duration", type=float, default=60.0, help="[s] how long")
     parser.add_argument("--rate", type=float, default=1000.0, help="[Hz] control rate")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
-    parser.add_argument("--logs", metavar="DIR", help="keep the processes' logs here")
+    parser.add_argument("--logs", metavar="DIR",
+                        help="write the sim's and the daemon's logs here (default: a fresh folder under the "
+                             "temporary directory, kept and named on the verdict line)")
     parser.add_argument("--trigger", choices=("rate", "state"),
                         help="the daemon's loop.trigger (default: the service config's)")
     add_robot_argument(parser)
@@ -56,18 +61,28 @@ def run(args: argparse.Namespace) -> int:
     stack = Stack(svc, rate_hz=args.rate, log_dir=log_dir, robot_file=robot.path,
                   extra_daemon_args=[] if args.trigger is None else ["--trigger", args.trigger])
     out: dict[str, Any] = {}
+    bar = ProgressLine("soak")
+    up = False
     try:
+        bar.update(f"starting the sim and the daemon (logs: {log_dir})")
         stack.start()
         with Client(svc, name="soak") as c:
-            info = c.wait_for_daemon(30.0)
+            bar.update("waiting for the daemon (a first start compiles its kernels)")
+            info = c.wait_for_daemon(90.0)
             end = time.monotonic() + 30.0
             while (info is None or not info.status.state_ok) and time.monotonic() < end:
                 time.sleep(0.1)
                 info = c.info()
             if info is None or not info.status.state_ok:
-                print(f"wmm-qp soak: error: the stack did not come up (logs: {log_dir})",
-                      file=sys.stderr)
-                return 1
+                return _no_stack(out, stack, log_dir, args.json)
+            up = True
+
+            def tick() -> None:
+                def text() -> str:
+                    st = c.latest_state()
+                    v = sum(st.violations.values()) if st is not None else "?"
+                    return f"{time.monotonic() - t0:.0f}/{args.duration:g} s, {v} violations so far"
+                bar.update(text)
             c.set_mode("track")
             time.sleep(0.2)
             x0 = np.array(info.status.x)
@@ -83,9 +98,9 @@ def run(args: argparse.Namespace) -> int:
                                 "rss_kib": {n: rss_kib(pid) for n, pid in pids.items()}})
                 seg = min(20.0, left)
                 if k % 2 == 0:
-                    stream_haptic(c, x0, seg, seed=k)
+                    stream_haptic(c, x0, seg, seed=k, on_tick=tick)
                 else:
-                    stream_circle(c, x0, seg)
+                    stream_circle(c, x0, seg, on_tick=tick)
                 k += 1
                 c.set_mode("hold")
                 time.sleep(0.5)
@@ -95,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
             st = c.latest_state() or c.wait_state(2.0)
             rss1 = {n: rss_kib(pid) for n, pid in pids.items()}
         if final is None:
-            return 1
+            return _no_stack(out, stack, log_dir, args.json, "the daemon stopped answering")
         lp = final.status.loop
         n = lp.ticks - loop0.ticks
         misses = lp.deadline_misses - loop0.deadline_misses
@@ -117,10 +132,19 @@ def run(args: argparse.Namespace) -> int:
                "protective_stops": st.protective_stops if st else None,
                "load_average": list(os.getloadavg())}
     finally:
-        out["exit_codes"] = stack.stop()
+        bar.update("stopping the sim and the daemon")
+        codes = stack.stop()  # again after _no_stack: a no-op
+        bar.close()
+        if up:
+            out["exit_codes"] = codes
     out["logs"] = str(log_dir)
+    verdict = judge(out["violations"], failures=_process_failures(out["exit_codes"]),
+                    deadline_misses=int(out["window_misses"]), faults=out["faults"] or {},
+                    protective_stops=int(out["protective_stops"] or 0), logs=log_dir)
+    out |= verdict.json_fields()
     if args.json:
         print(json.dumps(out))
+        print(verdict.line(), file=sys.stderr, flush=True)
     else:
         print(f"soak: {out['duration_s']:g} s at {out['rate_hz']:g} Hz ({out['trigger']} trigger) — ticks "
               f"{out['ticks']}, deadline misses {out['deadline_misses']} ({out['misses_per_10k']} per 10k in the "
@@ -130,4 +154,25 @@ def run(args: argparse.Namespace) -> int:
         print(f"      RSS [KiB] start {out['rss_kib_start']} end {out['rss_kib_end']}")
         print(f"      violations {out['violations']}; faults {out['faults'] or 'none'}; "
               f"protective stops {out['protective_stops']}; exit codes {out['exit_codes']}")
-    return 0 if sum(out["violations"].values()) == 0 else 1
+        print(verdict.line(), flush=True)
+    return verdict.exit_code
+
+
+def _process_failures(codes: dict[str, int | None]) -> list[str]:
+    """A crashed process, or one that did not stop: each a FAIL."""
+    return [f"the {name} did not stop on SIGINT (killed)" if code is None else f"the {name} exited with status {code}"
+            for name, code in codes.items() if code != 0]
+
+
+def _no_stack(out: dict[str, Any], stack: Any, log_dir: Path, as_json: bool,
+              why: str = "the stack did not come up") -> int:
+    """FAIL: nothing to judge (the processes stopped, the verdict line names the logs)."""
+    codes = stack.stop()
+    verdict = judge({}, failures=[why, *_process_failures(codes)], logs=log_dir)
+    out |= {"logs": str(log_dir), "exit_codes": codes, **verdict.json_fields()}
+    if as_json:
+        print(json.dumps(out))
+        print(verdict.line(), file=sys.stderr, flush=True)
+    else:
+        print(verdict.line(), flush=True)
+    return verdict.exit_code

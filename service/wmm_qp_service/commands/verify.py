@@ -16,6 +16,8 @@ from wmm_qp.controllers.qp import QpController
 from wmm_qp.solvers import SOLVER_NAMES
 from wmm_qp.verify import KINDS, verify_controller
 
+from ..progress import ProgressLine
+from ..verdict import EXIT_CODES_HELP, judge
 from .common import add_config_arguments, add_scene_argument, load_configs, load_scene_arg
 
 HELP = "sample random states and check every command against every hard bound"
@@ -42,6 +44,7 @@ def _seed(text: str) -> int:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.epilog = EXIT_CODES_HELP + " Progress goes to stderr (about once a second)."
     parser.add_argument("--controller", choices=w.config.CONTROLLER_KINDS, default="qp")
     parser.add_argument("--solver", choices=SOLVER_NAMES, default=None, help="QP backend (default: config's)")
     parser.add_argument("--samples", type=_positive, default=1000, help="random states (each run in every mode)")
@@ -65,13 +68,15 @@ def run(args: argparse.Namespace) -> int:
         cfg = cfg.with_(collision={"enabled": True})
     model = w.WmmModel(robot)
     ctl = w.make_controller(args.controller, model, cfg)
-    tty = sys.stderr.isatty() and not args.json
+    bar = ProgressLine("verify")
+    bar.update(f"0/{args.samples} samples (a first run also compiles the kernels)")
 
-    def progress(i: int, n: int) -> None:
-        if tty and (i % 50 == 0 or i == n):
-            print(f"\rverify: {i}/{n} states", end="" if i < n else "\n", file=sys.stderr, flush=True)
+    def progress(i: int, n: int, violations: int) -> None:
+        text = f"{i}/{n} samples, {violations} violations"
+        bar.done(text) if i == n else bar.update(text)
 
     rep = verify_controller(ctl, model, args.samples, args.seed, progress, scene=scene)
+    verdict = judge(rep.by_kind, also=f"in {rep.steps} commands ({rep.samples} states x {len(rep.by_mode)} modes)")
     label = f"{robot.name}, {cfg.task.kind} task: " + args.controller
     label += f" ({ctl.solver})" if isinstance(ctl, QpController) else ""
     if args.json:
@@ -93,9 +98,11 @@ def run(args: argparse.Namespace) -> int:
                     "examples": rep.examples,
                     "seed": args.seed,
                     "scene": None if scene is None else str(scene.path),
+                    **verdict.json_fields(),
                 }
             )
         )
+        print(verdict.line(), file=sys.stderr)
     else:
         where = "no collision referee" if scene is None else f"scene {scene.path}"
         print(f"{label}: {rep.samples} states x {len(rep.by_mode)} modes = {rep.steps} commands, seed {args.seed}, "
@@ -106,4 +113,5 @@ def run(args: argparse.Namespace) -> int:
         print(f"{'total':<14}" + "".join(f"{rep.by_kind[k]:>14}" for k in KINDS))
         print("command statuses: " + ", ".join(f"{k} {v}" for k, v in sorted(rep.statuses.items())))
         print(f"violations: {rep.violations}")
-    return 1 if rep.violations else 0
+        print(verdict.line())
+    return verdict.exit_code
