@@ -53,9 +53,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--leg", type=float, default=2.0, help="[s] time per side")
     p.add_argument("--tolerance", type=float, default=0.005, help="[m] a corner missed by more fails")
     args = p.parse_args(argv)
-    svc = service_config(args)
+    svc = service_config(args)  # the robot id as `wmm-qp sim` and `serve` resolve it for these flags
     dwell = 0.5  # [s] at each corner: the EE settles on it
-    with Client(svc, name="square", robot=args.robot or args.robot_config,
+    with Client(svc, name="square",
                 on_fault=lambda st: print(f"fault: {st.last_fault}", file=sys.stderr, flush=True)) as c:
         info = c.wait_for_daemon(timeout=60.0)
         while info is not None and not info.status.state_ok:  # the sim's first states
