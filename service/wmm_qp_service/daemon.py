@@ -32,7 +32,8 @@ import zenoh
 import wmm_qp as w
 from wmm_qp.config import ShapeConfig
 from wmm_qp.scene import Scene, load_scene
-from wmm_qp.tasks import rotation_to_quat
+from wmm_qp.tasks import orientation_error as log_rotation_error
+from wmm_qp.tasks import quat_to_matrix, rotation_to_quat
 
 from .config import ServiceConfig
 from .keys import Keys
@@ -205,6 +206,7 @@ class ControlCore:
         self.need_latch = True
         self.safe = False
         self.last_fault = ""
+        self.last_fault_time = -math.inf  # [s] clock value when last_fault was recorded (-inf: none)
         self.sim_alive = False
         self.cmd: w.Command | None = None
         self.ref = w.Reference(mode=w.Mode.HOLD)
@@ -225,6 +227,9 @@ class ControlCore:
         self.foreign_time = -math.inf
         self.twin_seen = False  # a second instance was seen: never latch another one by itself
         self.last_state_seq = -1
+        # the last command the robot applied before this daemon drove it (a restarted daemon):
+        # not of this daemon's stream, until the robot applies one of this daemon's (-1: none)
+        self.inherited_cmd_seq = -1
         # the sim's own referee and firmware
         self.sim_violations_seen = -1  # total count of the latched instance (-1: no state yet)
         self.event_fault = ""  # a fault that happened (not a condition): holds the safe stop
@@ -284,6 +289,7 @@ class ControlCore:
             if self.instance:
                 self._fault(f"sim instance changed ({self.instance} -> {msg.instance}: a restarted sim)")
             self.instance = msg.instance
+            self.inherited_cmd_seq = msg.cmd_seq  # another daemon's (or none, -1)
             self.anchor_on_command = False  # a new robot: its rates are what it executes
             self.cmd = None  # and the last command was another robot's
             self.last_state_seq = -1
@@ -294,6 +300,8 @@ class ControlCore:
             self.refused["state_seq"] += 1  # old (replayed, reordered), or a forged jump ahead
             return False
         self.last_state_seq = msg.seq
+        if msg.cmd_seq != self.inherited_cmd_seq:
+            self.inherited_cmd_seq = -1  # the robot applied one of this daemon's commands
         self.state_msg = msg
         self.state = w.RobotState(q_base=msg.q_base, q_arm=msg.q_arm,  # type: ignore[arg-type]
                                   v_arm=msg.v_arm, wheel_speeds=msg.wheel_speeds)  # type: ignore[arg-type]
@@ -346,8 +354,11 @@ class ControlCore:
 
     def _left_stream(self, msg: StateMsg) -> bool:
         """The state applied a command of the current stream and shows the robot's own stale or
-        protective stop: the robot stopped following this stream."""
-        return (msg.stale_stop or msg.protective_stop) and 0 < self.stream_start <= msg.cmd_seq
+        protective stop: the robot stopped following this stream. A robot that another daemon
+        drove before this one (a restarted daemon) reports that daemon's last command, in its
+        stale stop, until it applies one of this daemon's: that is no stop of this stream."""
+        return ((msg.stale_stop or msg.protective_stop) and 0 < self.stream_start <= msg.cmd_seq
+                and msg.cmd_seq != self.inherited_cmd_seq)
 
     def late(self, now: float) -> bool:
         """More than the robot's command timeout since the last command was published."""
@@ -497,6 +508,7 @@ class ControlCore:
                      if st is not None else "")
             self.say(f"wmm-qp serve: fault: {what}{where}")
         self.last_fault = what
+        self.last_fault_time = self.now
         self.faults[kind or what.split(" (")[0]] += 1
 
     def _latch(self) -> None:
@@ -685,6 +697,20 @@ class ControlCore:
         self.anchor_on_command = True
         return cmd
 
+    @property
+    def fault_active(self) -> bool:
+        """A fault holds the robot now (a safe stop, a broken stream, a lost lease), or the
+        daemon holds in ``hold`` until a mode message resumes (``resume_needed``)."""
+        return self.safe or self.stream_broken or self.lease_lost or self.resume_needed
+
+    def orientation_error(self) -> float:
+        """[rad] the angle between the EE's orientation (the last state; model, odometry) and the
+        orientation target (``quat_d``); NaN with the position task or before a state."""
+        if not self.pose or self.state is None:
+            return math.nan
+        _, R = self.model.ee_pose(self.state.q_base, self.state.q_arm)
+        return float(np.linalg.norm(log_rotation_error(quat_to_matrix(self.orient.quat), R)))  # ‖log(R_d Rᵀ)‖
+
     def status(self, loop: LoopTiming, rejected: Counter[str], accepted: dict[str, int]) -> StatusMsg:
         """The status message."""
         cmd = self.cmd
@@ -693,7 +719,9 @@ class ControlCore:
             robot=self.svc.robot, stamp=time.time(), mode=self.mode.value,
             state_ok=self.state is not None and not self.safe, safe_stop=self.safe,
             controller_status=cmd.status.value if cmd else "", reason=cmd.reason if cmd else "",
-            last_fault=self.last_fault, loop=loop.stats(), rejected=dict(rejected),
+            last_fault=self.last_fault, fault_active=self.fault_active,
+            last_fault_age=self.now - self.last_fault_time if math.isfinite(self.last_fault_time) else math.nan,
+            loop=loop.stats(), rejected=dict(rejected),
             accepted=accepted,
             sim_violations=dict(self.state_msg.violations) if self.state_msg else {},
             x=self._ee_now(), x_d=_xd(self.ref),
@@ -703,6 +731,7 @@ class ControlCore:
             operator_conflicts=self.operator_conflicts, resume_needed=self.resume_needed,
             round_trip_ms=self.round_trip * 1e3, protective_stop=bool(self.protective),
             quat_d=self.orient.quat.tolist() if self.pose else [],
+            orientation_error=self.orientation_error(),
             orientation_ignored=self.orientation_ignored, clamped=self.clamped, last_clamp=self.last_clamp,
             obstacles=len(self.scene.obstacles) + len(self.live_obstacles),
             obstacles_live=len(self.live_obstacles), obstacles_stale=self.obstacles_stale,

@@ -21,7 +21,8 @@ PROTOCOL_VERSION = 2
 """Bumped on any incompatible change of a schema below (2: the sim instance, the control lease,
 the setpoint's source and the command's period and state seq are required fields). Optional
 fields with a default may be added within a version (2 gained the setpoint's ``q`` and ``w``,
-the status's ``quat_d`` and ``orientation_ignored``, and the info reply's robot description)."""
+the status's ``quat_d``, ``orientation_ignored``, ``fault_active``, ``last_fault_age`` and
+``orientation_error``, and the info reply's robot description)."""
 
 
 class _Msg(msgspec.Struct, kw_only=True, forbid_unknown_fields=True, tag_field="type"):
@@ -231,7 +232,11 @@ class StatusMsg(_Msg, tag="status"):
         state_ok: a fresh, valid state is arriving.
         safe_stop: the daemon is commanding a safe stop.
         controller_status, reason: of the last command.
-        last_fault: the last fault seen ("" = none), e.g. "state stale", "sim lost".
+        last_fault: the last fault seen ("" = none), e.g. "state stale", "sim lost"; it stays
+            after the fault cleared: ``fault_active`` says whether one holds the robot now.
+        fault_active: a fault holds the robot now (a safe stop, a broken command stream, a lost
+            lease), or ``resume_needed``: the robot does not follow setpoints until a client acts.
+        last_fault_age: [s] time since ``last_fault`` was recorded (daemon clock; nan: none).
         loop: timing figures.
         rejected: rejected messages, by reason.
         accepted: accepted messages, by key (state, setpoint, mode).
@@ -252,6 +257,8 @@ class StatusMsg(_Msg, tag="status"):
         protective_stop: the sim's firmware reports a protective stop.
         quat_d: the orientation target, a quaternion [x, y, z, w] (world), pose task only
             ([] with the position task).
+        orientation_error: [rad] angle between the EE's orientation (last state; model,
+            odometry) and ``quat_d``; nan with the position task.
         orientation_ignored: setpoints whose orientation was ignored (the position task).
         clamped: setpoints clamped into the scene's fence (its EE box) and above the floor
             margin before they were followed; ``last_clamp``: the last one, e.g. "x 20 -> 3.5".
@@ -268,6 +275,8 @@ class StatusMsg(_Msg, tag="status"):
     controller_status: str = ""
     reason: str = ""
     last_fault: str = ""
+    fault_active: bool = False
+    last_fault_age: float = float("nan")
     loop: LoopStats = msgspec.field(default_factory=LoopStats)
     rejected: dict[str, int] = msgspec.field(default_factory=dict)
     accepted: dict[str, int] = msgspec.field(default_factory=dict)
@@ -287,6 +296,7 @@ class StatusMsg(_Msg, tag="status"):
     protective_stop: bool = False
     quat_d: list[float] = msgspec.field(default_factory=list)
     orientation_ignored: int = 0
+    orientation_error: float = float("nan")
     clamped: int = 0
     last_clamp: str = ""
     obstacles: int = 0

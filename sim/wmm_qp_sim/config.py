@@ -95,6 +95,9 @@ class SimConfig:
             and any motion that could not stop before a position limit, with a protective
             stop (see :mod:`.robot`). The in-process experiments turn it off, so that the
             referee measures the controllers themselves.
+        rt_priority: SCHED_FIFO priority (1–99) of ``wmm-qp sim``'s step loop, as the daemon's
+            ``loop.rt_priority``; 0: normal scheduling. Without root or CAP_SYS_NICE the sim
+            says so and runs with normal scheduling.
         slip: base slip and drift model.
         referee: tolerance of the limit referee.
         box: the box of the push experiment, or None (no box).
@@ -104,6 +107,7 @@ class SimConfig:
     seed: int = 0
     stale_timeout: float = 0.025
     firmware: bool = True
+    rt_priority: int = 50
     slip: SlipConfig = field(default_factory=SlipConfig)
     referee: RefereeConfig = field(default_factory=RefereeConfig)
     box: BoxConfig | None = None
@@ -137,8 +141,11 @@ def load_sim_config(path: Path | str | None = None) -> SimConfig:
             return SimConfig()
     path = Path(path)
     r = TomlTable(path, read_toml(path))
-    r.unknown({"rate_hz", "seed", "stale_timeout", "firmware", "slip", "referee", "box"})
+    r.unknown({"rate_hz", "seed", "stale_timeout", "firmware", "rt_priority", "slip", "referee", "box"})
     d = SimConfig()
+    rt_priority = r.integer("rt_priority", d.rt_priority, lo=0)
+    if rt_priority > 99:
+        raise ConfigError(path, "rt_priority", f"must be in [0, 99] (0: normal scheduling), got {rt_priority}")
     seed = r.get("seed", d.seed)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ConfigError(path, "seed", f"must be a non-negative integer, got {seed!r}")
@@ -176,6 +183,7 @@ def load_sim_config(path: Path | str | None = None) -> SimConfig:
         seed=seed,
         stale_timeout=r.number("stale_timeout", d.stale_timeout, positive=True),
         firmware=r.boolean("firmware", d.firmware),
+        rt_priority=rt_priority,
         slip=slip,
         referee=referee,
         box=box,

@@ -4,6 +4,10 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import wmm_qp as w
 
 HELP = "run the control daemon (Zenoh)"
 
@@ -24,14 +28,33 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--controller", choices=("qp", "paper", "traditional"),
                         help="controller kind (default: controller.toml's)")
     parser.add_argument("--solver", help="QP solver (default: controller.toml's)")
+    parser.add_argument("--task", choices=("position", "pose"),
+                        help="the EE task: position (r = 3) or pose (r = 6, setpoints' orientation "
+                             "followed) (default: controller.toml's task.kind)")
     parser.add_argument("--controller-config", metavar="TOML", help="default: configs/controller.toml")
     parser.add_argument("--wait-lease", action="store_true",
                         help="when another daemon controls this robot, wait for its lease instead of "
                              "refusing to start")
 
 
-def run(args: argparse.Namespace) -> int:
+def controller_config(args: argparse.Namespace) -> w.ControllerConfig:
+    """The controller config of ``--controller-config`` with the command line's changes: collision
+    rows on with ``--scene``, the task kind of ``--task``.
+
+    Raises:
+        wmm_qp.ConfigError: a bad controller file (one line, exit 2).
+    """
     import wmm_qp as w
+
+    ctl_cfg = w.load_controller_config(args.controller_config)
+    if args.scene is not None:  # a scene given: the qp controller's collision rows on
+        ctl_cfg = ctl_cfg.with_(collision={"enabled": True})
+    if args.task is not None:
+        ctl_cfg = ctl_cfg.with_(task={"kind": args.task})
+    return ctl_cfg
+
+
+def run(args: argparse.Namespace) -> int:
 
     from ..cli_common import stop_on_signals
     from ..daemon import Daemon, LeaseHeld
@@ -46,9 +69,7 @@ def run(args: argparse.Namespace) -> int:
         svc = svc.with_(loop={"rate_hz": args.rate})
     if args.trigger is not None:
         svc = svc.with_(loop={"trigger": args.trigger})
-    ctl_cfg = w.load_controller_config(args.controller_config)
-    if args.scene is not None:  # a scene given: the qp controller's collision rows on
-        ctl_cfg = ctl_cfg.with_(collision={"enabled": True})
+    ctl_cfg = controller_config(args)
     if args.solver:
         from wmm_qp.solvers import available_solvers
 

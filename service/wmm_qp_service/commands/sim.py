@@ -18,10 +18,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sim-config", metavar="TOML", help="sim config (default: configs/sim.toml)")
     parser.add_argument("--seed", type=int, help="slip/drift noise seed (default: the sim config's)")
     parser.add_argument("--rate", type=float, help="[Hz] sim rate (default: the sim config's)")
-    parser.add_argument("--rt-priority", type=int, default=0, metavar="N",
-                        help="SCHED_FIFO priority of the step loop (default 0: normal scheduling; "
-                             "on a machine with few cores a real-time sim next to the real-time "
-                             "daemon starves both processes' transport threads)")
+    parser.add_argument("--rt-priority", type=int, default=None, metavar="N",
+                        help="SCHED_FIFO priority of the step loop, 0 = normal scheduling (default: "
+                             "the sim config's rt_priority, 50; without root or CAP_SYS_NICE the sim "
+                             "says so and runs normally)")
     parser.add_argument("--no-ramp", action="store_true",
                         help="apply each command at once (no drive acceleration ramp)")
     f = parser.add_argument_group("fault injection (reliability tests)")
@@ -50,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
         print("wmm-qp sim: error: --state-loss must be in [0, 1) and --state-delay-ms in [0, 10000)",
               file=sys.stderr)
         return 2
-    prio = args.rt_priority
+    prio = sim_cfg.rt_priority if args.rt_priority is None else args.rt_priority
     if not 0 <= prio <= 99:
         print("wmm-qp sim: error: --rt-priority must be in [0, 99]", file=sys.stderr)
         return 2
