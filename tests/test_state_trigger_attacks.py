@@ -18,7 +18,7 @@ from wmm_qp_service.client import Client
 from wmm_qp_service.faults import Probe, sigstop
 from wmm_qp_service.fuzz import fuzz_wire
 from wmm_qp_service.processes import Stack, isolated_config
-from wmm_qp_service.protocol import StateMsg, encode
+from wmm_qp_service.protocol import encode
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
