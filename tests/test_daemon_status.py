@@ -64,8 +64,9 @@ def test_a_starting_daemon_reports_no_fault_before_any_client(robot: w.RobotConf
     assert math.isnan(st.last_fault_age) and st.faults == {}
     # the marker of the earlier daemon's seq is gone: a stop of this stream is still seen
     core.on_state(plant.msg(stale_stop=True, cmd_seq=applied), t)
-    core.tick(t)  # (at rest already: the stream starts again at once, in hold)
-    assert "its command timeout" in core.last_fault and status(core).fault_active
+    core.tick(t)  # (at rest already: the stream starts again at once, in hold: nothing to resume)
+    assert "its command timeout" in core.last_fault
+    assert core.faults["the robot stopped following the commands"] == 1 and not status(core).fault_active
 
 
 # ---------------------------------------------------------------- fault_active and the fault's age
@@ -159,3 +160,29 @@ def test_orientation_error_is_the_angle_to_the_target(robot: w.RobotConfig) -> N
     tick(position, plant2, 0.0)
     assert math.isnan(status(position).orientation_error)
     assert np.isfinite(status(position).x).all()
+
+
+def test_a_fault_while_holding_clears_without_a_resume_a_fault_in_a_task_needs_one(robot: w.RobotConfig) -> None:
+    """An idle robot (the daemon in hold) whose states stall on a busy host: the fault is
+    reported (counted, last_fault) but, once cleared, the daemon holds on by itself: there is
+    no task to resume. The same stall in track needs the operator's mode message."""
+    for task_mode in ("hold", "track"):
+        core, plant = make(robot)
+        if task_mode != "hold":
+            mode(core, task_mode)
+        t = 0.0
+        for _ in range(20):
+            core.on_state(plant.msg(), t)
+            tick(core, plant, t)
+            t += DT
+        for _ in range(60):  # no state for 120 ms: state stale, a safe stop
+            tick(core, plant, t)
+            t += DT
+        assert core.safe and core.faults["state stale"] == 1
+        for _ in range(50):
+            core.on_state(plant.msg(), t)
+            tick(core, plant, t)
+            t += DT
+        st = status(core)
+        assert not st.safe_stop and st.last_fault.startswith("state stale") and st.mode == "hold"
+        assert st.resume_needed == (task_mode != "hold") == st.fault_active, task_mode

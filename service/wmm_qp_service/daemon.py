@@ -568,7 +568,9 @@ class ControlCore:
         if self.safe:  # the fault cleared: re-latch from the measured state
             self.safe = False
             self.need_latch = True
-            if wd.resume == "manual":  # hold where the robot is until a mode message resumes
+            # hold where the robot is until a mode message resumes a task; a daemon that was
+            # holding has no task to resume (an idle robot's faults need no operator)
+            if wd.resume == "manual" and self.mode != w.Mode.HOLD:
                 self.mode, self.direction = w.Mode.HOLD, None
                 self.resume_needed = True
         self.cmd_state_seq = self.last_state_seq if self.state_fresh else -1
