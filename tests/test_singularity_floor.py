@@ -36,8 +36,12 @@ def model(name: str) -> w.WmmModel:
     return w.WmmModel(w.load_robot_config(FILES[name]))
 
 
-def controller(name: str, direction: np.ndarray | None = None, floor: float | None = None) -> w.QpController:
-    cfg = w.load_controller_config().with_(collision={"enabled": False})
+def controller(
+    name: str, direction: np.ndarray | None = None, floor: float | None = None, **changes: object
+) -> w.QpController:
+    """The shipped controller config without collision rows, DM along ``direction``, σ_f = ``floor``
+    (None: the shipped one), and any other ``changes``."""
+    cfg = w.load_controller_config().with_(collision={"enabled": False}, **changes)
     if direction is not None:
         cfg = cfg.with_(direction=direction / np.linalg.norm(direction))
     if floor is not None:
@@ -203,6 +207,22 @@ def test_null_space_dm_from_near_the_floor_never_goes_below_it_and_the_arm_then_
     track, err = track_hold(ctl, sim, 1.0)
     assert not [c for c in track if c.status in (w.Status.DAMPED, w.Status.SAFE_STOP)]
     assert err < TRACK_BOUND
+
+
+@pytest.mark.parametrize("name", ["gen3_mecanum", "ur5_omni", "z1_omni"])
+def test_cartesian_dm_from_near_the_floor_never_goes_below_it(name: str) -> None:
+    """Eqs. (16)–(17) with the EE box open on every axis (so v_c = k_C ∇_x H2 whole): the task is the
+    DM ascent there, and the floor row cuts it."""
+    floor = w.load_controller_config().sigma_min_floor
+    q = near_the_floor(name, floor)
+    u = least_mobile_direction(name, q)
+    box = {"ee_box_lower": np.full(3, -10.0), "ee_box_upper": np.full(3, 10.0)}
+    free = run(controller(name, u, 0.0, **box), sim_at(name, q), 1500, w.Reference(w.Mode.DM_CARTESIAN))
+    assert min(c.sigma_min for c in free) < floor  # eq. (17)'s ascent heads into the singularity
+    cmds = run(controller(name, u, **box), sim_at(name, q), 1500, w.Reference(w.Mode.DM_CARTESIAN))
+    assert min(c.sigma_min for c in cmds) >= floor - SIGMA_TOL
+    assert any(c.reason.startswith("sigma_min floor") for c in cmds)  # the floor, not the bounds, cut it
+    assert not [c for c in cmds if c.status == w.Status.SAFE_STOP]
 
 
 def test_the_floor_is_a_controller_key_and_a_negative_one_is_a_clear_error(tmp_path: Path) -> None:
