@@ -53,6 +53,13 @@ Stages:
    This replaces the α switch (14).
 2. whole robot: the QP above.
 
+The σ_min floor (DM modes, limits/singularity_floor.py): raising DM (eqs. (16)–(19)) heads into a
+singularity wherever DM along u has no interior optimum, so while σ_min(J_m) is within twice
+``dm.sigma_min_floor`` the whole-robot stage carries one more row, a damper that lets σ_min fall
+ever slower as it nears the floor. Priority: task, floor, DM. In DM_NULLSPACE a stage whose task
+the row cuts (or that no solver solves with it) is solved again without it; in DM_CARTESIAN the
+task is the DM ascent itself, which the row cuts.
+
 Each stage first tries the closed-form optimum (no bound active, zero slack), taken only when
 it meets every KKT condition (``qp.closed_form_first``); otherwise the solver runs.
 A stage the configured solver fails on is solved again by DAQP (when the configured solver is

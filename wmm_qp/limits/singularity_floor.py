@@ -33,6 +33,7 @@ import numpy as np
 from .._jit import jit
 from ..config import FloatArray
 from ..linalg3 import gram3
+from ..pseudoinverse import _sigma_min3
 
 FLOOR_RATE = 2.0  # γ [1/s]: σ_min − σ_f may shrink by at most this fraction per second
 INFLUENCE = 2.0  # the row acts while σ_min < INFLUENCE·σ_f
@@ -94,24 +95,14 @@ def _smallest_eigvec3(a: float, b: float, c: float, d: float, e: float, f: float
 
 @jit
 def _sigma_min_gradient(J: FloatArray, dJ: FloatArray, grad: FloatArray) -> float:
-    a, b, c, d, e, f = gram3(J)  # J Jᵀ
-    p1 = b * b + c * c + e * e
-    q = (a + d + f) / 3.0
-    aq, dq, fq = a - q, d - q, f - q
-    p = math.sqrt((aq * aq + dq * dq + fq * fq + 2.0 * p1) / 6.0)
-    if p < 1e-300:
-        lam = q
-    else:
-        det = aq * (dq * fq - e * e) - b * (b * fq - e * c) + c * (b * e - dq * c)
-        r = max(-1.0, min(1.0, det / (2.0 * p**3)))
-        lam = q + 2.0 * p * math.cos(math.acos(r) / 3.0 + 2.0 * math.pi / 3.0)
-    s = math.sqrt(max(lam, 0.0))
+    s = _sigma_min3(J)  # the controller's own σ_min (closed form), λ_min(J Jᵀ) = s²
+    a, b, c, d, e, f = gram3(J)
     n = J.shape[1]
     for k in range(n):
         grad[k] = 0.0
     if not s >= SIGMA_EPS:
         return s
-    w = _smallest_eigvec3(a, b, c, d, e, f, lam)
+    w = _smallest_eigvec3(a, b, c, d, e, f, s * s)
     jw = np.empty(n)  # Jᵀw
     for i in range(n):
         jw[i] = J[0, i] * w[0] + J[1, i] * w[1] + J[2, i] * w[2]
