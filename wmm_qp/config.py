@@ -330,6 +330,11 @@ class ControllerConfig:
         W: diagonal of the torque scaling W of eq. (8); None = the robot's (ArmConfig.default_W).
         direction: default DM direction u, in the base (yaw-compensated) frame.
         ee_box_lower, ee_box_upper: [m] the EE box of eq. (17) (world frame), ±inf = free.
+        sigma_min_floor: [m/rad] σ_f: in the DM modes the QP controller keeps σ_min(J_m) of the
+            arm's translational Jacobian at or above it (a velocity damper on σ_min,
+            limits/singularity_floor.py), so raising DM never leaves the arm near a singularity;
+            0 = no floor (eqs. (16)–(19) alone). Just above ``sigma_threshold``, so that the arm a
+            DM phase leaves behind is not under the singularity damping.
         state_latency: [s] age of the state when the command starts to act; the bounds (13)
             brake from where the joints will be by then (0 = the state is current).
         sigma_threshold: σ_min(J_m) below which damped least squares replaces J#.
@@ -349,6 +354,7 @@ class ControllerConfig:
     direction: FloatArray = field(default_factory=lambda: _ro([1.0, 0.0, 0.0]))
     ee_box_lower: FloatArray = field(default_factory=lambda: _ro([-np.inf, -np.inf, 0.36]))
     ee_box_upper: FloatArray = field(default_factory=lambda: _ro([np.inf, np.inf, 0.56]))
+    sigma_min_floor: float = 0.085
     state_latency: float = 0.0
     sigma_threshold: float = 0.08
     damping_max: float = 0.05
@@ -759,7 +765,7 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
     g = r.table("gains", required=False)
     g.unknown({"K_x", "alpha", "k_C", "k_N"})
     dm = r.table("dm", required=False)
-    dm.unknown({"W", "direction", "ee_box_lower", "ee_box_upper"})
+    dm.unknown({"W", "direction", "ee_box_lower", "ee_box_upper", "sigma_min_floor"})
     s = r.table("singularity", required=False)
     s.unknown({"sigma_threshold", "damping_max"})
     q = r.table("qp", required=False)
@@ -813,6 +819,7 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
         direction=_ro(direction / np.linalg.norm(direction)),
         ee_box_lower=lo,
         ee_box_upper=hi,
+        sigma_min_floor=dm.number("sigma_min_floor", d.sigma_min_floor, lo=0.0),
         sigma_threshold=s.number("sigma_threshold", d.sigma_threshold, lo=0.0),
         damping_max=s.number("damping_max", d.damping_max, lo=0.0),
         qp=QpConfig(

@@ -10,6 +10,7 @@ Every tick:
                 Q_min(q) ≤ v_m ≤ Q_max(q)                    eq. (13)
                 wheel speed and acceleration bounds, s± ≥ 0
                 x_min ≤ x + Δt·J v ≤ x_max                   EE box (DM_CARTESIAN, eq. (17))
+                ∇σ_min·v_m ≥ −γ(σ_min − σ_f)                 σ_min floor (DM modes, near σ_f)
 
 W_x = diag(α I_wheels, (1−α) I_joints) is eq. (12) (α = ``qp.alpha`` small: the base is expensive; in
 DM_NULLSPACE α = ``qp.dm_alpha``, close to 1, so the base serves the DM objective) and
@@ -52,6 +53,13 @@ Stages:
    This replaces the α switch (14).
 2. whole robot: the QP above.
 
+The σ_min floor (DM modes, limits/singularity_floor.py): raising DM (eqs. (16)–(19)) heads into a
+singularity wherever DM along u has no interior optimum, so while σ_min(J_m) is within twice
+``dm.sigma_min_floor`` the whole-robot stage carries one more row, a damper that lets σ_min fall
+ever slower as it nears the floor. Priority: task, floor, DM. In DM_NULLSPACE a stage whose task
+the row cuts (or that no solver solves with it) is solved again without it; in DM_CARTESIAN the
+task is the DM ascent itself, which the row cuts.
+
 Each stage first tries the closed-form optimum (no bound active, zero slack), taken only when
 it meets every KKT condition (``qp.closed_form_first``); otherwise the solver runs.
 A stage the configured solver fails on is solved again by DAQP (when the configured solver is
@@ -75,6 +83,7 @@ import numpy as np
 from .._jit import jit
 from ..config import ControllerConfig, FloatArray
 from ..limits.collision import CollisionRows, Rows, warm_up_obstacles
+from ..limits.singularity_floor import FloorRow, floor_row
 from ..linalg3 import solve_spd, solve_sym3
 from ..manipulability.preference import dm_preference_gain
 from ..model.arm import IntArray
@@ -87,6 +96,7 @@ from ..types import AT_REST, Command, Mode, Reference, RobotState, Status
 from .base import Controller, TickContext
 
 SLACK_ACCEPT = 1e-7  # [m/s] slack below this counts as "the task is met"
+TASK_CUT = 1e-6  # [m/s] a stage's max |J v − ẋ_ref| above this: the task was cut (status saturated)
 RETURN_TIME = 0.05  # [s] a joint past a position limit is pulled back in over about this long
 _NO_BOUNDS = np.zeros(0)  # no EE box rows (read only)
 _NO_BOUNDS.setflags(write=False)
@@ -412,6 +422,8 @@ class QpController(Controller):
             self.collision = CollisionRows(geometry, model.base.M, config.collision, config.state_latency,
                                            self.bounds.a_max)
         self.last_rows: Rows | None = None  # the collision rows of the last tick
+        self.last_floor: FloorRow | None = None  # the σ_min floor's row of the last tick
+        self.floor_dropped = 0  # DM_NULLSPACE stages re-solved without the floor row: it cut the task
 
     @property
     def solver(self) -> str:
@@ -448,7 +460,7 @@ class QpController(Controller):
         self._full.reset()
 
     def clear_statistics(self) -> None:
-        self.fallbacks = self.closed_form_hits = self.task_checks = 0
+        self.fallbacks = self.closed_form_hits = self.task_checks = self.floor_dropped = 0
         self.task_recovered = self.task_without_objective = self.ee_box_corrections = self.braking_stages = 0
 
     # ------------------------------------------------------------------ building
@@ -610,6 +622,20 @@ class QpController(Controller):
         rows = self.collision.rows(ctx.kin.q_base, ctx.kin.x, J, v_prev, ctx.lo, ctx.hi)
         return rows
 
+    def floor_row(self, ctx: TickContext, state: RobotState, mode: Mode) -> FloorRow | None:
+        """The σ_min floor's row this tick (limits/singularity_floor.py): in the DM modes only, and only
+        while σ_min is near ``dm.sigma_min_floor``; None otherwise.
+
+        Eqs. (16)–(19) raise H2 (8) wherever its gradient (9) leads, and along many directions it
+        leads into a singularity: the floor keeps the ascent out of it (docs/model.md, "The QP").
+        """
+        if not self.needs_gradient(mode) or ctx.kin.dJ_arm is None:
+            return None
+        wheels = self._rest_wheels if state.wheel_speeds is AT_REST else state.wheel_speeds
+        v_prev = np.concatenate((wheels, state.v_arm))  # the bounds' centre (the daemon's last command)
+        return floor_row(ctx.kin.J_arm, ctx.kin.dJ_arm, self.config.sigma_min_floor, v_prev, ctx.lo, ctx.hi,
+                         self.config.state_latency)
+
     def build_arm_first(
         self, ctx: TickContext, xdot: FloatArray, rows: Rows | None = None
     ) -> tuple[QPProblem, FloatArray]:
@@ -634,15 +660,21 @@ class QpController(Controller):
         return p, w_hold
 
     def build(
-        self, ctx: TickContext, xdot: FloatArray, mode: Mode, rows: Rows | None = None, brake: bool = False
+        self, ctx: TickContext, xdot: FloatArray, mode: Mode, rows: Rows | None = None, brake: bool = False,
+        floor: FloorRow | None = None,
     ) -> QPProblem:
-        """Stage 2: the whole robot (see the module docstring); ``brake``: the collision rows relaxed
-        to admit the braking command (the retry when the rows together are infeasible)."""
+        """Stage 2: the whole robot (see the module docstring); ``brake``: the collision rows (and the
+        σ_min floor's) relaxed to admit the braking command (the retry when the rows together are
+        infeasible). Rows, in order: the EE box, the collision rows, the σ_min floor."""
         C, l, u = self.ee_box_rows(ctx, mode, ctx.lo, ctx.hi)
         if rows is not None and rows.l.shape[0]:
             C = np.vstack((C, rows.C))
             l = np.concatenate((l, rows.l_brake if brake else rows.l))
             u = np.concatenate((u, np.full(rows.l.shape[0], INF)))
+        if floor is not None:
+            C = np.vstack((C, floor.C))
+            l = np.append(l, floor.l_brake if brake else floor.l)
+            u = np.append(u, INF)
         p = self._template(self.n_v, C.shape[0])
         cost = self.cost_diagonal(ctx, mode)
         c = self.base_rotation_weight(ctx, mode)
@@ -663,8 +695,9 @@ class QpController(Controller):
         return p
 
     @staticmethod
-    def _cut_reason(rows: Rows | None, v: FloatArray) -> str:
-        """Why the task was cut: the collision or fence rows the command sits on, else the bounds."""
+    def _cut_reason(rows: Rows | None, v: FloatArray, floor: FloorRow | None = None) -> str:
+        """Why the task was cut: the collision or fence rows the command sits on, else the σ_min
+        floor's row if the command sits on it, else the bounds."""
         if rows is not None and rows.l.shape[0]:
             slack = rows.C @ v - rows.l
             active = np.flatnonzero(slack <= 1e-9 * np.maximum(1.0, np.abs(rows.l)))
@@ -672,6 +705,8 @@ class QpController(Controller):
                 k = active[np.argmin(rows.distances[active])]
                 more = f" (+{active.size - 1} more)" if active.size > 1 else ""
                 return f"collision: {rows.names[k]} at {rows.distances[k]:.3f} m{more} (task cut)"
+        if floor is not None and float(floor.C @ v) - floor.l <= 1e-6:  # on the row, to a solver's tolerance
+            return f"sigma_min floor: sigma_min {floor.sigma:.3g} near {floor.floor:.3g} (task cut)"
         return "the bounds cut the task (best effort)"
 
     # ------------------------------------------------------------------ solving
@@ -766,15 +801,31 @@ class QpController(Controller):
             if z is not None and (self._closed_form_hit or task_residual(p, z) <= SLACK_ACCEPT):
                 self.last_stage = "arm"
                 return self.finish(ctx, np.concatenate([w_hold, z[: self.n_arm]]), xdot, alpha=0.0)
-        problem = self.build(ctx, xdot, mode, rows)
+        floor = self.last_floor = self.floor_row(ctx, state, mode)
+        problem = self.build(ctx, xdot, mode, rows, floor=floor)
         z = self._solve(self._full, problem)
-        if z is None and rows is not None and rows.l.shape[0]:  # the rows together infeasible: admit braking
-            problem = self.build(ctx, xdot, mode, rows, brake=True)
+        if (floor is not None and mode == Mode.DM_NULLSPACE
+                and (z is None or (not self._closed_form_hit and task_residual(problem, z) > TASK_CUT))):
+            # the task before the floor: where the floor row cuts the hold (or leaves the stage without
+            # a solution: a row the bounds can barely meet pins v to a vertex of them) and the stage
+            # without it meets the task, that one is the command (the floor outranks only the DM
+            # objective; in DM_CARTESIAN the task is that objective, and the floor cuts it)
+            loose = self.build(ctx, xdot, mode, rows)
+            z_loose = self._solve(self._full, loose)
+            if z_loose is not None and (self._closed_form_hit or task_residual(loose, z_loose) <= TASK_CUT):
+                self.floor_dropped += 1
+                floor = self.last_floor = None
+                problem, z = loose, z_loose
+            else:  # the bounds cut the task anyway: the floored stage stands
+                self._last_problem, self._closed_form_hit = problem, False
+        if z is None and (floor is not None or (rows is not None and rows.l.shape[0])):
+            # the rows together infeasible: admit braking
+            problem = self.build(ctx, xdot, mode, rows, brake=True, floor=floor)
             z = self._solve(self._full, problem)
             if z is None and problem.g[: self.n_v].any():  # still failing: without the DM and return terms
                 problem.g[: self.n_v] = 0.0
                 z = self._solve(self._full, problem)
-        if z is None and rows is not None and rows.l.shape[0]:
+        if z is None and (floor is not None or (rows is not None and rows.l.shape[0])):
             # every solver read the braking stage as infeasible: its rows all pass within 1e-9 m/s of
             # the braking command v₀ at a vertex of the box, degenerate for an active-set solver
             # (the UR5 at its position limits, docs/results.md); v₀ itself meets every row and bound
@@ -784,26 +835,30 @@ class QpController(Controller):
                 self.last_stage = "brake"
                 self.braking_stages += 1
                 return self.finish(ctx, v0, xdot, status=Status.SATURATED,
-                                   reason=f"{self._cut_reason(rows, v0)}: the braking command (qp ({self.solver}): "
-                                          "no solution of the stage that admits it)")
+                                   reason=f"{self._cut_reason(rows, v0, floor)}: the braking command (qp "
+                                          f"({self.solver}): no solution of the stage that admits it)")
         if z is None:
             self.last_stage = "failed"
             return self.safe_stop(state, f"qp ({self.solver}): the solver failed")
         self.last_stage = "full"
         status, reason = Status.OK, ""
-        if problem.n_in:  # the EE box (eq. (17)) and collision rows, re-checked whatever solved the stage
-            e = problem.C[:, : self.n_v] @ z[: self.n_v]
-            left = np.flatnonzero((e > problem.u + EE_BOX_TOL) | (e < problem.l - EE_BOX_TOL))
-            out = _hold_ee_box(problem.C, problem.l, problem.u, problem.lb, problem.ub, z, self.n_v)
+        # the EE box (eq. (17)) and collision rows, re-checked whatever solved the stage; not the σ_min
+        # floor's row (last): it steers the DM ascent, met to the solver's tolerance (~1e-7 m/rad/s)
+        n_hard = problem.n_in - (0 if floor is None else 1)
+        if n_hard:
+            C, lo, hi = problem.C[:n_hard], problem.l[:n_hard], problem.u[:n_hard]
+            e = C[:, : self.n_v] @ z[: self.n_v]
+            left = np.flatnonzero((e > hi + EE_BOX_TOL) | (e < lo - EE_BOX_TOL))
+            out = _hold_ee_box(C, lo, hi, problem.lb, problem.ub, z, self.n_v)
             if out > 0.0:
                 self.ee_box_corrections += 1
                 status = Status.SATURATED
-                n_box = problem.n_in - (0 if rows is None else rows.l.shape[0])
+                n_box = n_hard - (0 if rows is None else rows.l.shape[0])
                 k = int(left[0]) if left.size else 0
                 what = "EE box" if k < n_box or rows is None else f"collision row {rows.names[k - n_box]}"
                 reason = f"{what}: the solution left it by {out / self.dt:.3g} m/s; projected back onto it"
-        if not self._closed_form_hit and task_residual(problem, z) > 1e-6:  # the task cut: by which rows first
-            cut = self._cut_reason(rows, z[: self.n_v])
+        if not self._closed_form_hit and task_residual(problem, z) > TASK_CUT:  # the task cut: by which rows first
+            cut = self._cut_reason(rows, z[: self.n_v], floor)
             status, reason = Status.SATURATED, f"{cut}; {reason}" if reason else cut
         alpha = self.config.qp.dm_alpha if mode == Mode.DM_NULLSPACE else self.config.qp.alpha
         return self.finish(ctx, z[: self.n_v], xdot, status=status, reason=reason, alpha=alpha)
