@@ -61,7 +61,7 @@ def test_every_output_step_is_within_velocity_acceleration_and_jerk_limits_and_b
     assert sh.stale_stop and sh.at_rest, (sh.v, sh.a)
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=25, deadline=None)
 @given(st.lists(st.tuples(st.integers(1, 5), st.lists(st.floats(-1.0, 1.0), min_size=7, max_size=7)),
                 min_size=1, max_size=30), st.integers(0, 6), st.sampled_from([-1.0, 1.0]))
 def test_a_joint_driven_towards_its_limit_stops_before_it(commands: list[tuple[int, list[float]]], joint: int,
@@ -76,7 +76,7 @@ def test_a_joint_driven_towards_its_limit_stops_before_it(commands: list[tuple[i
         f = np.array(frac)
         f[joint] = side * abs(f[joint])  # this joint always towards its limit
         sh.command(t, f * LIM.v_max, stream=1, q=q)
-        for _ in range(gap * 10):
+        for _ in range(gap * 100):  # up to 0.5 s between commands: the joint goes on alone
             t += DT
             v = sh.step(t, q)
             a_prev, v_prev = _check_step(v, v_prev, a_prev), v
