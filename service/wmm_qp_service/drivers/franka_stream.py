@@ -93,6 +93,7 @@ class CommandShaper:
         self.protective_stops = 0
         self.reason = ""  # why the last protective stop happened
         self.refused = 0  # commands refused (past a limit, or during a protective stop)
+        self.halted = False  # halt(): braking to rest for good, every command refused
 
     @property
     def at_rest(self) -> bool:
@@ -127,6 +128,18 @@ class CommandShaper:
         self.reason = reason
         self.target = np.zeros_like(self.target)
 
+    def reset(self, reason: str) -> None:
+        """The robot stopped the motion itself (a reflex): a new stream starts from rest, and
+        the stop is reported as a protective stop (released by a new stream)."""
+        self.v = np.zeros_like(self.v)
+        self.a = np.zeros_like(self.a)
+        self._protect(reason)
+
+    def halt(self) -> None:
+        """Brake to rest and refuse every command from now on (the driver is stopping)."""
+        self.halted = True
+        self.target = np.zeros_like(self.target)
+
     def command(self, t: float, rates: FloatArray, stream: Hashable, q: FloatArray) -> bool:
         """A command of the daemon, received at robot time ``t`` [s].
 
@@ -141,6 +154,9 @@ class CommandShaper:
             True when it became the target; False when refused (counted in ``refused``).
         """
         rates = np.asarray(rates, dtype=float)
+        if self.halted:
+            self.refused += 1
+            return False
         if self.protective_stop:
             if stream == self.stream or not self.at_rest:
                 self.refused += 1
@@ -197,7 +213,8 @@ class CommandShaper:
             [rad/s] the command (a fresh array).
         """
         q = np.asarray(q, dtype=float)
-        if not (self.protective_stop or self.stale_stop) and t - self.t_cmd > self.stale_timeout and self.t_cmd > -np.inf:
+        late = np.isfinite(self.t_cmd) and t - self.t_cmd > self.stale_timeout
+        if late and not (self.protective_stop or self.stale_stop):
             self.stale_stop = True
             self.target = np.zeros_like(self.target)
         v, a = self._track(self.target)
