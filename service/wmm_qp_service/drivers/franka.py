@@ -227,7 +227,13 @@ class FrankaDriver:
                     self.on_lease(str(a.key_expr).rsplit("/", 1)[-1], a.kind == zenoh.SampleKind.PUT)
                 if not finishing:
                     while (c := sub.try_recv()) is not None:
-                        self.on_command(c.payload.to_bytes(), q, time.monotonic())
+                        try:
+                            self.on_command(c.payload.to_bytes(), q, time.monotonic())
+                        except Exception as e:  # never out of the control loop: the command is dropped
+                            self.refused["error"] += 1
+                            if self.refused["error"] <= 10:
+                                print(f"wmm-qp driver franka: a command dropped: {type(e).__name__}: {e}",
+                                      file=sys.stderr, flush=True)
                 v = self.cycle(dur.to_sec(), q)
                 n += 1
                 if not finishing and (stop.is_set() or (max_cycles is not None and n >= max_cycles)):
