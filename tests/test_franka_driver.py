@@ -23,14 +23,14 @@ import pytest
 pytest.importorskip("pylibfranka", reason="needs pylibfranka (pip install 'wmm-qp[franka]')")
 pytest.importorskip("franky_sim", reason="needs franky-sim (pip install franky-sim)")
 
-import zenoh  # noqa: E402
-from wmm_qp_service.keys import Keys  # noqa: E402
-from wmm_qp_service.processes import isolated_config  # noqa: E402
-from wmm_qp_service.protocol import CommandMsg, StateMsg, decode, encode  # noqa: E402
-from wmm_qp_service.transport import ROLE_DAEMON, open_session  # noqa: E402
+import zenoh
+from wmm_qp_service.keys import Keys
+from wmm_qp_service.processes import isolated_config
+from wmm_qp_service.protocol import CommandMsg, StateMsg, decode, encode
+from wmm_qp_service.transport import ROLE_DAEMON, open_session
 
-import wmm_qp as w  # noqa: E402
-from wmm_qp.config import default_config_dir  # noqa: E402
+import wmm_qp as w
+from wmm_qp.config import default_config_dir
 
 FR3 = default_config_dir() / "robots" / "fr3.toml"
 # shared with the sim process: q (7), dq (7), steps, steps with a joint past its position limit,
@@ -103,7 +103,7 @@ class Daemon:
 
 
 @pytest.fixture(scope="module")
-def rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Daemon, Any, w.RobotConfig]]:
+def rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Daemon, Any]]:
     robot = w.load_robot_config(FR3)
     a = robot.arm
     ctx = mp.get_context("spawn")
@@ -131,7 +131,7 @@ def rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Daemon, Any,
                 time.sleep(0.05)
             assert d.state is not None, "no state from the driver: " + Path(log).read_text()
             d.wait(0.5)  # the lease reaches the driver
-            yield d, shared, robot
+            yield d, shared
     finally:
         drv.terminate()
         try:
@@ -145,7 +145,7 @@ def rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Daemon, Any,
 
 
 def test_the_driver_streams_within_the_fr3s_limits_and_brakes_when_the_commands_stop(rig: Any) -> None:
-    d, shared, robot = rig
+    d, shared = rig
     d.send_for(1.5, lambda t: [0.4 * np.sin(4.0 * t), 0.2 * np.sin(3.0 * t), 0, 0.2 * np.sin(2.0 * t), 0, 0,
                                0.5 * min(1.0, t / 0.3)])  # from rest, within 10 rad/s² between commands
     st = d.poll()
@@ -167,7 +167,7 @@ def test_the_driver_streams_within_the_fr3s_limits_and_brakes_when_the_commands_
 
 
 def test_a_command_past_the_limits_is_refused_with_a_protective_stop(rig: Any) -> None:
-    d, shared, robot = rig
+    d, shared = rig
     d.stream = 100
     too_fast = [0, 0, 0, 0, 6.0, 0, 0]  # joint 5: 5.26 rad/s at most
     d.send_for(0.3, lambda t: too_fast)

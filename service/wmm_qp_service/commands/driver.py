@@ -47,4 +47,10 @@ def run(args: argparse.Namespace) -> int:
         print("wmm-qp driver franka: error: --stale-timeout must be in (0, 1] s", file=sys.stderr)
         return 2
     driver = FrankaDriver(svc, robot, stale_timeout=stale, referee=sim_cfg.referee)
-    return driver.run(args.robot_ip, stop_on_signals())
+    code = driver.run(args.robot_ip, stop_on_signals())
+    sh = driver.shaper
+    violations = {k: n for k, n in driver.referee.counts.items() if n}
+    last = f" (last: {sh.reason})" if sh.reason else ""
+    print(f"wmm-qp driver franka: stopped at t = {driver.t:.3f} s (exit {code}), violations {violations}, "
+          f"protective stops {sh.protective_stops}{last}, refused {dict(driver.refused)}", file=sys.stderr, flush=True)
+    return code
