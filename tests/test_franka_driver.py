@@ -177,3 +177,82 @@ def test_a_command_past_the_limits_is_refused_with_a_protective_stop(rig: Any) -
     q0 = np.array(shared[0:7])
     d.wait(0.3)
     assert abs(shared[4] - q0[4]) < 0.005 and shared[16] == 0  # joint 5 never moved off: refused
+
+
+def _start_franky_sim(ctx: Any, robot: w.RobotConfig) -> tuple[Any, Any, Any, str]:
+    a = robot.arm
+    shared, hostname, stop = ctx.Array("d", N_SHARED), ctx.Array("c", 64), ctx.Event()
+    sim = ctx.Process(target=_serve, args=(shared, hostname, stop, a.position_lower.tolist(),
+                                            a.position_upper.tolist(), a.velocity_max.tolist()), daemon=True)
+    sim.start()
+    t0 = time.monotonic()
+    while not hostname.value and time.monotonic() - t0 < 60:
+        time.sleep(0.1)
+    assert hostname.value, "franky-sim did not start"
+    return sim, shared, stop, hostname.value.decode()
+
+
+def test_serve_tracks_through_the_driver_and_resumes_after_the_robot_braked_in_its_own_stop(tmp_path: Path) -> None:
+    """wmm-qp serve + the driver + franky-sim: a track phase within every limit; the daemon frozen
+    for 0.3 s (the driver brakes: stale) resumes on the client's mode message, which needs the
+    state's ``v_arm`` exactly 0 at rest."""
+    import os
+    import signal
+
+    from wmm_qp_service.client import Client
+
+    robot = w.load_robot_config(FR3)
+    sim, shared, stop, host = _start_franky_sim(mp.get_context("spawn"), robot)
+    svc = isolated_config(robot=robot)
+    common = ["--robot-config", str(FR3), "--prefix", svc.prefix, "--daemon-endpoint", svc.zenoh.daemon_endpoint,
+              "--sim-endpoint", svc.zenoh.sim_endpoint]
+    procs = []
+    try:
+        for name, argv in (("driver", ["driver", "franka", "--robot-ip", host]), ("serve", ["serve"])):
+            with open(tmp_path / f"{name}.log", "w") as err:
+                procs.append(subprocess.Popen([sys.executable, "-m", "wmm_qp_service.cli", *argv, *common],
+                                              stderr=err))
+        serve = procs[1]
+        with Client(svc, name="e2e") as c:
+            info = c.wait_for_daemon(timeout=60)
+            assert info is not None, (tmp_path / "serve.log").read_text()
+            x0 = np.array(info.status.x)
+            assert c.resume("track", timeout=20), (tmp_path / "serve.log").read_text()
+
+            def follow(seconds: float, k0: int) -> int:
+                k = k0
+                t_end = time.monotonic() + seconds
+                while time.monotonic() < t_end:  # 5 cm along y in about 3 s, and back, 100 Hz
+                    if c.send_setpoint(x0 + [0.0, 0.05 * np.sin(0.005 * k), 0.0]):
+                        k += 1
+                    time.sleep(0.01)
+                return k
+
+            k = follow(3.0, 0)
+            st = c.info()
+            assert st is not None and abs(st.status.x[1] - x0[1]) > 0.02, (st, x0)
+            os.kill(serve.pid, signal.SIGSTOP)  # the daemon freezes: no command for 0.3 s
+            time.sleep(0.3)
+            os.kill(serve.pid, signal.SIGCONT)
+            time.sleep(0.5)
+            mid = c.info()
+            assert mid is not None and mid.status.faults, mid  # the daemon saw its stream broken
+            assert c.resume("track", timeout=20), "the daemon did not resume after the robot's stale stop"
+            follow(1.5, k)
+            state = c.latest_state()
+            info = c.info()
+        assert state is not None and not state.stale_stop and not state.protective_stop, state
+        assert not any(state.violations.values()), state.violations
+        assert info is not None and not any(info.status.sim_violations.values())
+        assert shared[15] == 0 and shared[16] == 0, "franky-sim saw a joint past a limit"
+    finally:
+        for p in reversed(procs):
+            p.send_signal(signal.SIGINT)
+            try:
+                p.wait(20)
+            except subprocess.TimeoutExpired:
+                p.kill()
+        stop.set()
+        sim.join(10)
+        if sim.is_alive():
+            sim.kill()

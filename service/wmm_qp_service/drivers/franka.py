@@ -12,6 +12,12 @@ past the limits (protective stop). The sim's referee (:mod:`wmm_qp_sim.referee`)
 command as received and the measured joint positions each cycle, so ``violations`` means what
 it means for the sim.
 
+``v_arm`` is the velocity the robot executes as its motion generator's output: the stream this
+driver writes (libfranka's commanded ``dq_c``), exactly 0 at rest — as the sim's executed rates.
+The daemon takes it as the baseline a new stream starts from and waits for it to be 0 after a
+stale or protective stop; the measured ``dq`` (encoder noise, the joint controllers' tracking
+error) is never exactly 0 and would hold the daemon in that wait for ever.
+
 What a real robot cannot give is filled in as such: ``base_true`` and ``ee_true`` are NaN (no
 ground truth), ``box_position`` NaN, ``stalled_joint`` −1; ``tau`` is the robot's estimate of the
 external joint torques (``tau_ext_hat_filtered``) and ``contact_force`` the external force at
@@ -162,14 +168,20 @@ class FrankaDriver:
         self.shaper.reset(f"robot: {reason}")
         self.referee.break_stream()
 
-    def state_msg(self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray, force: np.ndarray) -> StateMsg:
-        """The wire message of this cycle's state."""
+    def state_msg(self, q: np.ndarray, tau: np.ndarray, force: np.ndarray) -> StateMsg:
+        """The wire message of this cycle's state (``v_arm``: the stream written, see the module docstring).
+
+        Args:
+            q: [rad] measured joint positions.
+            tau: [N·m] the robot's external joint torque estimate.
+            force: [N] the external force at the EE (base frame).
+        """
         self.seq += 1
         sh = self.shaper
         refused = {**self.refused}
         return StateMsg(
             robot=self.svc.robot, seq=self.seq, stamp=time.time(), t=self.t,
-            q_base=[0.0, 0.0, 0.0], q_arm=q.tolist(), v_arm=dq.tolist(), wheel_speeds=[],
+            q_base=[0.0, 0.0, 0.0], q_arm=q.tolist(), v_arm=sh.v.tolist(), wheel_speeds=[],
             base_true=NAN3, ee_true=NAN3, tau=tau.tolist(), contact_force=force.tolist(),
             violations={k: n for k, n in self.referee.counts.items() if n}, stale_stop=sh.stale_stop,
             cmd_seq=self.cmd_seq, instance=self.instance, lease=self.holder,
@@ -244,8 +256,7 @@ class FrankaDriver:
                 if done:
                     cmd.motion_finished = True
                 ctl.writeOnce(cmd)
-                pub.put(encode(self.state_msg(q, np.array(st.dq, dtype=float),
-                                              np.array(st.tau_ext_hat_filtered, dtype=float),
+                pub.put(encode(self.state_msg(q, np.array(st.tau_ext_hat_filtered, dtype=float),
                                               np.array(st.O_F_ext_hat_K, dtype=float)[:3])))
                 if done:
                     return 0
