@@ -5,6 +5,7 @@ past the limits is refused with a protective stop that only a new stream release
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from wmm_qp_service.drivers.franka_stream import CommandShaper, StreamLimits
@@ -138,3 +139,27 @@ def test_stale_commands_brake_to_rest_and_the_next_command_resumes() -> None:
         sh.step(k * DT, READY)
     assert sh.at_rest
     assert sh.command(0.3, np.full(7, 0.2), stream=1, q=READY) and not sh.stale_stop
+
+
+@pytest.mark.parametrize("period_ms", [1, 2])
+def test_the_daemons_bounds_drive_a_joint_into_its_limit_without_a_protective_stop(period_ms: int) -> None:
+    """Commands at the daemon's bounds (13) with its latency margin (the robot's command timeout,
+    25 ms, or more) bring a joint up to its limit at full speed: the shaper follows them, stops
+    short of the limit and raises no protective stop (its own braking, jerk-limited, needs more
+    room than (13)'s, which the margin covers; with a margin of 5 ms it would stop the arm)."""
+    from wmm_qp.limits.joint_motion_bounds import joint_motion_bounds
+
+    sh = CommandShaper(LIM, DT, stale_timeout=0.025)
+    q = 0.5 * (LIM.q_lo + LIM.q_hi)
+    q[0] = LIM.q_hi[0] - 0.5
+    v_cmd = np.zeros(7)
+    want = np.zeros(7)
+    want[0] = LIM.v_max[0]
+    for k in range(2000):
+        if k % period_ms == 0:
+            lo, hi = joint_motion_bounds(q, v_cmd, LIM.q_lo, LIM.q_hi, LIM.v_max, LIM.a_max, period_ms * 1e-3, 0.025)
+            v_cmd = np.clip(want, lo, hi)
+            assert sh.command(k * DT, v_cmd, stream=1, q=q), sh.reason
+        q = q + sh.step(k * DT, q) * DT
+        assert not sh.protective_stop, sh.reason
+    assert LIM.q_hi[0] - 0.01 < q[0] <= LIM.q_hi[0] and sh.at_rest
