@@ -261,3 +261,31 @@ def test_experiment_and_bench_print_progress_on_stderr_only(capsys: pytest.Captu
                          "--json")
     assert code == 0 and "oneshot" in json.loads(out)
     assert "bench: section 1/1: oneshot" in err and "bench: done, 1/1 sections" in err, err
+
+
+ROBOTS = default_config_dir() / "robots"
+
+
+@pytest.mark.parametrize(("argv", "names"), [
+    (["--robot-config", str(ROBOTS / "gen3_mecanum.toml")], "--robot-config"),  # a mobile base: not a Franka
+    (["--stale-timeout", "0"], "--stale-timeout"),
+    (["--stale-timeout", "nan"], "--stale-timeout"),
+])
+def test_driver_franka_bad_input_is_one_line_and_exit_2(capsys: pytest.CaptureFixture[str], argv: list[str],
+                                                        names: str) -> None:
+    if "--robot-config" not in argv:
+        pytest.importorskip("franky_sim", reason="configs/robots/fr3.toml's URDF ships with franky-sim")
+    code, _, err = run(capsys, "driver", "franka", "--robot-ip", "127.0.0.1", *argv)
+    assert code == 2 and names in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_driver_franka_without_a_robot_says_so_and_exits_1(tmp_path: object) -> None:
+    pytest.importorskip("pylibfranka", reason="needs pylibfranka (pip install 'wmm-qp[franka]')")
+    pytest.importorskip("franky_sim", reason="configs/robots/fr3.toml's URDF ships with franky-sim")
+    from wmm_qp_service.processes import free_port
+
+    r = subprocess.run([sys.executable, "-m", "wmm_qp_service.cli", "driver", "franka", "--robot-ip", "127.0.0.254",
+                        "--prefix", f"wmmnorobot{free_port()}", "--sim-endpoint", f"tcp/127.0.0.1:{free_port()}"],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 1 and "cannot connect to the robot at 127.0.0.254" in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr

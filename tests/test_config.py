@@ -100,6 +100,11 @@ BAD_ROBOT_FILES = {  # (replace this, with this) → the key the error must name
     "missing URDF": (('urdf = "gen3_7dof.urdf"', 'urdf = "nowhere.urdf"'), "arm.urdf", "not found"),
     "missing optional package": (('urdf = "gen3_7dof.urdf"', 'urdf = "package://example-robot-data-x/robots/a.urdf"'),
                                  "arm.urdf", "not installed"),
+    "pkg:// of a Python package not installed": (('urdf = "gen3_7dof.urdf"', 'urdf = "pkg://no_such_pkg_x/a.urdf"'),
+                                                 "arm.urdf", "Python package 'no_such_pkg_x', which is not installed"),
+    "pkg:// of a file the package lacks": (('urdf = "gen3_7dof.urdf"', 'urdf = "pkg://wmm_qp/nowhere.urdf"'),
+                                           "arm.urdf", "has no file 'nowhere.urdf'"),
+    "a jerk limit that is not positive": (("[base]", "jerk_max = -1.0\n\n[base]"), "arm.jerk_max", "> 0"),
     "start outside the limits": (("start = [0.0, 0.5235987755982988", "start = [0.0, 2.5"), "arm.start", "outside"),
     "start of the wrong length": (("start = [0.0, ", "start = ["), "arm.start", "list of 7"),
     "a wheel limit per wheel of the wrong count": (("wheel_speed_max = 13.0", "wheel_speed_max = [13.0, 13.0]"),
@@ -138,3 +143,31 @@ def test_W_defaults_to_the_torque_ratio_without_the_robot_files_weight(tmp_path:
     r = w.load_robot_config(p)
     assert r.arm.torque_weight is None
     np.testing.assert_allclose(r.arm.default_W(), [1, 1, 1, 1, 32 / 13, 32 / 13, 32 / 13])  # tau_ref/tau_lim, eq. (8)
+
+
+def test_pkg_urdf_resolves_inside_an_installed_python_package(tmp_path: Path) -> None:
+    import shutil
+
+    import wmm_qp
+
+    pkg = Path(wmm_qp.__file__).parent
+    target = pkg / "_test_pkg_urdf.urdf"  # a file inside an installed package, removed after
+    shutil.copy(default_config_dir() / "robots" / "gen3_7dof.urdf", target)
+    try:
+        p = _robot_file(tmp_path, 'urdf = "gen3_7dof.urdf"', 'urdf = "pkg://wmm_qp/_test_pkg_urdf.urdf"')
+        r = w.load_robot_config(p)
+    finally:
+        target.unlink()
+    assert r.arm.urdf == target and r.arm.jerk_max is None
+
+
+def test_the_fr3_file_holds_frankas_published_limits() -> None:
+    pytest.importorskip("franky_sim", reason="the FR3's URDF ships with franky-sim (pip install franky-sim)")
+    r = w.load_robot_config(default_config_dir() / "robots" / "fr3.toml")
+    a = r.arm
+    assert r.base.kind == "fixed" and a.n == 7 and a.ee_frame == "link8"
+    np.testing.assert_array_equal(a.position_upper, [2.7437, 1.7837, 2.9007, -0.1518, 2.8065, 4.5169, 3.0159])
+    np.testing.assert_array_equal(a.velocity_max, [2.62] * 4 + [5.26, 4.18, 5.26])
+    np.testing.assert_array_equal(a.acceleration_max, [10.0] * 7)
+    assert a.jerk_max is not None
+    np.testing.assert_array_equal(a.jerk_max, [5000.0] * 7)

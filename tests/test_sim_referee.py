@@ -162,3 +162,19 @@ def test_a_stream_late_on_the_way_is_judged_against_itself_a_new_stream_against_
     # a new stream that ignores the braked rates is counted
     sim.step(SimCommand(z, v.copy(), period=CTRL_DT, seq=101, stream=101), DT)
     assert sim.state().violations["acceleration"] == 7
+
+
+def test_an_acceleration_violation_of_a_robot_without_wheels_is_counted() -> None:
+    """A fixed base has empty wheel vectors: the event line's ratio must not reduce over them."""
+    import dataclasses
+
+    from wmm_qp_sim.config import RefereeConfig
+    from wmm_qp_sim.referee import Referee
+
+    r = wmm_qp.load_robot_config()
+    fixed = dataclasses.replace(r, base=dataclasses.replace(r.base, wheel_speed_max=np.zeros(0),
+                                                            wheel_acceleration_max=np.zeros(0)))
+    ref = Referee(fixed, RefereeConfig())
+    none = np.zeros(0)
+    ref.on_command(0.0, np.full(7, 0.5), none, np.zeros(7), none, period=0.002, seq=1, stream=1)
+    assert ref.counts["acceleration"] == 7 and "acceleration" in ref.last_event

@@ -112,6 +112,8 @@ class ArmConfig:
         start: [rad or m] where the sim and the experiments start.
         ee_offset_xyz: [m] the task point in the ``ee_frame`` link's frame (e.g. the tool tip).
         ee_offset_rpy: [rad] the task frame's orientation in it (roll, pitch, yaw; pose task).
+        jerk_max: [rad/s³ or m/s³] symmetric jerk limits of a robot whose drives refuse a jerkier
+            command stream (a driver's command shaper keeps within them), or None (no limit given).
     """
 
     urdf: Path
@@ -130,6 +132,7 @@ class ArmConfig:
     start: FloatArray
     ee_offset_xyz: FloatArray = field(default_factory=lambda: _ro([0.0, 0.0, 0.0]))
     ee_offset_rpy: FloatArray = field(default_factory=lambda: _ro([0.0, 0.0, 0.0]))
+    jerk_max: FloatArray | None = None
 
     @property
     def n(self) -> int:
@@ -566,6 +569,7 @@ def load_robot_config(path: Path | str | None = None) -> RobotConfig:
             "position_upper",
             "velocity_max",
             "acceleration_max",
+            "jerk_max",
             "torque_limit",
             "torque_weight",
             "start",
@@ -632,6 +636,7 @@ def load_robot_config(path: Path | str | None = None) -> RobotConfig:
         start=start,
         ee_offset_xyz=a.vector("ee_offset_xyz", 3, [0.0, 0.0, 0.0]),
         ee_offset_rpy=a.vector("ee_offset_rpy", 3, [0.0, 0.0, 0.0]),
+        jerk_max=a.per_joint("jerk_max", n, positive=True) if a.has("jerk_max") else None,
     )
     base = _load_base(r.table("base"))
     collision = _load_collision(r.table("collision", required=False), path, full, chain.joints)

@@ -31,6 +31,7 @@ COMMANDS: dict[str, str] = {
     "bench": "bench",
     "soak": "soak",
     "acl": "acl",
+    "driver": "driver",
 }
 
 HELP = {
@@ -47,6 +48,7 @@ HELP = {
     "bench": "measure per-tick controller time and the loop over Zenoh",
     "soak": "run sim + daemon + client for a long time and report drift in time and memory",
     "acl": "write per-role Zenoh credentials with fresh secrets and their ACL configs (acl init DIR)",
+    "driver": "drive a real robot behind the daemon's protocol (driver franka --robot-ip IP: a Franka FR3)",
 }
 
 

@@ -164,8 +164,8 @@ class Referee:
             self.counts["acceleration"] += na
             self.counts["wheel_acceleration"] += nw
             if na or nw:
-                ratio = max(float(np.max(np.abs(v_cmd - base_v) / (self.a_max * held))),
-                            float(np.max(np.abs(w_cmd - base_w) / (self.wa_max * held))))
+                ratio = max(float(np.max(np.abs(v_cmd - base_v) / (self.a_max * held), initial=0.0)),
+                            float(np.max(np.abs(w_cmd - base_w) / (self.wa_max * held), initial=0.0)))
                 since = "the executed rates (a new stream)" if prev is None else f"command seq {prev[3]}"
                 self.last_event = (f"acceleration: command seq {seq} changed by {ratio:.2f} A·Δt "
                                    f"over Δt = {held * 1e3:.2f} ms from {since}")

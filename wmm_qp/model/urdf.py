@@ -7,12 +7,16 @@ file and the key that caused it.
 Paths: a ``urdf`` value is relative to the robot file, absolute, or ``package://NAME/REST``
 (the convention the URDFs themselves use for meshes), resolved to ``<share>/NAME/REST`` in the
 first ``share`` folder of this Python environment that holds ``NAME`` — ``sys.prefix/share``
-and the ``cmeel.prefix/share`` where PyPI packages such as ``example-robot-data`` put theirs.
+and the ``cmeel.prefix/share`` where PyPI packages such as ``example-robot-data`` put theirs —
+or ``pkg://MODULE/REST``, resolved to ``REST`` inside the installed Python package ``MODULE``
+(a package that ships a robot description as package data, e.g. ``franky_sim/assets``); the
+package is located, not imported.
 """
 
 from __future__ import annotations
 
 import contextlib
+import importlib.util
 import math
 import os
 import sys
@@ -26,7 +30,8 @@ import pinocchio as pin
 
 from ..exceptions import ConfigError
 
-PACKAGE_HINTS = {"example-robot-data": "pip install 'wmm-qp[robots]' (or: pip install example-robot-data)"}
+PACKAGE_HINTS = {"example-robot-data": "pip install 'wmm-qp[robots]' (or: pip install example-robot-data)",
+                 "franky_sim": "pip install franky-sim"}
 """How to install the packages the shipped robot files name."""
 
 # Pinocchio's one-DOF joint models: revolute (any axis), continuous (stored as cos, sin), prismatic.
@@ -54,6 +59,19 @@ def resolve_urdf(robot_file: Path, value: str, key: str = "arm.urdf") -> Path:
     Raises:
         ConfigError: the file does not exist, or the package it names is not installed.
     """
+    if value.startswith("pkg://"):
+        module, _, rest = value[len("pkg://") :].partition("/")
+        try:
+            spec = importlib.util.find_spec(module) if module.isidentifier() else None
+        except (ImportError, ValueError):
+            spec = None
+        if spec is None or not spec.submodule_search_locations:
+            hint = PACKAGE_HINTS.get(module, f"install the Python package {module!r}")
+            raise ConfigError(robot_file, key, f"needs the Python package {module!r}, which is not installed: {hint}")
+        path = Path(next(iter(spec.submodule_search_locations))) / rest
+        if not path.is_file():
+            raise ConfigError(robot_file, key, f"the Python package {module!r} has no file {rest!r}")
+        return path
     if value.startswith("package://"):
         package, _, rest = value[len("package://") :].partition("/")
         for share in share_dirs():

@@ -1,0 +1,283 @@
+"""``wmm-qp driver franka``: a Franka FR3 behind the daemon's protocol, through libfranka.
+
+One process, one loop: libfranka's joint velocity control (``readOnce`` / ``writeOnce``, the
+robot's 1 kHz cycle is the clock) and the wmm-qp protocol as the simulated robot speaks it
+(``sim/wmm_qp_sim/zenoh_adapter.py``, docs/protocol.md): it publishes ``state`` every cycle with
+its ``instance``, a consecutive ``seq``, the ``lease`` holder and the ``cmd_seq`` it follows,
+holds the liveliness token ``alive/sim``, and obeys ``cmd`` from the lease holder only, addressed
+to its instance, with increasing seq. Between the daemon's commands (500 Hz or 1 kHz, some late
+or lost) and the robot, the :class:`~.franka_stream.CommandShaper` makes the continuous,
+jerk-limited stream Franka's controller demands, brakes on stale commands and refuses commands
+past the limits (protective stop). The sim's referee (:mod:`wmm_qp_sim.referee`) judges every
+command as received and the measured joint positions each cycle, so ``violations`` means what
+it means for the sim.
+
+``v_arm`` is the velocity the robot executes as its motion generator's output: the stream this
+driver writes (libfranka's commanded ``dq_c``), exactly 0 at rest — as the sim's executed rates.
+The daemon takes it as the baseline a new stream starts from and waits for it to be 0 after a
+stale or protective stop; the measured ``dq`` (encoder noise, the joint controllers' tracking
+error) is never exactly 0 and would hold the daemon in that wait for ever.
+
+What a real robot cannot give is filled in as such: ``base_true`` and ``ee_true`` are NaN (no
+ground truth), ``box_position`` NaN, ``stalled_joint`` −1; ``tau`` is the robot's estimate of the
+external joint torques (``tau_ext_hat_filtered``) and ``contact_force`` the external force at
+the EE (``O_F_ext_hat_K``, its first three entries); the base is fixed (``q_base`` zeros, no
+wheels).
+
+libfranka's errors: a ``ControlException`` (a reflex of the robot: a limit, a collision, a
+discontinuity) is reported as a protective stop (``protective_reason`` names it); the driver
+asks the robot to recover automatically and starts a new control, which follows only a new
+stream. A ``NetworkException`` (the connection is lost) ends the driver: it says so and exits 1.
+
+Only this module imports ``pylibfranka`` (at run time: ``pip install 'wmm-qp[franka]'``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import secrets
+import sys
+import threading
+import time
+from collections import Counter
+from typing import Any
+
+import numpy as np
+import zenoh
+from wmm_qp_sim.config import RefereeConfig
+from wmm_qp_sim.referee import Referee
+
+import wmm_qp as w
+
+from ..config import ServiceConfig
+from ..keys import Keys
+from ..protocol import CommandMsg, StateMsg, encode
+from ..transport import ROLE_SIM, open_session
+from ..validation import Validator
+from .franka_stream import CommandShaper, StreamLimits
+
+DT = 1e-3
+"""[s] Franka's control cycle."""
+
+NAN3 = [math.nan] * 3
+
+
+class FrankaDriver:
+    """The protocol side of the driver: commands in, the shaper, the referee, states out.
+
+    Pure of libfranka: :meth:`cycle` takes one robot state's measurements and returns the
+    velocities to write; :meth:`run` binds it to libfranka and Zenoh.
+
+    Args:
+        svc: service config (keys, validation ranges).
+        robot: the robot file (a fixed base; its ``jerk_max`` bounds the stream).
+        stale_timeout: [s] commands older than this brake the arm to rest.
+        referee: the referee's tolerances.
+    """
+
+    def __init__(self, svc: ServiceConfig, robot: w.RobotConfig, stale_timeout: float = 0.025,
+                 referee: RefereeConfig | None = None) -> None:
+        svc = svc.with_robot(robot)
+        self.svc = svc
+        self.robot = robot
+        self.keys = Keys.of(svc.prefix, svc.robot)
+        self.validate = Validator(CommandMsg, svc.robot, svc.validation, n_arm=robot.n_arm, n_wheels=robot.n_wheels)
+        self.shaper = CommandShaper(StreamLimits.of(robot.arm), DT, stale_timeout)
+        self.referee = Referee(robot, referee if referee is not None else RefereeConfig(), period_max=stale_timeout)
+        self.instance = secrets.token_hex(8)
+        self.leases: dict[str, None] = {}
+        self._holder = ""
+        self._holder_seq = -1
+        self.cmd_seq = -1
+        self.refused: Counter[str] = Counter()
+        self.t = 0.0  # [s] the robot's time: the sum of its cycles
+        self.seq = 0
+        self._stopped = False  # the shaper was in a stale or protective stop at the last cycle
+
+    @property
+    def holder(self) -> str:
+        """The control lease holder whose commands are followed ("" = none)."""
+        return next(iter(self.leases), "")
+
+    def on_lease(self, holder: str, alive: bool) -> None:
+        """A lease token appeared (alive) or vanished."""
+        if alive:
+            self.leases.setdefault(holder, None)
+        else:
+            self.leases.pop(holder, None)
+
+    def on_command(self, data: bytes, q: np.ndarray, received: float) -> bool:
+        """Validate a command, check its sender and hand it to the referee and the shaper.
+
+        Args:
+            data: the payload.
+            q: [rad] the measured joint positions.
+            received: [s] monotonic time of receipt.
+
+        Returns:
+            True when the shaper took it as its target.
+        """
+        msg = self.validate(data)
+        if msg is None:
+            self.refused["invalid"] += 1
+            return False
+        if msg.lease != self.holder:
+            self.refused["lease"] += 1
+            return False
+        if msg.instance != self.instance:
+            self.refused["instance"] += 1
+            return False
+        if msg.lease != self._holder:  # a new holder: its stream starts from the robot's rates
+            self._holder, self._holder_seq = msg.lease, -1
+            self.referee.break_stream()
+        elif msg.seq <= self._holder_seq:
+            self.refused["seq"] += 1
+            return False
+        self._holder_seq = msg.seq
+        rates = np.array(msg.arm_rates, dtype=float)
+        self.referee.on_command(self.t, rates, np.zeros(0), self.shaper.v, np.zeros(0), period=msg.period,
+                                seq=msg.seq, received=received, step=DT, stream=msg.stream, sent=msg.stamp)
+        if not self.shaper.command(self.t, rates, (msg.lease, msg.stream), q):
+            self.refused["firmware"] += 1
+            return False
+        self.cmd_seq = msg.seq
+        return True
+
+    def cycle(self, elapsed: float, q: np.ndarray) -> np.ndarray:
+        """One robot cycle: advance the robot's time, judge its positions, shape the next command.
+
+        Args:
+            elapsed: [s] the time since the previous cycle (libfranka's duration; 0.001 normally).
+            q: [rad] the measured joint positions.
+
+        Returns:
+            [rad/s] the joint velocities to write.
+        """
+        self.t += elapsed
+        self.referee.check_positions(q)
+        v = self.shaper.step(self.t, q)
+        stopped = self.shaper.stale_stop or self.shaper.protective_stop
+        if stopped and not self._stopped:
+            self.referee.break_stream(hard=False)  # the robot stopped following the stream
+        self._stopped = stopped
+        return v
+
+    def fault(self, reason: str) -> None:
+        """libfranka refused the motion (a reflex): report a protective stop, restart from rest."""
+        self.shaper.reset(f"robot: {reason}")
+        self.referee.break_stream()
+
+    def state_msg(self, q: np.ndarray, tau: np.ndarray, force: np.ndarray) -> StateMsg:
+        """The wire message of this cycle's state (``v_arm``: the stream written, see the module docstring).
+
+        Args:
+            q: [rad] measured joint positions.
+            tau: [N·m] the robot's external joint torque estimate.
+            force: [N] the external force at the EE (base frame).
+        """
+        self.seq += 1
+        sh = self.shaper
+        refused = {**self.refused}
+        return StateMsg(
+            robot=self.svc.robot, seq=self.seq, stamp=time.time(), t=self.t,
+            q_base=[0.0, 0.0, 0.0], q_arm=q.tolist(), v_arm=sh.v.tolist(), wheel_speeds=[],
+            base_true=NAN3, ee_true=NAN3, tau=tau.tolist(), contact_force=force.tolist(),
+            violations={k: n for k, n in self.referee.counts.items() if n}, stale_stop=sh.stale_stop,
+            cmd_seq=self.cmd_seq, instance=self.instance, lease=self.holder,
+            protective_stop=sh.protective_stop, protective_stops=sh.protective_stops,
+            protective_reason=sh.reason, refused=refused)
+
+    def run(self, robot_ip: str, stop: threading.Event, max_cycles: int | None = None) -> int:
+        """Connect to the robot at ``robot_ip`` and drive it until ``stop`` (or ``max_cycles``).
+
+        Returns:
+            0 after a clean stop (the arm braked to rest, the motion finished); 1 when the
+            connection to the robot could not be made or was lost (said on stderr).
+        """
+        try:
+            import pylibfranka as fr
+        except ImportError:
+            print("wmm-qp driver franka: error: needs pylibfranka (pip install 'wmm-qp[franka]')",
+                  file=sys.stderr, flush=True)
+            return 2
+        with open_session(self.svc, ROLE_SIM) as session:
+            k = self.keys
+            sub = session.declare_subscriber(k.cmd, zenoh.handlers.FifoChannel(1024))
+            pub = session.declare_publisher(k.state, express=True, congestion_control=zenoh.CongestionControl.DROP,
+                                            priority=zenoh.Priority.REAL_TIME)
+            lease_sub = session.liveliness().declare_subscriber(k.lease_all, zenoh.handlers.FifoChannel(64),
+                                                                history=True)
+            token = None
+            try:
+                try:
+                    robot = fr.Robot(robot_ip, fr.RealtimeConfig.kIgnore)
+                    ctl = robot.start_joint_velocity_control(fr.ControllerMode.JointImpedance)
+                except (fr.NetworkException, fr.FrankaException, RuntimeError) as e:
+                    print(f"wmm-qp driver franka: error: cannot connect to the robot at {robot_ip}: {e}",
+                          file=sys.stderr, flush=True)
+                    return 1
+                token = session.liveliness().declare_token(k.alive("sim"))
+                print(f"wmm-qp driver franka: {k.state.rsplit('/', 1)[0]} driving the robot at {robot_ip} "
+                      f"(instance {self.instance})", file=sys.stderr, flush=True)
+                return self._loop(fr, robot, ctl, sub, lease_sub, pub, stop, max_cycles, robot_ip)
+            finally:
+                for ent in (token, lease_sub, sub, pub):
+                    if ent is not None:
+                        with contextlib.suppress(Exception):
+                            ent.undeclare()
+
+    def _loop(self, fr: Any, robot: Any, ctl: Any, sub: Any, lease_sub: Any, pub: Any, stop: threading.Event,
+              max_cycles: int | None, robot_ip: str) -> int:
+        n = 0
+        finishing = False
+        while True:
+            try:
+                st, dur = ctl.readOnce()
+                q = np.array(st.q, dtype=float)
+                while (a := lease_sub.try_recv()) is not None:
+                    self.on_lease(str(a.key_expr).rsplit("/", 1)[-1], a.kind == zenoh.SampleKind.PUT)
+                if not finishing:
+                    while (c := sub.try_recv()) is not None:
+                        try:
+                            self.on_command(c.payload.to_bytes(), q, time.monotonic())
+                        except Exception as e:  # never out of the control loop: the command is dropped
+                            self.refused["error"] += 1
+                            if self.refused["error"] <= 10:
+                                print(f"wmm-qp driver franka: a command dropped: {type(e).__name__}: {e}",
+                                      file=sys.stderr, flush=True)
+                v = self.cycle(dur.to_sec(), q)
+                n += 1
+                if not finishing and (stop.is_set() or (max_cycles is not None and n >= max_cycles)):
+                    finishing = True  # brake to rest, then finish the motion
+                    self.shaper.halt()
+                cmd = fr.JointVelocities(v.tolist())
+                done = finishing and self.shaper.at_rest
+                if done:
+                    cmd.motion_finished = True
+                ctl.writeOnce(cmd)
+                pub.put(encode(self.state_msg(q, np.array(st.tau_ext_hat_filtered, dtype=float),
+                                              np.array(st.O_F_ext_hat_K, dtype=float)[:3])))
+                if done:
+                    return 0
+            except fr.NetworkException as e:
+                print(f"wmm-qp driver franka: error: lost the connection to the robot at {robot_ip}: {e}",
+                      file=sys.stderr, flush=True)
+                return 1
+            except fr.ControlException as e:
+                reason = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+                print(f"wmm-qp driver franka: protective stop: {reason}", file=sys.stderr, flush=True)
+                self.fault(reason)
+                try:
+                    robot.automatic_error_recovery()
+                    ctl = robot.start_joint_velocity_control(fr.ControllerMode.JointImpedance)
+                except fr.NetworkException as e2:
+                    print(f"wmm-qp driver franka: error: lost the connection to the robot at {robot_ip}: {e2}",
+                          file=sys.stderr, flush=True)
+                    return 1
+                except (fr.FrankaException, RuntimeError) as e2:
+                    print(f"wmm-qp driver franka: error: the robot did not recover: {e2}", file=sys.stderr,
+                          flush=True)
+                    return 1
+                if finishing:
+                    return 0

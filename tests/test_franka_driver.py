@@ -1,0 +1,258 @@
+"""``wmm-qp driver franka`` against franky-sim (a MuJoCo FR3 speaking libfranka's protocol).
+
+franky-sim enforces none of the robot's limits: a post-step callback watches its physics state
+and counts every step with a joint past the FR3's position or velocity limits. franky-sim runs
+in a child process of the test (libfranka's connect holds the GIL while it waits for the server,
+so the two cannot share one interpreter), the driver as ``wmm-qp driver franka``, and the test
+plays the daemon: it holds the control lease and publishes ``cmd`` at 500 Hz.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+pytest.importorskip("pylibfranka", reason="needs pylibfranka (pip install 'wmm-qp[franka]')")
+pytest.importorskip("franky_sim", reason="needs franky-sim (pip install franky-sim)")
+
+import zenoh
+from wmm_qp_service.keys import Keys
+from wmm_qp_service.processes import isolated_config
+from wmm_qp_service.protocol import CommandMsg, StateMsg, decode, encode
+from wmm_qp_service.transport import ROLE_DAEMON, open_session
+
+import wmm_qp as w
+from wmm_qp.config import default_config_dir
+
+FR3 = default_config_dir() / "robots" / "fr3.toml"
+# shared with the sim process: q (7), dq (7), steps, steps with a joint past its position limit,
+# steps with a joint past its velocity limit
+N_SHARED = 17
+
+
+def _serve(shared: Any, hostname: Any, stop: Any, q_lo: list[float], q_hi: list[float], v_max: list[float]) -> None:
+    from franky_sim import SimulationServer
+    from franky_sim.mujoco_simulator import MujocoSimulator
+
+    lo, hi, vm = np.array(q_lo), np.array(q_hi), np.array(v_max)
+    with MujocoSimulator(enable_visualization=False) as sim:
+        rm = sim.add_robot()
+
+        def watch(s: Any) -> None:
+            st = s.robots[0].inner_state
+            q, dq = np.asarray(st.q, dtype=float), np.asarray(st.dq, dtype=float)
+            shared[0:7], shared[7:14] = q.tolist(), dq.tolist()
+            shared[14] += 1
+            shared[15] += bool(np.any((q < lo - 1e-6) | (q > hi + 1e-6)))
+            shared[16] += bool(np.any(np.abs(dq) > vm * 1.01))  # 1 %: the physics' own tracking
+
+        sim.register_post_step_callback(watch)
+        with SimulationServer(sim) as server:
+            hostname.value = rm.hostname.encode()
+            server.run_async()
+            stop.wait()
+
+
+class Daemon:
+    """The test as the daemon: the lease, the latest state, commands at 500 Hz."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys, robot: str) -> None:
+        self.keys, self.robot = keys, robot
+        self.token = session.liveliness().declare_token(keys.lease("testlease"))
+        self.sub = session.declare_subscriber(keys.state, zenoh.handlers.RingChannel(1))
+        self.pub = session.declare_publisher(keys.cmd, express=True)
+        self.seq = 0
+        self.stream = 1
+        self.state: StateMsg | None = None
+
+    def poll(self) -> StateMsg | None:
+        if (s := self.sub.try_recv()) is not None:
+            self.state = decode(StateMsg, s.payload.to_bytes())
+        return self.state
+
+    def send_for(self, duration: float, rates: Any) -> None:
+        """Send rates(t) [rad/s] every 2 ms for duration [s] of wall time; t is the commands' own
+        time (k · period), as a daemon's bounds (13) see it, whatever the host's stalls."""
+        t0 = time.monotonic()
+        k = 0
+        while time.monotonic() - t0 < duration:
+            st = self.poll()
+            if st is not None:
+                self.seq += 1
+                k += 1
+                self.pub.put(encode(CommandMsg(robot=self.robot, seq=self.seq, stamp=time.time(), wheel_speeds=[],
+                                               arm_rates=list(map(float, rates(k * 0.002))), lease="testlease",
+                                               instance=st.instance, period=0.002, stream=self.stream)))
+            time.sleep(0.002)
+
+    def wait(self, duration: float) -> StateMsg:
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < duration:
+            self.poll()
+            time.sleep(0.005)
+        assert self.state is not None
+        return self.state
+
+
+@pytest.fixture(scope="module")
+def rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Daemon, Any]]:
+    robot = w.load_robot_config(FR3)
+    a = robot.arm
+    ctx = mp.get_context("spawn")
+    shared, hostname, stop = ctx.Array("d", N_SHARED), ctx.Array("c", 64), ctx.Event()
+    sim = ctx.Process(target=_serve, args=(shared, hostname, stop, a.position_lower.tolist(),
+                                            a.position_upper.tolist(), a.velocity_max.tolist()), daemon=True)
+    sim.start()
+    t0 = time.monotonic()
+    while not hostname.value and time.monotonic() - t0 < 60:
+        time.sleep(0.1)
+    assert hostname.value, "franky-sim did not start"
+    svc = isolated_config(robot=robot)
+    log = tmp_path_factory.mktemp("franka") / "driver.log"
+    with open(log, "w") as err:
+        drv = subprocess.Popen([sys.executable, "-m", "wmm_qp_service.cli", "driver", "franka", "--robot-ip",
+                                hostname.value.decode(), "--robot-config", str(FR3), "--prefix", svc.prefix,
+                                "--daemon-endpoint", svc.zenoh.daemon_endpoint,
+                                "--sim-endpoint", svc.zenoh.sim_endpoint], stderr=err)
+    try:
+        with open_session(svc, ROLE_DAEMON) as session:
+            d = Daemon(session, Keys.of(svc.prefix, svc.robot), svc.robot)
+            t0 = time.monotonic()
+            while d.poll() is None and time.monotonic() - t0 < 60:
+                assert drv.poll() is None, Path(log).read_text()
+                time.sleep(0.05)
+            assert d.state is not None, "no state from the driver: " + Path(log).read_text()
+            d.wait(0.5)  # the lease reaches the driver
+            yield d, shared
+    finally:
+        drv.terminate()
+        try:
+            drv.wait(20)
+        except subprocess.TimeoutExpired:
+            drv.kill()
+        stop.set()
+        sim.join(10)
+        if sim.is_alive():
+            sim.kill()
+
+
+def test_the_driver_streams_within_the_fr3s_limits_and_brakes_when_the_commands_stop(rig: Any) -> None:
+    d, shared = rig
+    d.send_for(1.5, lambda t: [0.4 * np.sin(4.0 * t), 0.2 * np.sin(3.0 * t), 0, 0.2 * np.sin(2.0 * t), 0, 0,
+                               0.5 * min(1.0, t / 0.3)])  # from rest, within 10 rad/s² between commands
+    st = d.poll()
+    assert st is not None and st.lease == "testlease" and st.cmd_seq > 0
+    moved = abs(shared[13])  # joint 7 follows 0.5 rad/s
+    assert moved > 0.3, f"joint 7 at {moved} rad/s"
+    assert shared[15] == 0 and shared[16] == 0, "franky-sim saw a joint past a limit"
+    assert not any(st.violations.values()), st.violations
+    # the command source dies: stale after 0.025 s, at rest 0.5/10 s later (robot time; franky-sim's
+    # clock runs slower than the wall's on a loaded host). At rest, franky-sim's joint 7 chatters
+    # at about ±0.08 rad/s around a still position (its D controller on a light link): rest is
+    # judged on positions.
+    st = d.wait(0.3)
+    assert st.stale_stop
+    q0 = np.array(shared[0:7])
+    st = d.wait(0.3)
+    assert np.max(np.abs(np.array(shared[0:7]) - q0)) < 0.005, np.array(shared[0:7]) - q0  # 0.5 rad/s: 0.15 rad
+    assert shared[15] == 0 and shared[16] == 0
+
+
+def test_a_command_past_the_limits_is_refused_with_a_protective_stop(rig: Any) -> None:
+    d, shared = rig
+    d.stream = 100
+    too_fast = [0, 0, 0, 0, 6.0, 0, 0]  # joint 5: 5.26 rad/s at most
+    d.send_for(0.3, lambda t: too_fast)
+    st = d.wait(0.3)
+    assert st.protective_stop and "joint 5" in st.protective_reason and st.refused.get("firmware", 0) > 0
+    assert st.violations.get("velocity", 0) > 0  # the referee judged the command as received
+    q0 = np.array(shared[0:7])
+    d.wait(0.3)
+    assert abs(shared[4] - q0[4]) < 0.005 and shared[16] == 0  # joint 5 never moved off: refused
+
+
+def _start_franky_sim(ctx: Any, robot: w.RobotConfig) -> tuple[Any, Any, Any, str]:
+    a = robot.arm
+    shared, hostname, stop = ctx.Array("d", N_SHARED), ctx.Array("c", 64), ctx.Event()
+    sim = ctx.Process(target=_serve, args=(shared, hostname, stop, a.position_lower.tolist(),
+                                            a.position_upper.tolist(), a.velocity_max.tolist()), daemon=True)
+    sim.start()
+    t0 = time.monotonic()
+    while not hostname.value and time.monotonic() - t0 < 60:
+        time.sleep(0.1)
+    assert hostname.value, "franky-sim did not start"
+    return sim, shared, stop, hostname.value.decode()
+
+
+def test_serve_tracks_through_the_driver_and_resumes_after_the_robot_braked_in_its_own_stop(tmp_path: Path) -> None:
+    """wmm-qp serve + the driver + franky-sim: a track phase within every limit; the daemon frozen
+    for 0.3 s (the driver brakes: stale) resumes on the client's mode message, which needs the
+    state's ``v_arm`` exactly 0 at rest."""
+    import os
+    import signal
+
+    from wmm_qp_service.client import Client
+
+    robot = w.load_robot_config(FR3)
+    sim, shared, stop, host = _start_franky_sim(mp.get_context("spawn"), robot)
+    svc = isolated_config(robot=robot)
+    common = ["--robot-config", str(FR3), "--prefix", svc.prefix, "--daemon-endpoint", svc.zenoh.daemon_endpoint,
+              "--sim-endpoint", svc.zenoh.sim_endpoint]
+    procs = []
+    try:
+        for name, argv in (("driver", ["driver", "franka", "--robot-ip", host]), ("serve", ["serve"])):
+            with open(tmp_path / f"{name}.log", "w") as err:
+                procs.append(subprocess.Popen([sys.executable, "-m", "wmm_qp_service.cli", *argv, *common],
+                                              stderr=err))
+        serve = procs[1]
+        with Client(svc, name="e2e") as c:
+            info = c.wait_for_daemon(timeout=60)
+            assert info is not None, (tmp_path / "serve.log").read_text()
+            x0 = np.array(info.status.x)
+            assert c.resume("track", timeout=20), (tmp_path / "serve.log").read_text()
+
+            def follow(seconds: float, k0: int) -> int:
+                k = k0
+                t_end = time.monotonic() + seconds
+                while time.monotonic() < t_end:  # 5 cm along y in about 3 s, and back, 100 Hz
+                    if c.send_setpoint(x0 + [0.0, 0.05 * np.sin(0.005 * k), 0.0]):
+                        k += 1
+                    time.sleep(0.01)
+                return k
+
+            k = follow(3.0, 0)
+            st = c.info()
+            assert st is not None and abs(st.status.x[1] - x0[1]) > 0.02, (st, x0)
+            os.kill(serve.pid, signal.SIGSTOP)  # the daemon freezes: no command for 0.3 s
+            time.sleep(0.3)
+            os.kill(serve.pid, signal.SIGCONT)
+            time.sleep(0.5)
+            mid = c.info()
+            assert mid is not None and mid.status.faults, mid  # the daemon saw its stream broken
+            assert c.resume("track", timeout=20), "the daemon did not resume after the robot's stale stop"
+            follow(1.5, k)
+            state = c.latest_state()
+            info = c.info()
+        assert state is not None and not state.stale_stop and not state.protective_stop, state
+        assert not any(state.violations.values()), state.violations
+        assert info is not None and not any(info.status.sim_violations.values())
+        assert shared[15] == 0 and shared[16] == 0, "franky-sim saw a joint past a limit"
+    finally:
+        for p in reversed(procs):
+            p.send_signal(signal.SIGINT)
+            try:
+                p.wait(20)
+            except subprocess.TimeoutExpired:
+                p.kill()
+        stop.set()
+        sim.join(10)
+        if sim.is_alive():
+            sim.kill()

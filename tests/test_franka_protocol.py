@@ -1,0 +1,75 @@
+"""The Franka driver's protocol side, without libfranka or a network: it obeys the lease holder
+for its instance with increasing seq, reports a robot's reflex as a protective stop that a new
+stream releases, and fills the state's sim-only fields as a real robot can."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+from wmm_qp_service.config import load_service_config
+from wmm_qp_service.drivers.franka import FrankaDriver
+from wmm_qp_service.protocol import CommandMsg, encode
+
+import wmm_qp as w
+from wmm_qp.config import default_config_dir
+
+pytest.importorskip("franky_sim", reason="configs/robots/fr3.toml's URDF ships with franky-sim")
+
+READY = np.array([0.0, -np.pi / 4, 0.0, -3 * np.pi / 4, 0.0, np.pi / 2, np.pi / 4])
+
+
+@pytest.fixture
+def drv() -> FrankaDriver:
+    d = FrankaDriver(load_service_config(), w.load_robot_config(default_config_dir() / "robots" / "fr3.toml"))
+    d.on_lease("L1", True)
+    return d
+
+
+def cmd(d: FrankaDriver, seq: int, rates: list[float], lease: str = "L1", instance: str | None = None,
+        stream: int = 1) -> bytes:
+    return encode(CommandMsg(robot=d.svc.robot, seq=seq, stamp=time.time(), wheel_speeds=[], arm_rates=rates,
+                             lease=lease, instance=d.instance if instance is None else instance, period=0.002,
+                             stream=stream))
+
+
+def test_only_the_lease_holders_commands_for_this_instance_with_increasing_seq_are_followed(drv: FrankaDriver) -> None:
+    d = drv
+    d.on_lease("L2", True)  # a later token: not the holder
+    small = [0.01] * 7
+    assert not d.on_command(cmd(d, 1, small, lease="L2"), READY, 0.0)
+    assert not d.on_command(cmd(d, 1, small, instance="another"), READY, 0.0)
+    assert not d.on_command(b"\x80junk", READY, 0.0)
+    assert d.on_command(cmd(d, 5, small), READY, 0.0) and d.cmd_seq == 5
+    assert not d.on_command(cmd(d, 5, small), READY, 0.001)  # replayed
+    assert d.refused == {"lease": 1, "instance": 1, "invalid": 1, "seq": 1}
+    st = d.state_msg(READY, np.zeros(7), np.zeros(3))
+    assert st.lease == "L1" and st.cmd_seq == 5 and st.instance == d.instance and st.refused == d.refused
+    d.on_lease("L1", False)  # the holder's token vanished: L2 holds
+    assert d.holder == "L2" and d.on_command(cmd(d, 1, small, lease="L2"), READY, 0.002)
+
+
+def test_a_robot_reflex_is_a_protective_stop_that_only_a_new_stream_releases(drv: FrankaDriver) -> None:
+    d = drv
+    assert d.on_command(cmd(d, 1, [0.01] * 7), READY, 0.0)
+    for _ in range(5):
+        d.cycle(1e-3, READY)
+    d.fault("joint_velocity_violation")
+    st = d.state_msg(READY, np.zeros(7), np.zeros(3))
+    assert st.protective_stop and st.protective_stops == 1 and st.protective_reason == "robot: joint_velocity_violation"
+    assert st.v_arm == [0.0] * 7  # the robot stopped: the next stream starts from rest
+    assert not d.on_command(cmd(d, 2, [0.0] * 7), READY, 0.001)  # the same stream: refused
+    assert d.refused["firmware"] == 1
+    assert d.on_command(cmd(d, 3, [0.0] * 7, stream=3), READY, 0.002)  # a new stream: resumes
+    assert not d.state_msg(READY, np.zeros(7), np.zeros(3)).protective_stop
+
+
+def test_the_state_has_no_ground_truth_and_counts_the_referees_violations(drv: FrankaDriver) -> None:
+    d = drv
+    d.on_command(cmd(d, 1, [0.5] + [0.0] * 6), READY, 0.0)  # from rest: 0.5 rad/s in one 2 ms period
+    st = d.state_msg(READY, np.zeros(7), np.zeros(3))
+    assert all(math.isnan(x) for x in st.base_true + st.ee_true) and math.isnan(st.box_position)
+    assert st.wheel_speeds == [] and st.stalled_joint == -1
+    assert st.violations == {"acceleration": 1}  # judged as received, before the shaper smooths it

@@ -1,0 +1,165 @@
+"""The FR3's 1 kHz command shaper: every output step within the velocity, acceleration and jerk
+limits, whatever the daemon sends and however late; stale commands brake it to rest; a command
+past the limits is refused with a protective stop that only a new stream releases."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from wmm_qp_service.drivers.franka_stream import CommandShaper, StreamLimits
+
+DT = 1e-3
+# The FR3's published limits (configs/robots/fr3.toml), written out: the shaper is tested
+# against the numbers, not against the file it reads them from.
+LIM = StreamLimits(
+    q_lo=np.array([-2.7437, -1.7837, -2.9007, -3.0421, -2.8065, 0.5445, -3.0159]),
+    q_hi=np.array([2.7437, 1.7837, 2.9007, -0.1518, 2.8065, 4.5169, 3.0159]),
+    v_max=np.array([2.62, 2.62, 2.62, 2.62, 5.26, 4.18, 5.26]),
+    a_max=np.full(7, 10.0),
+    j_max=np.full(7, 5000.0),
+)
+READY = np.array([0.0, -np.pi / 4, 0.0, -3 * np.pi / 4, 0.0, np.pi / 2, np.pi / 4])
+TOL = 1e-9
+
+
+def _check_step(v: np.ndarray, v_prev: np.ndarray, a_prev: np.ndarray) -> np.ndarray:
+    """Assert one output step's limits; return its acceleration."""
+    a = (v - v_prev) / DT
+    assert np.all(np.abs(v) <= LIM.v_max + TOL), f"velocity {v} beyond {LIM.v_max}"
+    assert np.all(np.abs(a) <= LIM.a_max + 1e-6), f"acceleration {a}"
+    assert np.all(np.abs(a - a_prev) <= LIM.j_max * DT + 1e-6), f"jerk {(a - a_prev) / DT}"
+    return a
+
+
+# a command: (cycles until it arrives [1, 40], fraction of each joint's velocity limit in [-1, 1])
+COMMANDS = st.lists(
+    st.tuples(st.integers(1, 40), st.lists(st.floats(-1.0, 1.0), min_size=7, max_size=7)),
+    min_size=1, max_size=40,
+)
+
+
+@settings(max_examples=60, deadline=None)
+@given(COMMANDS)
+def test_every_output_step_is_within_velocity_acceleration_and_jerk_limits_and_braking_reaches_rest(
+        commands: list[tuple[int, list[float]]]) -> None:
+    sh = CommandShaper(LIM, DT, stale_timeout=0.02)
+    q = np.zeros(7) + 0.5 * (LIM.q_lo + LIM.q_hi)  # mid-range: the position check stays out of the way
+    v_prev, a_prev, t = np.zeros(7), np.zeros(7), 0.0
+    for gap, frac in commands:
+        for _ in range(gap):  # late, early, lost: the gap between two commands in cycles
+            t += DT
+            v = sh.step(t, q)
+            a_prev, v_prev = _check_step(v, v_prev, a_prev), v
+        sh.command(t, 0.3 * np.array(frac) * LIM.v_max, stream=1, q=q)  # 30 %: mid-range stays inside
+    # the command source falls silent: stale within 20 ms, then at rest
+    rest_by = 0.02 + float(np.max(LIM.v_max / LIM.a_max + 2 * LIM.a_max / LIM.j_max)) + 0.01
+    for _ in range(int(rest_by / DT) + 1):
+        t += DT
+        v = sh.step(t, q)
+        a_prev, v_prev = _check_step(v, v_prev, a_prev), v
+    assert sh.stale_stop and sh.at_rest, (sh.v, sh.a)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.tuples(st.integers(1, 5), st.lists(st.floats(-1.0, 1.0), min_size=7, max_size=7)),
+                min_size=1, max_size=30), st.integers(0, 6), st.sampled_from([-1.0, 1.0]))
+def test_a_joint_driven_towards_its_limit_stops_before_it(commands: list[tuple[int, list[float]]], joint: int,
+                                                          side: float) -> None:
+    """Integrating the output from near a limit: no joint ever passes one; the shaper stops the arm
+    itself (protective stop) when the commands would carry it past."""
+    sh = CommandShaper(LIM, DT, stale_timeout=1.0)
+    q = 0.5 * (LIM.q_lo + LIM.q_hi)
+    q[joint] = (LIM.q_hi if side > 0 else LIM.q_lo)[joint] - side * 0.05  # 5 cm of an angle from the limit
+    v_prev, a_prev, t = np.zeros(7), np.zeros(7), 0.0
+    for gap, frac in commands:
+        f = np.array(frac)
+        f[joint] = side * abs(f[joint])  # this joint always towards its limit
+        sh.command(t, f * LIM.v_max, stream=1, q=q)
+        for _ in range(gap * 100):  # up to 0.5 s between commands: the joint goes on alone
+            t += DT
+            v = sh.step(t, q)
+            a_prev, v_prev = _check_step(v, v_prev, a_prev), v
+            q = q + v * DT
+            assert np.all(q >= LIM.q_lo - TOL) and np.all(q <= LIM.q_hi + TOL), (q, sh.reason)
+
+
+def test_a_command_that_could_not_stop_before_a_limit_is_refused_with_a_protective_stop() -> None:
+    sh = CommandShaper(LIM, DT)
+    q = READY.copy()
+    q[0] = LIM.q_hi[0] - 0.01
+    v = np.zeros(7)
+    v[0] = 2.0  # 2 rad/s needs 0.2 rad to stop at 10 rad/s²: 0.01 rad is not enough
+    assert not sh.command(0.0, v, stream=1, q=q)
+    assert sh.protective_stop and sh.protective_stops == 1 and "joint 1" in sh.reason and "could not stop" in sh.reason
+    assert not sh.step(DT, q).any()  # the target is rest: nothing moves
+
+
+def test_a_command_past_a_velocity_limit_is_refused_and_only_a_new_stream_at_rest_recovers() -> None:
+    sh = CommandShaper(LIM, DT)
+    ok = np.full(7, 0.1)
+    assert sh.command(0.0, ok, stream=1, q=READY)
+    t = 0.0
+    for _ in range(50):
+        t += DT
+        sh.step(t, READY)
+    bad = ok.copy()
+    bad[4] = 5.3  # joint 5's limit is 5.26 rad/s
+    assert not sh.command(t, bad, stream=1, q=READY)
+    assert sh.protective_stop and "joint 5" in sh.reason and "5.26" in sh.reason
+    for _ in range(200):  # brakes to rest
+        t += DT
+        sh.step(t, READY)
+        assert not sh.command(t, ok, stream=1, q=READY)  # the same stream: refused, even at rest
+    assert sh.at_rest and sh.protective_stop and sh.refused == 201
+    assert sh.command(t, ok, stream=2, q=READY)  # a new stream, at rest: resumes
+    assert not sh.protective_stop and sh.protective_stops == 1
+
+
+def test_a_new_stream_while_still_braking_is_refused() -> None:
+    sh = CommandShaper(LIM, DT)
+    sh.command(0.0, np.full(7, 1.0), stream=1, q=READY)
+    for k in range(100):
+        sh.step((k + 1) * DT, READY)
+    sh.command(0.1, np.full(7, 9.0), stream=1, q=READY)
+    sh.step(0.101, READY)
+    assert not sh.at_rest and not sh.command(0.101, np.zeros(7), stream=2, q=READY)
+
+
+def test_stale_commands_brake_to_rest_and_the_next_command_resumes() -> None:
+    sh = CommandShaper(LIM, DT, stale_timeout=0.05)
+    sh.command(0.0, np.full(7, 0.2), stream=1, q=READY)
+    for k in range(1, 51):
+        sh.step(k * DT, READY)
+    assert not sh.stale_stop and np.all(sh.v == 0.2)  # reached the target (in 22 ms), held it
+    sh.step(51 * DT, READY)
+    assert sh.stale_stop  # 51 ms after the last command
+    for k in range(52, 300):
+        sh.step(k * DT, READY)
+    assert sh.at_rest
+    assert sh.command(0.3, np.full(7, 0.2), stream=1, q=READY) and not sh.stale_stop
+
+
+@pytest.mark.parametrize("period_ms", [1, 2])
+def test_the_daemons_bounds_drive_a_joint_into_its_limit_without_a_protective_stop(period_ms: int) -> None:
+    """Commands at the daemon's bounds (13) with its latency margin (the robot's command timeout,
+    25 ms, or more) bring a joint up to its limit at full speed: the shaper follows them, stops
+    short of the limit and raises no protective stop (its own braking, jerk-limited, needs more
+    room than (13)'s, which the margin covers; with a margin of 5 ms it would stop the arm)."""
+    from wmm_qp.limits.joint_motion_bounds import joint_motion_bounds
+
+    sh = CommandShaper(LIM, DT, stale_timeout=0.025)
+    q = 0.5 * (LIM.q_lo + LIM.q_hi)
+    q[0] = LIM.q_hi[0] - 0.5
+    v_cmd = np.zeros(7)
+    want = np.zeros(7)
+    want[0] = LIM.v_max[0]
+    for k in range(2000):
+        if k % period_ms == 0:
+            lo, hi = joint_motion_bounds(q, v_cmd, LIM.q_lo, LIM.q_hi, LIM.v_max, LIM.a_max, period_ms * 1e-3, 0.025)
+            v_cmd = np.clip(want, lo, hi)
+            assert sh.command(k * DT, v_cmd, stream=1, q=q), sh.reason
+        q = q + sh.step(k * DT, q) * DT
+        assert not sh.protective_stop, sh.reason
+    assert LIM.q_hi[0] - 0.01 < q[0] <= LIM.q_hi[0] and sh.at_rest
