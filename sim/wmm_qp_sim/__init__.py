@@ -1,11 +1,15 @@
 """The simulated wheeled mobile manipulator: a pure model (this package) and its Zenoh adapter.
 
-The pure model is plain objects, no I/O: :class:`SimRobot` is stepped by commands and reports
-a :class:`SimState` (odometry and ground truth, torques, the referee's violation counts).
+The pure model is plain objects, no I/O: :class:`SimRobot` (the robot's firmware, referees and
+odometry) is stepped by commands, drives a :class:`Plant` (the hardware: write the rates,
+advance, read the measurements; :class:`KinematicPlant` by default) and reports a
+:class:`SimState` (odometry and ground truth, torques, the referee's violation counts).
 """
 
 from .config import BoxConfig, RefereeConfig, SimConfig, SlipConfig, load_sim_config
 from .contact import Box, ContactResult
+from .kinematic_plant import KinematicPlant
+from .plant import Plant, PlantState
 from .referee import VIOLATION_KINDS, Referee
 from .robot import SimCommand, SimRobot, SimState
 from .slip import SlipModel, integrate_pose
@@ -15,6 +19,9 @@ __all__ = [
     "Box",
     "BoxConfig",
     "ContactResult",
+    "KinematicPlant",
+    "Plant",
+    "PlantState",
     "Referee",
     "RefereeConfig",
     "SimCommand",
