@@ -31,10 +31,13 @@ class PlantState:
         v_arm: [rad/s or m/s] joint velocities.
         wheel_speeds: [rad/s] wheel speeds (the base kind's wheel order).
         base_true: [m, m, rad] the true base pose (x, y, ψ).
-        tau: [N·m] joint torques the drives exert beyond carrying the robot itself (the contact's
-            J_mᵀ F for the kinematic plant; the actuator forces for a physics plant).
+        tau: [N·m or N] joint torques: the kinematic plant's are the box contact's J_mᵀ F only
+            (it carries no weight), a physics plant's are what its drives exert (servo and
+            gravity compensation).
         contact_force: [N] force the EE applies to the box (world).
-        stalled_joint: a joint (0-based) held at its torque limit this step, or None.
+        stalled_joint: a joint (0-based) at its torque limit this step, or None (the first).
+        lagging_joint: a joint (0-based) that could not follow its commanded rate this step, or
+            None (the first; the kinematic plant's joints always follow).
     """
 
     q_arm: FloatArray
@@ -44,6 +47,7 @@ class PlantState:
     tau: FloatArray
     contact_force: FloatArray
     stalled_joint: int | None
+    lagging_joint: int | None = None
 
 
 class Plant(Protocol):

@@ -35,8 +35,8 @@ from .collision import CollisionReferee
 from .command import SimCommand
 from .config import BoxConfig, SimConfig
 from .contact import Box
-from .kinematic_plant import KinematicPlant
 from .plant import Plant, PlantState
+from .plants import make_plant
 from .referee import Referee
 from .slip import integrate_pose
 from .state import SimState
@@ -57,8 +57,12 @@ class SimRobot:
             collisions are checked anyway).
         collisions: check collisions (``collision`` violations, :mod:`.collision`); None: the
             config's ``referee.collisions``.
-        plant: the hardware driven; None: a :class:`~.kinematic_plant.KinematicPlant` with the
-            config's slip, seeded with ``seed``.
+        plant: the hardware driven; None: the config's ``physics.plant`` (:mod:`.plants`; the
+            default a :class:`~.kinematic_plant.KinematicPlant` with the config's slip, seeded
+            with ``seed``).
+
+    Raises:
+        PlantNotAvailable: the config names a plant whose package is not installed.
 
     Attributes:
         v_arm: [rad/s] the joint rates the drives were last told (written to the plant).
@@ -71,7 +75,8 @@ class SimRobot:
         self.model = model
         self.config = config
         self.seed = config.seed if seed is None else seed
-        self.plant: Plant = plant if plant is not None else KinematicPlant(model, config.slip, self.seed)
+        self.plant: Plant = plant if plant is not None else make_plant(config.physics.plant, model, config,
+                                                                       self.seed, scene)
         self._ps: PlantState = self.plant.read()
         self.referee = Referee(model.config, config.referee, period_max=config.stale_timeout)
         self.torque_limit = np.array(model.config.arm.torque_limit, dtype=float)
@@ -177,6 +182,7 @@ class SimRobot:
         self.refused = 0
         self.stream: int | None = None  # the stream of the last command received (and not refused for it)
         self.stopped_stream: int | None = None  # the stream a stale or protective stop ended
+        self.drives = {"torque_limit": [0] * self.n_arm, "tracking": [0] * self.n_arm}
         return self.state()
 
     def place_box(self, box: BoxConfig | None) -> None:
@@ -216,6 +222,10 @@ class SimRobot:
         self.plant.write(self.wheels, self.v_arm)
         self.plant.advance(dt)
         self._ps = self.plant.read()
+        if self._ps.stalled_joint is not None:
+            self.drives["torque_limit"][self._ps.stalled_joint] += 1
+        if self._ps.lagging_joint is not None:
+            self.drives["tracking"][self._ps.lagging_joint] += 1
         self.base_odom = integrate_pose(self.base_odom, self.model.base.body_twist(self._ps.wheel_speeds), dt)
         self.t += dt
         self.referee.check_positions(self.q_arm)
@@ -330,6 +340,7 @@ class SimRobot:
             protective_stops=self.protective_stops,
             protective_reason=self.protective_reason,
             refused_commands=self.refused,
+            drives={k: list(v) for k, v in self.drives.items()},
         )
 
     def robot_state(self) -> wmm_qp.RobotState:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from wmm_qp.config import FloatArray
 
@@ -23,7 +23,8 @@ class SimState:
         contact_force: [N] force the EE applies to the box (world).
         box_position: [m] world x of the box face, nan without a box.
         box_displacement: [m] how far the box has been pushed, nan without a box.
-        stalled_joint: the joint (0-based) that stalled the push this step, or None.
+        stalled_joint: the joint (0-based) at its torque limit this step (the kinematic plant: the
+            joint that stalled the push), or None.
         violations: counts by kind (see :mod:`.referee`).
         stale_stop: the sim is braking because commands went stale.
         rejected_commands: malformed commands ignored since reset.
@@ -33,6 +34,9 @@ class SimState:
         protective_stops: protective stops since reset.
         protective_reason: why the last protective stop started ("" = none yet).
         refused_commands: commands the firmware refused since reset.
+        drives: per joint, since reset: ``torque_limit`` the steps it was at its torque limit,
+            ``tracking`` the steps it could not follow its commanded rate (a physics plant only;
+            the first such joint of a step is counted). Reports, not violations.
     """
 
     t: float
@@ -55,3 +59,4 @@ class SimState:
     protective_stops: int = 0
     protective_reason: str = ""
     refused_commands: int = 0
+    drives: dict[str, list[int]] = field(default_factory=dict)
