@@ -205,3 +205,27 @@ def test_step_time_at_1khz_is_reported(name: str) -> None:
     us = 1e6 * np.percentile([plant_t, step_t], [50, 99], axis=1)
     print(f"\n{name}: plant step p50 {us[0, 0]:.0f} us, p99 {us[1, 0]:.0f} us; "
           f"SimRobot.step p50 {us[0, 1]:.0f} us, p99 {us[1, 1]:.0f} us (1 kHz budget: 1000 us)")
+
+
+def test_wmm_qp_sim_physics_flag_chooses_the_plant(monkeypatch: pytest.MonkeyPatch) -> None:
+    from types import SimpleNamespace
+
+    import wmm_qp_sim.zenoh_adapter as adapter
+    from wmm_qp_service.cli import main
+
+    plants: list[str] = []
+
+    class Node:  # records the config the command builds its node from; runs nothing
+        def __init__(self, svc: object, sim_cfg: SimConfig, robot: object, **kw: object) -> None:
+            plants.append(sim_cfg.physics.plant)
+            self.sim = SimpleNamespace(collision=None)
+            self.validate = SimpleNamespace(rejected={})
+            self.states_dropped = 0
+
+        def run(self, stop: object) -> SimpleNamespace:
+            return SimpleNamespace(t=0.0, violations={})
+
+    monkeypatch.setattr(adapter, "SimNode", Node)
+    assert main(["sim", "--physics", "mujoco", "--rt-priority", "0"]) == 0
+    assert main(["sim", "--rt-priority", "0"]) == 0
+    assert plants == ["mujoco", load_sim_config().physics.plant]
