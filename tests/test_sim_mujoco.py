@@ -229,3 +229,20 @@ def test_wmm_qp_sim_physics_flag_chooses_the_plant(monkeypatch: pytest.MonkeyPat
     assert main(["sim", "--physics", "mujoco", "--rt-priority", "0"]) == 0
     assert main(["sim", "--rt-priority", "0"]) == 0
     assert plants == ["mujoco", load_sim_config().physics.plant]
+
+
+def test_the_zenoh_node_drives_the_robot_it_is_given() -> None:
+    from wmm_qp_service.config import ServiceConfig
+    from wmm_qp_sim.zenoh_adapter import SimNode
+
+    m = model("ur5_omni.toml")
+    sim = SimRobot(m, PHYSICS, collisions=False)
+    node = SimNode(ServiceConfig(), PHYSICS, m.config, sim=sim)
+    assert node.sim is sim and node.model is m
+    q0 = sim.state().q_arm
+    arm = np.full(m.n_arm, 0.1)
+    node.take([SimCommand(np.zeros(m.n_wheels), np.full(m.n_arm, 9.0)), SimCommand(np.zeros(m.n_wheels), arm)], DT)
+    st = sim.state()
+    assert st.commands == 1 and st.violations["velocity"] > 0  # the superseded one: received and judged
+    np.testing.assert_array_equal(st.q_arm, q0)  # not executed
+    assert sim.step(node.take([SimCommand(np.zeros(m.n_wheels), arm)], DT), DT).q_arm[0] > q0[0]

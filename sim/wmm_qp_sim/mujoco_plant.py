@@ -70,6 +70,8 @@ class MujocoPlant:
     # ------------------------------------------------------------------ scene
     def _set_box(self, box: BoxConfig | None, keep_state: bool) -> None:
         r = self.robot
+        if box is not None and box.height <= r.floor_z:  # no volume above the floor: no box
+            box = None
         old = r.spec.body("push_box")
         if old is not None:
             r.spec.delete(old)
