@@ -67,6 +67,20 @@ def test_the_model_has_the_urdfs_masses_and_the_robot_files_limits(name: str) ->
 
 
 @pytest.mark.parametrize("name", SHIPPED)
+def test_the_physics_ee_is_where_the_controllers_model_puts_it(name: str) -> None:
+    m = model(name)
+    p = plant(name)
+    p.reset(np.array([0.5, -0.3, 0.7]), np.array(m.config.arm.start, dtype=float), None)
+    wheels = m.base.wheel_speeds(np.array([0.1, 0.05, 0.2])) if m.n_wheels else np.zeros(0)
+    hold(p, 300, wheels=wheels, arm=np.linspace(-0.3, 0.3, m.n_arm))
+    st = p.read()
+    mujoco.mj_kinematics(p.robot.model, p.data)  # a step leaves the poses of its start
+    tip = p.data.geom("ee_tip").xpos
+    np.testing.assert_allclose(tip, m.ee_position(st.base_true, st.q_arm), atol=1e-9)
+    assert np.abs(st.q_arm - m.config.arm.start).max() > 0.05  # it moved
+
+
+@pytest.mark.parametrize("name", SHIPPED)
 def test_gravity_is_carried_the_arm_holds_its_start(name: str) -> None:
     p = plant(name)
     q0 = p.read().q_arm.copy()
