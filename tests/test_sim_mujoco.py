@@ -237,7 +237,7 @@ def test_wmm_qp_sim_physics_flag_chooses_the_plant(monkeypatch: pytest.MonkeyPat
             self.states_dropped = 0
 
         def run(self, stop: object) -> SimpleNamespace:
-            return SimpleNamespace(t=0.0, violations={})
+            return SimpleNamespace(t=0.0, violations={}, drives={"torque_limit": [0], "tracking": [0]})
 
     monkeypatch.setattr(adapter, "SimNode", Node)
     assert main(["sim", "--physics", "mujoco", "--rt-priority", "0"]) == 0

@@ -71,6 +71,8 @@ def run(args: argparse.Namespace) -> int:
     st = node.run(stop)
     print(f"wmm-qp sim: stopped at t = {st.t:.3f} s, violations {st.violations}, "
           f"commands rejected {dict(node.validate.rejected)}, "
-          f"states dropped by fault injection {node.states_dropped}",
+          f"states dropped by fault injection {node.states_dropped}"
+          + (f"; steps per joint at its torque limit {st.drives['torque_limit']}, not following its command "
+             f"{st.drives['tracking']}" if sim_cfg.physics.plant != "kinematic" and st.drives else ""),
           file=sys.stderr, flush=True)
     return 0
