@@ -13,13 +13,15 @@ class SimState:
 
     Attributes:
         t: [s] sim time since reset.
-        q_arm: [rad] joint angles.
-        v_arm: [rad/s] executed joint rates.
-        wheel_speeds: [rad/s] executed wheel speeds.
+        q_arm: [rad] measured joint angles.
+        v_arm: [rad/s] measured joint rates (the kinematic plant's: the executed ones).
+        wheel_speeds: [rad/s] measured wheel speeds (the kinematic plant's: the executed ones; a
+            physics plant's: those of the base's achieved twist).
         base_odom: [m, m, rad] base pose integrated from the wheel speeds with the nominal model.
         base_true: [m, m, rad] true base pose (with slip and drift).
         ee_true: [m] true EE position (world), the "motion capture".
-        tau: [N·m] joint torques J_mᵀ F from the box contact (zeros without contact).
+        tau: [N·m] joint torques: the kinematic plant's J_mᵀ F from the box contact (zeros without
+            contact), a physics plant's what its drives exert (servo and gravity compensation).
         contact_force: [N] force the EE applies to the box (world).
         box_position: [m] world x of the box face, nan without a box.
         box_displacement: [m] how far the box has been pushed, nan without a box.
