@@ -1,11 +1,17 @@
 """The simulated wheeled mobile manipulator: a pure model (this package) and its Zenoh adapter.
 
-The pure model is plain objects, no I/O: :class:`SimRobot` is stepped by commands and reports
-a :class:`SimState` (odometry and ground truth, torques, the referee's violation counts).
+The pure model is plain objects, no I/O: :class:`SimRobot` (the robot's firmware, referees and
+odometry) is stepped by commands, drives a :class:`Plant` (the hardware: write the rates,
+advance, read the measurements; :class:`KinematicPlant` by default) and reports a
+:class:`SimState` (odometry and ground truth, torques, the referee's violation counts). The
+physics plant, ``wmm_qp_sim.mujoco_plant.MujocoPlant``, needs ``mujoco`` (:func:`make_plant`).
 """
 
-from .config import BoxConfig, RefereeConfig, SimConfig, SlipConfig, load_sim_config
+from .config import BoxConfig, PhysicsConfig, RefereeConfig, SimConfig, SlipConfig, load_sim_config
 from .contact import Box, ContactResult
+from .kinematic_plant import KinematicPlant
+from .plant import Plant, PlantState
+from .plants import PlantNotAvailable, available_plants, make_plant
 from .referee import VIOLATION_KINDS, Referee
 from .robot import SimCommand, SimRobot, SimState
 from .slip import SlipModel, integrate_pose
@@ -15,6 +21,11 @@ __all__ = [
     "Box",
     "BoxConfig",
     "ContactResult",
+    "KinematicPlant",
+    "PhysicsConfig",
+    "Plant",
+    "PlantNotAvailable",
+    "PlantState",
     "Referee",
     "RefereeConfig",
     "SimCommand",
@@ -23,6 +34,8 @@ __all__ = [
     "SimState",
     "SlipConfig",
     "SlipModel",
+    "available_plants",
     "integrate_pose",
     "load_sim_config",
+    "make_plant",
 ]

@@ -83,6 +83,42 @@ class BoxConfig:
         return self.mu * self.mass * self.g
 
 
+PLANTS = ("kinematic", "mujoco")
+"""The plants a :class:`PhysicsConfig` may name (``plant``)."""
+
+
+@dataclass(frozen=True)
+class PhysicsConfig:
+    """The plant the simulated robot drives, and the physics plant's parameters.
+
+    Attributes:
+        plant: "kinematic" (:class:`~.kinematic_plant.KinematicPlant`: the rates happen exactly)
+            or "mujoco" (:class:`~.mujoco_plant.MujocoPlant`: rigid-body physics, needs
+            ``pip install 'wmm-qp[physics]'``); the other keys are the physics plant's.
+        mu_wheel: [-] wheel/floor friction coefficient: the base's traction limit is μ_wheel·m·g
+            (m the whole robot's mass), its yaw torque limit that times the wheels' lever.
+        base_mass: [kg] the base's own mass (the arm's comes from its URDF).
+        base_time_constant: [s] time constant of the wheels' force servo toward the commanded twist.
+        servo_error: [rad/s or m/s] the velocity error at which a joint's servo reaches its
+            torque limit (its gain is torque_limit / servo_error).
+        tracking_error: [rad/s or m/s] a joint further than this from its commanded rate could
+            not follow (counted in ``SimState.physics["tracking"]``).
+        armature: [kg·m²] rotor inertia added to every arm joint (a real drive's gearbox).
+        ee_tip_radius: [m] the sphere at the task point that touches the push box.
+        g: [m/s²] gravity.
+    """
+
+    plant: str = "kinematic"
+    mu_wheel: float = 0.5
+    base_mass: float = 60.0
+    base_time_constant: float = 0.02
+    servo_error: float = 0.05
+    tracking_error: float = 0.1
+    armature: float = 0.01
+    ee_tip_radius: float = 0.02
+    g: float = 9.81
+
+
 @dataclass(frozen=True)
 class SimConfig:
     """The simulated robot.
@@ -101,6 +137,7 @@ class SimConfig:
         slip: base slip and drift model.
         referee: tolerance of the limit referee.
         box: the box of the push experiment, or None (no box).
+        physics: the plant and the physics plant's parameters (the file's ``[physics]`` table).
     """
 
     rate_hz: float = 1000.0
@@ -111,6 +148,7 @@ class SimConfig:
     slip: SlipConfig = field(default_factory=SlipConfig)
     referee: RefereeConfig = field(default_factory=RefereeConfig)
     box: BoxConfig | None = None
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
 
     @property
     def dt(self) -> float:
@@ -118,8 +156,9 @@ class SimConfig:
         return 1.0 / self.rate_hz
 
     def with_(self, **changes: Any) -> SimConfig:
-        """A copy with some fields changed; ``slip`` and ``referee`` may be dicts of fields."""
-        for k in ("slip", "referee"):
+        """A copy with some fields changed; ``slip``, ``referee`` and ``physics`` may be dicts of
+        fields."""
+        for k in ("slip", "referee", "physics"):
             if isinstance(changes.get(k), dict):
                 changes[k] = replace(getattr(self, k), **changes[k])
         return replace(self, **changes)
@@ -141,7 +180,7 @@ def load_sim_config(path: Path | str | None = None) -> SimConfig:
             return SimConfig()
     path = Path(path)
     r = TomlTable(path, read_toml(path))
-    r.unknown({"rate_hz", "seed", "stale_timeout", "firmware", "rt_priority", "slip", "referee", "box"})
+    r.unknown({"rate_hz", "seed", "stale_timeout", "firmware", "rt_priority", "slip", "referee", "box", "physics"})
     d = SimConfig()
     rt_priority = r.integer("rt_priority", d.rt_priority, lo=0)
     if rt_priority > 99:
@@ -179,6 +218,7 @@ def load_sim_config(path: Path | str | None = None) -> SimConfig:
             g=b.number("g", db.g, positive=True),
         )
     return SimConfig(
+        physics=_physics(path, r),
         rate_hz=r.number("rate_hz", d.rate_hz, positive=True),
         seed=seed,
         stale_timeout=r.number("stale_timeout", d.stale_timeout, positive=True),
@@ -187,4 +227,26 @@ def load_sim_config(path: Path | str | None = None) -> SimConfig:
         slip=slip,
         referee=referee,
         box=box,
+    )
+
+
+def _physics(path: Path, r: TomlTable) -> PhysicsConfig:
+    """The ``[physics]`` table (absent: the defaults)."""
+    p = r.table("physics", required=False)
+    p.unknown({"plant", "mu_wheel", "base_mass", "base_time_constant", "servo_error", "tracking_error", "armature",
+               "ee_tip_radius", "g"})
+    d = PhysicsConfig()
+    plant = p.get("plant", d.plant)
+    if plant not in PLANTS:
+        raise ConfigError(path, "physics.plant", f"must be one of {', '.join(PLANTS)}, got {plant!r}")
+    return PhysicsConfig(
+        plant=plant,
+        mu_wheel=p.number("mu_wheel", d.mu_wheel, lo=0.0),
+        base_mass=p.number("base_mass", d.base_mass, positive=True),
+        base_time_constant=p.number("base_time_constant", d.base_time_constant, positive=True),
+        servo_error=p.number("servo_error", d.servo_error, positive=True),
+        tracking_error=p.number("tracking_error", d.tracking_error, positive=True),
+        armature=p.number("armature", d.armature, lo=0.0),
+        ee_tip_radius=p.number("ee_tip_radius", d.ee_tip_radius, positive=True),
+        g=p.number("g", d.g, positive=True),
     )

@@ -1,14 +1,16 @@
-"""The simulated wheeled mobile manipulator: a kinematic robot stepped by commanded rates.
+"""The simulated wheeled mobile manipulator's firmware and referees, driving a plant.
 
-:meth:`SimRobot.step` executes the commanded wheel speeds and joint rates as they are (a
-kinematic robot: the referee, not the sim, judges whether they were legal), integrates the
-arm, the odometry (the base kind's nominal model, eq. (3)) and the true base (with slip and drift, see
-:mod:`.slip`), pushes the box if there is one (:mod:`.contact`), and counts every limit
-violation (:mod:`.referee`). It never raises from ``step``: a malformed command is ignored
-(counted in ``SimState.rejected_commands``) and the held command goes on.
+:class:`SimRobot` is the robot as its controller meets it: it receives commands, runs the
+robot's firmware (command refusal, stale and protective stops), writes the rates the drives
+follow to a :class:`~.plant.Plant` (the hardware: :class:`~.kinematic_plant.KinematicPlant` by
+default, a kinematic robot that executes the rates as they are), advances it, reads it back,
+integrates the odometry (the base kind's nominal model, eq. (3), from the measured wheel speeds)
+and counts every limit violation (:mod:`.referee`, :mod:`.collision`): the referee, not the
+plant, judges whether the commands were legal. It never raises from ``step``: a malformed command
+is ignored (counted in ``SimState.rejected_commands``) and the held command goes on.
 
 Stale commands: when no new command has arrived for ``config.stale_timeout`` seconds, the
-sim brakes every joint and wheel to rest by itself at its acceleration limit
+firmware brakes every joint and wheel to rest by itself at its acceleration limit
 (``SimState.stale_stop`` is True until the next command it accepts).
 
 A stop ends the stream it stopped: after a stale or protective stop the firmware refuses every
@@ -23,7 +25,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -31,100 +32,16 @@ import wmm_qp
 from wmm_qp.config import FloatArray
 
 from .collision import CollisionReferee
+from .command import SimCommand
 from .config import BoxConfig, SimConfig
 from .contact import Box
+from .plant import Plant, PlantState
+from .plants import make_plant
 from .referee import Referee
-from .slip import SlipModel, integrate_pose
+from .slip import integrate_pose
+from .state import SimState
 
-
-@dataclass(slots=True)
-class SimCommand:
-    """A command to the robot, held until the next one.
-
-    Attributes:
-        wheel_speeds: [rad/s] wheel speeds (the base kind's wheel order).
-        arm_rates: [rad/s or m/s] joint rates (the robot description's joint order).
-        period: [s] the command's own period (the Δt of its sender's bounds (13)); the referee
-            judges the change from the previous command over it. None: over the time since the
-            previous command.
-        seq: the sender's sequence number (a gap widens the referee's window), or None.
-        received: [s] monotonic time the command was received (caps the referee's window at
-            the time that really passed), or None.
-        stream: the sender's stream id (a new one is judged against the executed rates), or
-            None (then a stale or protective stop starts a new stream).
-        sent: [s] the sender's stamp (its own clock), or None.
-    """
-
-    wheel_speeds: FloatArray
-    arm_rates: FloatArray
-    period: float | None = None
-    seq: int | None = None
-    received: float | None = None
-    stream: int | None = None
-    sent: float | None = None
-
-    def __post_init__(self) -> None:
-        self.wheel_speeds = np.asarray(self.wheel_speeds, dtype=float).reshape(-1)
-        self.arm_rates = np.asarray(self.arm_rates, dtype=float).reshape(-1)
-
-    def is_valid(self, n_wheels: int, n_arm: int) -> bool:
-        """The robot's sizes and finite values."""
-        return bool(
-            self.wheel_speeds.shape == (n_wheels,)
-            and self.arm_rates.shape == (n_arm,)
-            and np.isfinite(self.wheel_speeds).all()
-            and np.isfinite(self.arm_rates).all()
-        )
-
-
-@dataclass(slots=True)
-class SimState:
-    """Everything the sim reports (ground truth included).
-
-    Attributes:
-        t: [s] sim time since reset.
-        q_arm: [rad] joint angles.
-        v_arm: [rad/s] executed joint rates.
-        wheel_speeds: [rad/s] executed wheel speeds.
-        base_odom: [m, m, rad] base pose integrated from the wheel speeds with the nominal model.
-        base_true: [m, m, rad] true base pose (with slip and drift).
-        ee_true: [m] true EE position (world), the "motion capture".
-        tau: [N·m] joint torques J_mᵀ F from the box contact (zeros without contact).
-        contact_force: [N] force the EE applies to the box (world).
-        box_position: [m] world x of the box face, nan without a box.
-        box_displacement: [m] how far the box has been pushed, nan without a box.
-        stalled_joint: the joint (0-based) that stalled the push this step, or None.
-        violations: counts by kind (see :mod:`.referee`).
-        stale_stop: the sim is braking because commands went stale.
-        rejected_commands: malformed commands ignored since reset.
-        commands: valid commands received since reset.
-        protective_stop: the firmware is braking the robot (or holds it at rest) after a
-            command it refused.
-        protective_stops: protective stops since reset.
-        protective_reason: why the last protective stop started ("" = none yet).
-        refused_commands: commands the firmware refused since reset.
-    """
-
-    t: float
-    q_arm: FloatArray
-    v_arm: FloatArray
-    wheel_speeds: FloatArray
-    base_odom: FloatArray
-    base_true: FloatArray
-    ee_true: FloatArray
-    tau: FloatArray
-    contact_force: FloatArray
-    box_position: float
-    box_displacement: float
-    stalled_joint: int | None
-    violations: dict[str, int]
-    stale_stop: bool
-    rejected_commands: int = 0
-    commands: int = 0
-    protective_stop: bool = False
-    protective_stops: int = 0
-    protective_reason: str = ""
-    refused_commands: int = 0
+__all__ = ["SimCommand", "SimRobot", "SimState"]
 
 
 class SimRobot:
@@ -140,16 +57,27 @@ class SimRobot:
             collisions are checked anyway).
         collisions: check collisions (``collision`` violations, :mod:`.collision`); None: the
             config's ``referee.collisions``.
+        plant: the hardware driven; None: the config's ``physics.plant`` (:mod:`.plants`; the
+            default a :class:`~.kinematic_plant.KinematicPlant` with the config's slip, seeded
+            with ``seed``).
+
+    Raises:
+        PlantNotAvailable: the config names a plant whose package is not installed.
+
+    Attributes:
+        v_arm: [rad/s] the joint rates the drives were last told (written to the plant).
+        wheels: [rad/s] the wheel speeds the drives were last told.
     """
 
     def __init__(self, model: wmm_qp.WmmModel, config: SimConfig, seed: int | None = None,
                  ramp: bool = False, scene: wmm_qp.scene.Scene | None = None,
-                 collisions: bool | None = None) -> None:
+                 collisions: bool | None = None, plant: Plant | None = None) -> None:
         self.model = model
         self.config = config
         self.seed = config.seed if seed is None else seed
-        self.rng = np.random.default_rng(self.seed)
-        self.slip = SlipModel(config.slip, model.base.M, self.rng)
+        self.plant: Plant = plant if plant is not None else make_plant(config.physics.plant, model, config,
+                                                                       self.seed, scene)
+        self._ps: PlantState = self.plant.read()
         self.referee = Referee(model.config, config.referee, period_max=config.stale_timeout)
         self.torque_limit = np.array(model.config.arm.torque_limit, dtype=float)
         self.a_max = np.array(model.config.arm.acceleration_max, dtype=float)
@@ -169,8 +97,28 @@ class SimRobot:
             self.collision = CollisionReferee(model, config.referee.collision_distance)
         self.scene_obstacles = scene.obstacles if scene is not None else ()
         self.live_obstacles: tuple[wmm_qp.config.ShapeConfig, ...] = ()
-        self.box: Box | None = None
         self.reset()
+
+    # ------------------------------------------------------------------ the plant's measurements
+    @property
+    def q_arm(self) -> FloatArray:
+        """[rad] the measured joint positions."""
+        return self._ps.q_arm
+
+    @property
+    def base_true(self) -> FloatArray:
+        """[m, m, rad] the true base pose; setting it carries the base there."""
+        return self._ps.base_true
+
+    @base_true.setter
+    def base_true(self, pose: FloatArray) -> None:
+        self.plant.set_base_pose(pose)
+        self._ps = self.plant.read()
+
+    @property
+    def box(self) -> Box | None:
+        """The push box, or None."""
+        return self.plant.box
 
     def set_obstacles(self, obstacles: Sequence[wmm_qp.config.ShapeConfig]) -> None:
         """The live obstacles the referee checks against (they replace the previous live set; the
@@ -209,21 +157,17 @@ class SimRobot:
             q_arm: [rad] joint values; None = the robot description's ``arm.start``.
             box: the box to push; None = ``config.box`` (which may itself be None).
         """
-        self.rng = np.random.default_rng(self.seed)
-        self.slip.rng = self.rng
-        self.slip.reset()
         self.referee.reset()
         if self.collision is not None:
             self.collision.reset()
         self.t = 0.0
         start = self.model.config.arm.start if q_arm is None else q_arm
-        self.q_arm = np.array(start, dtype=float).reshape(self.n_arm)
         self.v_arm = np.zeros(self.n_arm)
         self.wheels = np.zeros(self.n_wheels)
         self.base_odom = np.array(q_base, dtype=float).reshape(3)
-        self.base_true = self.base_odom.copy()
         box_cfg = box if box is not None else self.config.box
-        self.box = Box(box_cfg) if box_cfg is not None else None
+        self.plant.reset(self.base_odom.copy(), np.array(start, dtype=float).reshape(self.n_arm), box_cfg)
+        self._ps = self.plant.read()
         self._box_x = self.box.face_x if self.box is not None else math.nan
         self._update_obstacles()
         self.t_last_command = 0.0
@@ -238,14 +182,12 @@ class SimRobot:
         self.refused = 0
         self.stream: int | None = None  # the stream of the last command received (and not refused for it)
         self.stopped_stream: int | None = None  # the stream a stale or protective stop ended
-        self.tau = np.zeros(self.n_arm)
-        self.force = np.zeros(3)
-        self.stalled_joint: int | None = None
+        self.drives = {"torque_limit": [0] * self.n_arm, "tracking": [0] * self.n_arm}
         return self.state()
 
     def place_box(self, box: BoxConfig | None) -> None:
         """Put a box in the scene now (or remove it with None), keeping the robot's state."""
-        self.box = Box(box) if box is not None else None
+        self.plant.place_box(box)
         self._box_x = self.box.face_x if self.box is not None else math.nan
         self._update_obstacles()
 
@@ -277,7 +219,14 @@ class SimRobot:
                                   f"could not stop before its {side} limit")
             v, w = self._braked(dt)
         self.v_arm, self.wheels = np.array(v, dtype=float), np.array(w, dtype=float)
-        self._integrate(dt)
+        self.plant.write(self.wheels, self.v_arm)
+        self.plant.advance(dt)
+        self._ps = self.plant.read()
+        if self._ps.stalled_joint is not None:
+            self.drives["torque_limit"][self._ps.stalled_joint] += 1
+        if self._ps.lagging_joint is not None:
+            self.drives["tracking"][self._ps.lagging_joint] += 1
+        self.base_odom = integrate_pose(self.base_odom, self.model.base.body_twist(self._ps.wheel_speeds), dt)
         self.t += dt
         self.referee.check_positions(self.q_arm)
         if self.collision is not None:
@@ -301,6 +250,13 @@ class SimRobot:
             return False
         self.t += steps * dt
         return True
+
+    def receive_superseded(self, command: SimCommand, dt: float) -> None:
+        """A command that another one superseded within the same step of dt [s]: received (the
+        referee judges it, the firmware checks it, it may start or end a stop) but not executed.
+        A malformed one is ignored (as :meth:`step` ignores it)."""
+        if command.is_valid(self.n_wheels, self.n_arm):
+            self._receive(command, dt)
 
     def _receive(self, command: SimCommand, dt: float) -> None:
         """A valid command arrived: the referee judges it as received, then the firmware."""
@@ -360,43 +316,22 @@ class SimRobot:
         idx = np.flatnonzero(bad)
         return int(idx[0]) if idx.size else -1
 
-    def _integrate(self, dt: float) -> None:
-        q_new = self.q_arm + self.v_arm * dt
-        self.base_odom = integrate_pose(self.base_odom, self.model.base.body_twist(self.wheels), dt)
-        base_new = integrate_pose(self.base_true, self.slip.true_body_twist(self.wheels, dt), dt)
-        self.tau = np.zeros(self.n_arm)
-        self.force = np.zeros(3)
-        self.stalled_joint = None
-        if self.box is not None:
-            kin = self.model.kinematics(base_new, q_new)
-            contact = self.box.check(kin.x, kin.J_m, self.torque_limit)
-            self.tau, self.force, self.stalled_joint = (
-                contact.tau,
-                contact.force,
-                contact.stalled_joint,
-            )
-            if contact.stalled:
-                return  # the robot is blocked by the box: neither the arm nor the base moves
-            if contact.in_contact:
-                self.box.slide_to(float(kin.x[0]))
-        self.q_arm, self.base_true = q_new, base_new
-
     # ------------------------------------------------------------------ reporting
     def state(self) -> SimState:
         """The full state, ground truth included."""
         return SimState(
             t=self.t,
             q_arm=self.q_arm.copy(),
-            v_arm=self.v_arm.copy(),
-            wheel_speeds=self.wheels.copy(),
+            v_arm=self._ps.v_arm.copy(),
+            wheel_speeds=self._ps.wheel_speeds.copy(),
             base_odom=self.base_odom.copy(),
             base_true=self.base_true.copy(),
             ee_true=self.model.ee_position(self.base_true, self.q_arm),
-            tau=self.tau.copy(),
-            contact_force=self.force.copy(),
+            tau=self._ps.tau.copy(),
+            contact_force=self._ps.contact_force.copy(),
             box_position=self.box.face_x if self.box is not None else float("nan"),
             box_displacement=self.box.displacement if self.box is not None else float("nan"),
-            stalled_joint=self.stalled_joint,
+            stalled_joint=self._ps.stalled_joint,
             violations=dict(self.referee.counts),
             stale_stop=self.stale,
             rejected_commands=self.rejected,
@@ -405,13 +340,14 @@ class SimRobot:
             protective_stops=self.protective_stops,
             protective_reason=self.protective_reason,
             refused_commands=self.refused,
+            drives={k: list(v) for k, v in self.drives.items()},
         )
 
     def robot_state(self) -> wmm_qp.RobotState:
-        """What a controller sees: odometry base pose, joint angles, executed rates."""
+        """What a controller sees: odometry base pose, measured joint angles and rates."""
         return wmm_qp.RobotState(
             q_base=self.base_odom.copy(),
             q_arm=self.q_arm.copy(),
-            v_arm=self.v_arm.copy(),
-            wheel_speeds=self.wheels.copy(),
+            v_arm=self._ps.v_arm.copy(),
+            wheel_speeds=self._ps.wheel_speeds.copy(),
         )

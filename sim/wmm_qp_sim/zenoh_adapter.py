@@ -123,19 +123,25 @@ class SimNode:
         fault_seed: seed of the state-loss draws.
         rt_priority: SCHED_FIFO priority of the step loop's thread (0: normal scheduling), set
             in :meth:`run` after the session opened (Zenoh's own threads keep theirs).
+        scene: the obstacles the referee checks (None: ``load_scene()``'s default).
+        sim: the robot to drive, built by the caller (its model must be ``robot``'s; e.g. with
+            a physics plant); None: a :class:`SimRobot` on its kinematic plant from ``sim_cfg``,
+            ``seed``, ``ramp`` and ``scene``.
     """
 
     def __init__(self, svc: ServiceConfig, sim_cfg: SimConfig, robot: w.RobotConfig,
                  seed: int | None = None, ramp: bool = True, spin_s: float = 0.0,
                  state_loss: float = 0.0, state_delay: float = 0.0, fault_seed: int = 0,
-                 rt_priority: int = 0, scene: Scene | None = None) -> None:
+                 rt_priority: int = 0, scene: Scene | None = None, sim: SimRobot | None = None) -> None:
         svc = svc.with_robot(robot)
         self.svc = svc
         self.cfg = sim_cfg
         self.robot = robot
-        self.model = w.WmmModel(robot)
         self.scene = scene if scene is not None else load_scene()
-        self.sim = SimRobot(self.model, sim_cfg, seed=seed, ramp=ramp, scene=self.scene)
+        if sim is None:
+            sim = SimRobot(w.WmmModel(robot), sim_cfg, seed=seed, ramp=ramp, scene=self.scene)
+        self.sim = sim
+        self.model = sim.model
         self.keys = Keys.of(svc.prefix, svc.robot)
         self.validate = Validator(CommandMsg, svc.robot, svc.validation, n_arm=robot.n_arm,
                                   n_wheels=robot.n_wheels)
@@ -218,8 +224,7 @@ class SimNode:
         if not commands:
             return None
         for c in commands[:-1]:
-            if c.is_valid(self.robot.n_wheels, self.robot.n_arm):  # step() ignores invalid ones too
-                self.sim._receive(c, dt)  # a command superseded within this step: received, not executed
+            self.sim.receive_superseded(c, dt)
         return commands[-1]
 
     def advance(self, now: float, inbox: CommandInbox) -> SimState:

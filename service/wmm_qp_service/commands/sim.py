@@ -22,6 +22,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="SCHED_FIFO priority of the step loop, 0 = normal scheduling (default: "
                              "the sim config's rt_priority, 50; without root or CAP_SYS_NICE the sim "
                              "says so and runs normally)")
+    parser.add_argument("--physics", choices=("kinematic", "mujoco"), default=None,
+                        help="the plant the simulated robot drives: kinematic (rates executed exactly) or "
+                             "mujoco (rigid-body physics, torque-limited servos, traction-limited wheels; "
+                             "pip install 'wmm-qp[physics]') (default: the sim config's [physics] plant)")
     parser.add_argument("--no-ramp", action="store_true",
                         help="apply each command at once (no drive acceleration ramp)")
     f = parser.add_argument_group("fault injection (reliability tests)")
@@ -50,6 +54,8 @@ def run(args: argparse.Namespace) -> int:
         print("wmm-qp sim: error: --state-loss must be in [0, 1) and --state-delay-ms in [0, 10000)",
               file=sys.stderr)
         return 2
+    if args.physics is not None:
+        sim_cfg = sim_cfg.with_(physics={"plant": args.physics})
     prio = sim_cfg.rt_priority if args.rt_priority is None else args.rt_priority
     if not 0 <= prio <= 99:
         print("wmm-qp sim: error: --rt-priority must be in [0, 99]", file=sys.stderr)
@@ -58,13 +64,15 @@ def run(args: argparse.Namespace) -> int:
                    state_loss=args.state_loss, state_delay=args.state_delay_ms * 1e-3, rt_priority=prio, scene=scene)
     stop = stop_on_signals()
     print(f"wmm-qp sim: {svc.prefix}/{svc.robot} at {sim_cfg.rate_hz:g} Hz ({robot.n_arm} joints, "
-          f"{robot.base.kind} base with {robot.n_wheels} wheels; scene {scene.path}: "
+          f"{robot.base.kind} base with {robot.n_wheels} wheels; {sim_cfg.physics.plant} plant; scene {scene.path}: "
           f"{len(scene.obstacles)} obstacles; collision referee "
           f"{'on' if node.sim.collision is not None else 'off'}), listening on {svc.zenoh.sim_endpoint}",
           file=sys.stderr, flush=True)
     st = node.run(stop)
     print(f"wmm-qp sim: stopped at t = {st.t:.3f} s, violations {st.violations}, "
           f"commands rejected {dict(node.validate.rejected)}, "
-          f"states dropped by fault injection {node.states_dropped}",
+          f"states dropped by fault injection {node.states_dropped}"
+          + (f"; steps per joint at its torque limit {st.drives['torque_limit']}, not following its command "
+             f"{st.drives['tracking']}" if sim_cfg.physics.plant != "kinematic" and st.drives else ""),
           file=sys.stderr, flush=True)
     return 0
