@@ -58,6 +58,8 @@ IntArray = np.ndarray
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 RELAX_MARGIN = 1e-9  # [m/s]
 PARALLEL = 0.995  # two rows of one pair of links this parallel (cos) are one
+JOINT_ITERATIONS = 300  # projected-gradient iterations of the rows' joint command (``Rows.relax_together``)
+JOINT_WEIGHT = 1e-6  # its pull towards the braking command [-]: breaks ties, the shortfalls decide
 MAX_ROWS = 48
 """At most this many body pairs per tick, the nearest to their safety distance first (further pairs
 are left out only while MAX_ROWS nearer ones are within the influence distance), but never one
@@ -78,6 +80,36 @@ class Rows:
     distances: FloatArray = field(default_factory=lambda: np.zeros(0))  # [m], per row
     min_distance: float = math.inf  # the closest monitored pair this tick (also beyond d_i)
     closest: str = ""
+
+    def relax_together(self, lb: FloatArray, ub: FloatArray, C_box: FloatArray | None = None,
+                       l_box: FloatArray | None = None, u_box: FloatArray | None = None) -> FloatArray:
+        """Relax the rows together (``l_brake``), when relaxed one by one (``l``) they exclude each
+        other: each row to min(damper, C_k v_r) with v_r the command of the box lb ≤ v ≤ ub that
+        comes nearest to meeting every damper at once (least squares of the shortfalls,
+        :func:`_joint_command`), moved back towards the braking command v₀ = clip(0, lb, ub) as far
+        as the EE box rows l_box ≤ C_box v ≤ u_box (which admit v₀) need. Every row and bound
+        admits v_r, so the stage is feasible; and v_r separates every pair as far as the bounds
+        allow them together, where v₀ (what the rows were relaxed to before) may keep approaching:
+        TIAGo's hand went on towards its torso column at the braking command's rate, 2–6 cm/s for
+        0.8 s, into contact (``wmm-qp experiment circle``, docs/model.md "priority").
+
+        Returns:
+            v_r (the stage's reference point: ``_hold_ee_box`` moves back towards it).
+        """
+        v0 = np.minimum(np.maximum(0.0, lb), ub)
+        v = np.empty(lb.shape[0])
+        _joint_command(self.C, self.damper, lb, ub, v0, JOINT_ITERATIONS, v)
+        if C_box is not None and l_box is not None and u_box is not None and C_box.shape[0]:
+            e0, e1 = C_box @ v0, C_box @ v
+            t = 1.0
+            for k in range(C_box.shape[0]):
+                if e1[k] > u_box[k] and e1[k] > e0[k]:
+                    t = min(t, max(0.0, (u_box[k] - e0[k]) / (e1[k] - e0[k])))
+                elif e1[k] < l_box[k] and e1[k] < e0[k]:
+                    t = min(t, max(0.0, (l_box[k] - e0[k]) / (e1[k] - e0[k])))
+            v = v0 + t * (v - v0)
+        self.l_brake = np.minimum(self.damper, self.C @ v - RELAX_MARGIN)
+        return v
 
 
 class Table:
@@ -770,6 +802,49 @@ def _row_bounds(
     linear = -gain * (d_eff - d_s) / (d_i - d_s)
     profile = -math.sqrt(2.0 * braking * a_n * max(d_eff - d_s, 0.0))
     return max(linear, profile) + shift, best, brake
+
+
+@jit
+def _joint_command(C: FloatArray, target: FloatArray, lb: FloatArray, ub: FloatArray, v0: FloatArray,
+                   iterations: int, out: FloatArray) -> None:
+    """out ← the v of lb ≤ v ≤ ub minimising Σ_k max(0, target_k − C_k v)² + μ‖v − v₀‖² (μ =
+    ``JOINT_WEIGHT``): the command nearest to meeting every row at once, by accelerated projected
+    gradient (FISTA) from v₀. Convex; its step 1/L with L = 2(‖CᵀC‖ + μ) (the Frobenius norm, an
+    upper bound) converges without line search. Not exact, and need not be: the rows are then
+    relaxed to what this v achieves, so every row admits it."""
+    m, n = C.shape
+    fro = 0.0  # ‖CᵀC‖₂ ≤ ‖C‖_F²
+    for k in range(m):
+        for i in range(n):
+            fro += C[k, i] * C[k, i]
+    lip = 2.0 * (fro + JOINT_WEIGHT)
+    x = v0.copy()
+    y = v0.copy()
+    grad = np.empty(n)
+    t = 1.0
+    for _ in range(iterations):
+        for i in range(n):
+            grad[i] = 2.0 * JOINT_WEIGHT * (y[i] - v0[i])
+        for k in range(m):
+            e = 0.0
+            for i in range(n):
+                e += C[k, i] * y[i]
+            short = target[k] - e
+            if short > 0.0:
+                for i in range(n):
+                    grad[i] -= 2.0 * short * C[k, i]
+        t_next = 0.5 * (1.0 + math.sqrt(1.0 + 4.0 * t * t))
+        moved = 0.0
+        for i in range(n):
+            xi = min(max(y[i] - grad[i] / lip, lb[i]), ub[i])
+            y[i] = xi + (t - 1.0) / t_next * (xi - x[i])
+            moved = max(moved, abs(xi - x[i]))
+            x[i] = xi
+        t = t_next
+        if moved < 1e-12:
+            break
+    for i in range(n):
+        out[i] = x[i]
 
 
 @jit
