@@ -10,11 +10,12 @@ HELP = "run the control daemon (Zenoh)"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from ..cli_common import add_service_arguments
-    from .common import add_robot_argument, add_scene_argument
+    from .common import add_collision_argument, add_robot_argument, add_scene_argument
 
     add_service_arguments(parser)
     add_robot_argument(parser)
     add_scene_argument(parser)
+    add_collision_argument(parser)
     parser.add_argument("--rate", type=float, help="[Hz] control rate (default: the service config's)")
     parser.add_argument("--trigger", choices=("rate", "state"),
                         help="what starts a tick: the fixed-rate clock, or each new state (default: the "
@@ -35,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
 
     from ..cli_common import stop_on_signals
     from ..daemon import Daemon, LeaseHeld
-    from .common import load_scene_arg, robot_service_config
+    from .common import collision_config, load_scene_arg, robot_service_config
 
     robot, svc = robot_service_config(args)
     scene = load_scene_arg(args)  # the default scene's fence clamps setpoints in any case
@@ -46,9 +47,8 @@ def run(args: argparse.Namespace) -> int:
         svc = svc.with_(loop={"rate_hz": args.rate})
     if args.trigger is not None:
         svc = svc.with_(loop={"trigger": args.trigger})
-    ctl_cfg = w.load_controller_config(args.controller_config)
-    if args.scene is not None:  # a scene given: the qp controller's collision rows on
-        ctl_cfg = ctl_cfg.with_(collision={"enabled": True})
+    # the rows: on unless --no-collision or the controller file's [collision] enabled = false
+    ctl_cfg = collision_config(args, w.load_controller_config(args.controller_config))
     if args.solver:
         from wmm_qp.solvers import available_solvers
 
