@@ -442,8 +442,9 @@ def test_rows_relaxed_together_separate_where_the_braking_command_does_not() -> 
 @pytest.mark.parametrize("seed", range(20))
 def test_rows_relaxed_together_admit_their_command_and_come_nearer_than_braking(seed: int) -> None:
     """Random rows and boxes: the joint command is inside the box, every relaxed row admits it
-    (the stage is feasible), no row is asked more than its damper, and the squared shortfalls
-    of the dampers are no larger than at the braking command; with EE box rows that admit v₀,
+    (the stage is feasible), no row is asked more than its damper nor admits less than relaxed
+    to the braking command v₀ (what verify's collision rule asks of a pair inside d_s), and the
+    squared shortfalls of the dampers are no larger than at v₀; with EE box rows that admit v₀,
     they admit the joint command too."""
     from wmm_qp.limits.collision import Rows
 
@@ -461,6 +462,7 @@ def test_rows_relaxed_together_admit_their_command_and_come_nearer_than_braking(
         v = rows.relax_together(lb, ub, *((Cb, lbox, ubox) if box else ()))
         assert (v >= lb - 1e-15).all() and (v <= ub + 1e-15).all()
         assert (C @ v >= rows.l_brake).all() and (rows.l_brake <= damper).all()
+        assert (rows.l_brake >= np.minimum(C @ v0, damper) - 2e-9).all()  # never below the braking relaxation
         if box:
             assert (Cb @ v >= lbox - 1e-12).all() and (Cb @ v <= ubox + 1e-12).all()
         else:

@@ -89,6 +89,7 @@ from .base import Controller, TickContext
 SLACK_ACCEPT = 1e-7  # [m/s] slack below this counts as "the task is met"
 RETURN_TIME = 0.05  # [s] a joint past a position limit is pulled back in over about this long
 _NO_BOUNDS = np.zeros(0)  # no EE box rows (read only)
+_NO_REF = np.zeros(0)  # _hold_ee_box's reference point: the braking command clip(0, lb, ub) (read only)
 _NO_BOUNDS.setflags(write=False)
 _NO_HOLD = np.zeros(0)  # stage 2 holds no column
 EE_BOX_TOL = 1e-14  # [m] over one tick: an EE box row violated by less is roundoff (the referee allows 1e-9·Δt)
@@ -289,8 +290,9 @@ def _hold_ee_box(
     A row left by more than ``EE_BOX_TOL`` is restored by the Euclidean projection of v onto
     that row's half-space inside the box bounds, v ← clip(v − λ·C_k, lb, ub) with the least λ ≥ 0
     that meets it (by bisection; it exists: the rows admit ``ref``, inside the box: the braking
-    command v₀ = clip(0, lb, ub), or in the stage whose collision rows are relaxed together the
-    command they were relaxed to). If one row's projection moved another out, v ← ref + t(v − ref)
+    command v₀ = clip(0, lb, ub) — an empty ``ref`` (``_NO_REF``) — or in the stage whose
+    collision rows are relaxed together the command they were relaxed to). If one row's
+    projection moved another out, v ← ref + t(v − ref)
     with the largest t ∈ [0, 1) that meets every row (both ends inside the box bounds, so v still
     is). Returns the largest violation found [m over one tick], 0.0 if v met every row (then
     unchanged).
@@ -333,7 +335,7 @@ def _hold_ee_box(
             e, r = 0.0, 0.0
             for i in range(n):
                 e += C[k, i] * z[i]
-                r += C[k, i] * ref[i]
+                r += C[k, i] * (ref[i] if ref.shape[0] else min(max(0.0, lb[i]), ub[i]))
             if e > u[k] + EE_BOX_TOL:  # r ≤ u[k] by construction
                 t = min(t, (u[k] - r) / (e - r))
             elif e < l[k] - EE_BOX_TOL:
@@ -342,7 +344,8 @@ def _hold_ee_box(
             t = 0.0
         if t < 1.0:
             for i in range(n):
-                z[i] = ref[i] + t * (z[i] - ref[i])
+                r = ref[i] if ref.shape[0] else min(max(0.0, lb[i]), ub[i])
+                z[i] = r + t * (z[i] - r)
     return worst
 
 
@@ -441,6 +444,8 @@ class QpController(Controller):
             state = RobotState(q_base=np.zeros(3), q_arm=q)
             for mode in Mode:  # a safe stop among the obstacles is no failure here: the kernels ran
                 self.step(state, Reference(mode))
+            ones = np.ones(self.n_v)  # the retry's kernel (rows relaxed together), which these may not reach
+            Rows(np.zeros((1, self.n_v)), np.zeros(1), damper=np.zeros(1)).relax_together(-ones, ones)
         finally:
             self.collision.set_obstacles(kept)
         self.reset()
@@ -766,13 +771,13 @@ class QpController(Controller):
             p, w_hold = self.build_arm_first(ctx, xdot, rows)
             z = self._solve(self._arm, p)
             if z is not None and p.n_in:  # the collision rows, whatever solved
-                _hold_ee_box(p.C, p.l, p.u, p.lb, p.ub, z, self.n_arm, np.clip(0.0, p.lb, p.ub))
+                _hold_ee_box(p.C, p.l, p.u, p.lb, p.ub, z, self.n_arm, _NO_REF)
             if z is not None and (self._closed_form_hit or task_residual(p, z) <= SLACK_ACCEPT):
                 self.last_stage = "arm"
                 return self.finish(ctx, np.concatenate([w_hold, z[: self.n_arm]]), xdot, alpha=0.0)
         problem = self.build(ctx, xdot, mode, rows)
         z = self._solve(self._full, problem)
-        ref = np.clip(0.0, ctx.lo, ctx.hi)  # v₀, the braking command: every row admits it but relaxed ones
+        ref = _NO_REF  # v₀ = clip(0, lb, ub), the braking command: the rows admit it unless relaxed together
         if z is None and rows is not None and rows.l.shape[0]:  # the rows together infeasible: relax them together
             n_box = problem.n_in - rows.l.shape[0]
             ref = rows.relax_together(ctx.lo, ctx.hi, problem.C[:n_box, : self.n_v], problem.l[:n_box],
@@ -787,6 +792,8 @@ class QpController(Controller):
             # every solver read the relaxed stage as infeasible: its rows all pass within 1e-9 m/s of
             # the command they were relaxed to, at a vertex of the box, degenerate for an active-set
             # solver (the UR5 at its position limits, docs/results.md); that command meets every row
+            if not ref.shape[0]:
+                ref = np.clip(0.0, ctx.lo, ctx.hi)
             e = problem.C[:, : self.n_v] @ ref
             if bool(((e >= problem.l - EE_BOX_TOL) & (e <= problem.u + EE_BOX_TOL)).all()):
                 self.last_stage = "brake"
