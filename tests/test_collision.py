@@ -422,20 +422,20 @@ def test_a_braking_stage_no_solver_solves_commands_the_braking_command_not_a_saf
     assert ctl.braking_stages == braking  # type: ignore[attr-defined]
 
 
-def test_rows_relaxed_together_separate_where_the_braking_command_does_not() -> None:
-    """A pair the braking command v₀ = clip(0, lb, ub) does not separate (one joint slowing
-    towards 0 moves it apart, another towards 0 moves it closer: C v₀ = 0) but the box can
-    (C v = 0.2 at a vertex). Relaxed together, the row admits only what separates as far as the
-    box allows; relaxed to v₀ (before), TIAGo's hand kept approaching its torso column at the
-    braking command's rate, into contact."""
+def test_rows_relaxed_together_slow_an_approach_the_braking_command_keeps() -> None:
+    """A pair the braking command v₀ = clip(0, lb, ub) keeps approaching (one joint slowing
+    towards 0 moves it apart, the other closer: C v₀ = −0.3 m/s) but the box can approach it less
+    (C v = −0.1 at a vertex). Relaxed together, the row admits no faster approach than that;
+    relaxed to v₀ (before), TIAGo's hand kept approaching its torso column at the braking
+    command's rate, into contact."""
     from wmm_qp.limits.collision import Rows
 
-    lb, ub = np.array([0.4, -0.6]), np.array([0.6, -0.4])
-    rows = Rows(C=np.array([[1.0, 1.0]]), l=np.array([0.2]), damper=np.array([0.5]))
+    lb, ub = np.array([0.4, -0.9]), np.array([0.6, -0.7])
+    rows = Rows(C=np.array([[1.0, 1.0]]), l=np.array([-0.1]), damper=np.array([0.5]))
     v = rows.relax_together(lb, ub)
     assert (v >= lb).all() and (v <= ub).all()
-    assert rows.C @ np.clip(0.0, lb, ub) == pytest.approx([0.0])  # what v₀ does
-    assert rows.C @ v == pytest.approx([0.2], abs=1e-6) and rows.l_brake == pytest.approx([0.2], abs=1e-6)
+    assert rows.C @ np.clip(0.0, lb, ub) == pytest.approx([-0.3])  # what v₀ does
+    assert rows.C @ v == pytest.approx([-0.1], abs=1e-6) and rows.l_brake == pytest.approx([-0.1], abs=1e-6)
     assert (rows.C @ v >= rows.l_brake).all()
 
 
@@ -444,8 +444,8 @@ def test_rows_relaxed_together_admit_their_command_and_come_nearer_than_braking(
     """Random rows and boxes: the joint command is inside the box, every relaxed row admits it
     (the stage is feasible), no row is asked more than its damper nor admits less than relaxed
     to the braking command v₀ (what verify's collision rule asks of a pair inside d_s), and the
-    squared shortfalls of the dampers are no larger than at v₀; with EE box rows that admit v₀,
-    they admit the joint command too."""
+    approaches it leaves (rates below min(damper, 0)) are no larger, in squares, than v₀'s; with
+    EE box rows that admit v₀, they admit the joint command too."""
     from wmm_qp.limits.collision import Rows
 
     rng = np.random.default_rng(seed)
@@ -466,5 +466,5 @@ def test_rows_relaxed_together_admit_their_command_and_come_nearer_than_braking(
         if box:
             assert (Cb @ v >= lbox - 1e-12).all() and (Cb @ v <= ubox + 1e-12).all()
         else:
-            short = lambda x: float(np.sum(np.maximum(0.0, damper - C @ x) ** 2))  # noqa: E731
+            short = lambda x: float(np.sum(np.maximum(0.0, np.minimum(damper, 0.0) - C @ x) ** 2))  # noqa: E731
             assert short(v) <= short(v0) + 1e-12

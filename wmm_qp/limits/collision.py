@@ -88,22 +88,27 @@ class Rows:
         """Relax the rows together (``l_brake``), when relaxed one by one (``l``) they exclude each
         other: each row to min(damper, C_k v_r), v_r a command of the box lb ≤ v ≤ ub that does
         for no row worse than the braking command v₀ = clip(0, lb, ub) or its damper, whichever
-        asks less (C_k v_r ≥ min(C_k v₀, damper_k)), and within that comes nearest to meeting
-        every damper at once (least squares of the shortfalls, :func:`_joint_command`, then moved
-        back towards v₀ as far as those floors and the EE box rows l_box ≤ C_box v ≤ u_box, which
+        asks less (the floor C_k v_r ≥ min(C_k v₀, damper_k)), and within that comes nearest to
+        stopping every approach the braking command lets go on (the target max(floor_k,
+        min(damper_k, 0)); least squares of the shortfalls, :func:`_joint_command`, then moved
+        back towards v₀ as far as the floors and the EE box rows l_box ≤ C_box v ≤ u_box, which
         admit v₀, need). Every row and bound admits v_r, so the stage is feasible; no row admits
-        more than it did relaxed to v₀ (before); and where v₀ keeps a pair approaching, v_r
-        separates it as far as the bounds allow with the others: relaxed to v₀, TIAGo's hand went
-        on towards its torso column at the braking command's rate, 2–6 cm/s for 0.8 s, into
-        contact (``wmm-qp experiment circle``, docs/model.md "priority").
+        more than it did relaxed to v₀ (before); where v₀ keeps a pair approaching, v_r slows
+        that approach as far as the bounds allow with the others: relaxed to v₀, TIAGo's hand
+        went on towards its torso column at the braking command's rate, 2–6 cm/s for 0.8 s, into
+        contact (``wmm-qp experiment circle``, docs/model.md "priority"). Not more than stopping
+        it: v_r asking each pair for its full damper separation moved a Panda deep in
+        self-contact fast along rows of the bodies' capsules that its cylinders did not follow
+        (``wmm-qp verify``, ``panda_link1_0/panda_hand_1`` 1.1 mm deeper in a tick).
 
         Returns:
             v_r (the stage's reference point: ``_hold_ee_box`` moves back towards it).
         """
         v0 = np.minimum(np.maximum(0.0, lb), ub)
         floor = np.minimum(self.C @ v0, self.damper)
+        target = np.maximum(floor, np.minimum(self.damper, 0.0))  # no approach, where braking lets one go on
         v = np.empty(lb.shape[0])
-        _joint_command(self.C, self.damper, floor, lb, ub, v0, JOINT_ITERATIONS, v)
+        _joint_command(self.C, target, floor, lb, ub, v0, JOINT_ITERATIONS, v)
         lo, hi, C = floor, np.full(floor.shape[0], np.inf), self.C
         if C_box is not None and l_box is not None and u_box is not None and C_box.shape[0]:
             lo, hi, C = np.concatenate((lo, l_box)), np.concatenate((hi, u_box)), np.vstack((C, C_box))
