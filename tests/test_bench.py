@@ -223,3 +223,42 @@ def test_compare_commits_interleaves_two_trees() -> None:
     row = r["solvers"]["daqp"]
     assert r["ticks"] == 20 and row["old"]["n"] == row["new"]["n"] == 20
     assert row["same_run"]["stages"] and row["same_run"]["status"] and row["ratio_p50"] > 0
+
+
+def test_collision_default_times_every_robot_with_and_without_its_default_rows(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """``wmm-qp bench --only collision_default`` on a short run: each robot's step with the default
+    scene's rows and without rows, on the same states (no timing asserted); a broken file is named."""
+    from wmm_qp_service.bench import collision
+    from wmm_qp_service.bench.runner import shipped_robots
+
+    bad = tmp_path / "broken.toml"
+    bad.write_text('name = "broken"\n')
+    files = [*shipped_robots(), bad]
+    r = collision.run_default(w.load_controller_config().with_(qp={"solver": "daqp"}), 150, 60.0, files=files)
+    assert set(r) == {"wmm", "panda_diffdrive", "ur5_omni", "tiago", "broken"}
+    assert r["broken"]["available"] is False
+    for name in ("wmm", "panda_diffdrive", "ur5_omni", "tiago"):
+        c = r[name]
+        assert c["with_rows"]["n"] == c["without_rows"]["n"] > 0 and c["solver"] == "daqp"
+        assert c["monitored"]["obstacles"] == 0 and c["monitored"]["self_pairs"] > 0
+    assert r["tiago"]["rows"]["max"] >= 1  # its arm_1/arm_3 pair starts within d_i
+
+
+def test_the_sections_but_collision_default_time_the_controller_without_rows(
+        capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """The shipped config has the rows on; the sections whose figures were taken without them
+    (the paper's setting) still time that, collision_default both."""
+    from wmm_qp_service.bench import runner
+
+    seen: list[bool] = []
+    real = runner.controller.run
+
+    def spy(robot, cfg, *a, **k):  # type: ignore[no-untyped-def]
+        seen.append(cfg.collision.enabled)
+        return real(robot, cfg, *a, **k)
+
+    monkeypatch.setattr(runner.controller, "run", spy)
+    assert main(["bench", "--json", "--ticks", "3", "--solver", "daqp", "--mode", "track", "--no-breakdown",
+                 "--only", "controller"]) == 0
+    assert seen == [False] and w.load_controller_config().collision.enabled
+    capsys.readouterr()

@@ -85,6 +85,34 @@ def test_verify_finds_violations_in_the_baselines(controller: str, capsys: pytes
     assert d["scene"].endswith("default.toml")
 
 
+def test_verify_referees_collisions_by_default(capsys: pytest.CaptureFixture[str]) -> None:
+    """Without --scene, verify still referees self and floor collisions and the default scene's
+    fence (the paper's controller, which has no rows, is caught colliding); --no-collision
+    referees the bounds only."""
+    code, out, _ = run(capsys, "verify", "--controller", "paper", "--samples", "30", "--json")
+    d = json.loads(out)
+    assert d["collision"] is True and d["scene"].endswith("default.toml")
+    assert code == 1 and d["by_kind"]["collision"] > 0 and d["by_case"].get("near_self", 0) > 0
+    code, out, _ = run(capsys, "verify", "--controller", "paper", "--samples", "30", "--no-collision", "--json")
+    d = json.loads(out)
+    assert d["collision"] is False and d["scene"] is None and d["by_kind"]["collision"] == 0
+
+
+def test_verify_has_the_qp_controllers_rows_on_by_default(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run(capsys, "verify", "--samples", "10", "--solver", "daqp", "--json")
+    d = json.loads(out)
+    assert d["collision"] is True and d["collision_rows"] is True and code == 0, d["by_kind"]
+    _, out, _ = run(capsys, "verify", "--samples", "10", "--solver", "daqp", "--no-collision", "--json")
+    assert json.loads(out)["collision_rows"] is False
+
+
+def test_verify_scene_and_no_collision_exclude_each_other(capsys: pytest.CaptureFixture[str]) -> None:
+    scene = str(default_config_dir() / "scenes" / "default.toml")
+    code, _, err = run(capsys, "verify", "--samples", "1", "--scene", scene, "--no-collision")
+    assert code == 2 and "--no-collision" in err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+
+
 def test_console_script_runs_without_traceback() -> None:
     r = subprocess.run(
         [sys.executable, "-m", "wmm_qp_service.cli", "inspect", "--arm-q", "1"],

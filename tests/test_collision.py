@@ -397,10 +397,11 @@ def test_the_first_obstacle_near_the_arm_compiles_nothing_in_the_loop(tmp_path: 
 
 def test_a_braking_stage_no_solver_solves_commands_the_braking_command_not_a_safe_stop() -> None:
     """The UR5 sampled at its position limits with its forearm inside its base (verify's
-    ``at_limit`` case, ~9 rows): the stage relaxed to admit the braking command v₀ has all its rows
-    within 1e-9 m/s of v₀ at a vertex of the box, and DAQP reads it as infeasible. v₀ meets every
-    row and bound by construction: it is commanded (``saturated``, the pair named), not a safe stop
-    (431 of 8,000 commands in the 2,000-sample verify with daqp before; docs/results.md)."""
+    ``at_limit`` case, ~9 rows): the stage with its rows relaxed together has all of them within
+    1e-9 m/s of their joint command v_r at a vertex of the box, and DAQP reads it as infeasible.
+    v_r meets every row and bound by construction: it is commanded (``saturated``, the pair
+    named), not a safe stop (431 of 8,000 commands in the 2,000-sample verify with daqp before
+    the braking command was commanded so; docs/results.md)."""
     from wmm_qp.verify import check_command, sample_states
 
     m = model("ur5_omni.toml")
@@ -414,8 +415,56 @@ def test_a_braking_stage_no_solver_solves_commands_the_braking_command_not_a_saf
     for s in sample_states(m, 12, 0, tuple(w.Mode), judge=judge, influence=p.influence_distance):
         cmd = ctl.step(s.state, s.reference)
         statuses.add(cmd.status.value)
-        braking += "the braking command" in cmd.reason
+        braking += "the rows' joint command" in cmd.reason
         assert sum(check_command(m.config, ctl.dt, s.state, cmd, model=m, collision=judge).values()) == 0, s.case
     assert braking >= 4, braking  # sample 11, at its limits, in every mode
     assert "safe_stop" not in statuses, statuses
     assert ctl.braking_stages == braking  # type: ignore[attr-defined]
+
+
+def test_rows_relaxed_together_slow_an_approach_the_braking_command_keeps() -> None:
+    """A pair the braking command v₀ = clip(0, lb, ub) keeps approaching (one joint slowing
+    towards 0 moves it apart, the other closer: C v₀ = −0.3 m/s) but the box can approach it less
+    (C v = −0.1 at a vertex). Relaxed together, the row admits no faster approach than that;
+    relaxed to v₀ (before), TIAGo's hand kept approaching its torso column at the braking
+    command's rate, into contact."""
+    from wmm_qp.limits.collision import Rows
+
+    lb, ub = np.array([0.4, -0.9]), np.array([0.6, -0.7])
+    rows = Rows(C=np.array([[1.0, 1.0]]), l=np.array([-0.1]), damper=np.array([0.5]))
+    v = rows.relax_together(lb, ub)
+    assert (v >= lb).all() and (v <= ub).all()
+    assert rows.C @ np.clip(0.0, lb, ub) == pytest.approx([-0.3])  # what v₀ does
+    assert rows.C @ v == pytest.approx([-0.1], abs=1e-6) and rows.l_brake == pytest.approx([-0.1], abs=1e-6)
+    assert (rows.C @ v >= rows.l_brake).all()
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_rows_relaxed_together_admit_their_command_and_come_nearer_than_braking(seed: int) -> None:
+    """Random rows and boxes: the joint command is inside the box, every relaxed row admits it
+    (the stage is feasible), no row is asked more than its damper nor admits less than relaxed
+    to the braking command v₀ (what verify's collision rule asks of a pair inside d_s), and the
+    approaches it leaves (rates below min(damper, 0)) are no larger, in squares, than v₀'s; with
+    EE box rows that admit v₀, they admit the joint command too."""
+    from wmm_qp.limits.collision import Rows
+
+    rng = np.random.default_rng(seed)
+    n, m = 10, int(rng.integers(1, 12))
+    mid = rng.normal(size=n)
+    lb, ub = mid - rng.uniform(0.0, 0.2, n), mid + rng.uniform(0.0, 0.2, n)
+    C = rng.normal(size=(m, n)) * 0.3
+    damper = rng.normal(size=m) * 0.3
+    rows = Rows(C=C, l=damper.copy(), damper=damper)
+    v0 = np.clip(0.0, lb, ub)
+    Cb = rng.normal(size=(2, n))
+    lbox, ubox = Cb @ v0 - rng.uniform(0, 0.05, 2), Cb @ v0 + rng.uniform(0, 0.05, 2)
+    for box in (False, True):
+        v = rows.relax_together(lb, ub, *((Cb, lbox, ubox) if box else ()))
+        assert (v >= lb - 1e-15).all() and (v <= ub + 1e-15).all()
+        assert (C @ v >= rows.l_brake).all() and (rows.l_brake <= damper).all()
+        assert (rows.l_brake >= np.minimum(C @ v0, damper) - 2e-9).all()  # never below the braking relaxation
+        if box:
+            assert (Cb @ v >= lbox - 1e-12).all() and (Cb @ v <= ubox + 1e-12).all()
+        else:
+            short = lambda x: float(np.sum(np.maximum(0.0, np.minimum(damper, 0.0) - C @ x) ** 2))  # noqa: E731
+            assert short(v) <= short(v0) + 1e-12

@@ -339,3 +339,25 @@ def test_the_status_position_is_finite_during_a_safe_stop(robot: w.RobotConfig) 
     assert cmd is not None and cmd.status == w.Status.SAFE_STOP and not np.isfinite(cmd.x).all()
     x = core.status(RateLoop(500.0, 0.0), Counter(), {}).x
     assert np.allclose(x, core.model.ee_position(plant.q_base, plant.q_arm))
+
+
+def test_the_status_and_info_say_whether_the_collision_rows_are_on(robot: w.RobotConfig) -> None:
+    """The shipped controller config has the rows on (self, floor, the default scene's fence);
+    ``[collision] enabled = false`` turns them off, and the status and the info say which."""
+    from collections import Counter
+
+    from wmm_qp_service.rate_loop import RateLoop
+
+    core, plant = make(robot)
+    run(core, plant, 0.0, 3)
+    st = core.status(RateLoop(500.0, 0.0), Counter(), {})
+    info = core.info(RateLoop(500.0, 0.0), Counter(), {})
+    assert st.collision is True and info.collision is True
+    assert st.collision_summary.startswith("collision rows on") and "fence" in st.collision_summary
+    assert info.collision_summary == st.collision_summary
+    assert st.collision_pair != "" and math.isfinite(st.collision_distance)
+    off, plant = make(robot, w.load_controller_config().with_(collision={"enabled": False}))
+    run(off, plant, 0.0, 3)
+    st = off.status(RateLoop(500.0, 0.0), Counter(), {})
+    assert st.collision is False and st.collision_summary == "no collision rows"
+    assert off.info(RateLoop(500.0, 0.0), Counter(), {}).collision is False

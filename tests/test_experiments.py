@@ -149,6 +149,7 @@ def test_circle_realtime(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> 
     assert sum(r["violations"].values()) == 0
     rt = r["realtime"]
     assert rt["exit_codes"] == {"sim": 0, "daemon": 0}
+    assert r["collision"] is False and rt["collision"] is False  # the paper's setting: the daemon without rows
     assert rt["ticks"] > 300 and set(rt["state_age_us"]) == {"p50", "p99", "max"}
     rows = read_log(log)
     assert {row["mode"] for row in rows} == {"track"}
@@ -185,6 +186,7 @@ def test_circle_on_any_robot(name: str, n_arm: int, n_wheels: int, rows: bool, c
     r = run_json(capsys, "circle", "--robot-config", str(ROBOTS / f"{name}.toml"), "--duration", "1", "--log", str(log),
                  *scene)
     assert r["robot"] == name and r["task"] == "position"
+    assert r["collision"] is rows  # the paper's setting (no rows) unless --scene
     assert sum(r["violations"].values()) == 0
     assert r["ee_error_max"]["x"] < 0.01 and r["ee_error_max"]["y"] < 0.01
     with open(log) as f:

@@ -21,7 +21,7 @@ import wmm_qp as w
 pytestmark = pytest.mark.integration
 
 FLOOR_Z = w.load_robot_config().base.floor_z
-SCENE = w.default_config_dir() / "scenes" / "default.toml"  # given with --scene: the collision rows on
+SCENE = w.default_config_dir() / "scenes" / "default.toml"  # the daemon's default scene
 MARGIN = w.load_controller_config().collision.floor_margin
 
 
@@ -48,9 +48,10 @@ def sweep_ball(c: Client, x0: np.ndarray, seconds: float = 14.0, speed: float = 
 
 
 def test_an_obstacle_moved_into_the_arm_over_zenoh_is_avoided(service_stack: Any) -> None:
-    stack = service_stack(scene_file=SCENE)
+    stack = service_stack()  # no --scene, no flag: the collision rows are on by default
     with Client(stack.svc, "perception") as c:
         info = ready(c)
+        assert info.collision and info.status.collision and "rows on" in info.collision_summary
         x0 = np.array(info.status.x)
         seen = sweep_ball(c, x0)
         st = until(lambda: (s := c.latest_status()) is not None and s)
@@ -74,9 +75,11 @@ def test_an_obstacle_moved_into_the_arm_over_zenoh_is_avoided(service_stack: Any
 
 
 def test_without_the_rows_the_sim_referee_sees_the_collision(service_stack: Any) -> None:
-    stack = service_stack()  # no --scene: controller.toml's rows (off)
+    stack = service_stack(extra_daemon_args=["--no-collision"])  # turned off explicitly
     with Client(stack.svc, "perception") as c:
-        x0 = np.array(ready(c).status.x)
+        info = ready(c)
+        assert not info.status.collision and info.collision_summary == "no collision rows"
+        x0 = np.array(info.status.x)
         sweep_ball(c, x0)
         st = until(lambda: (s := c.latest_status()) is not None and s)
         assert st.sim_violations.get("collision", 0) > 0, st.sim_violations

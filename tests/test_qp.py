@@ -514,7 +514,7 @@ def test_the_ee_box_recheck_restores_every_row_inside_the_box_bounds(seed: int, 
     u = np.maximum(reach, reach + rng.uniform(0, 1e-3, rows) * (not relaxed))
     z = np.concatenate([rng.uniform(lb, ub), np.zeros(6)])
     before = z.copy()
-    worst = _hold_ee_box(C, l, u, lb, ub, z, n)
+    worst = _hold_ee_box(C, l, u, lb, ub, z, n, np.clip(0.0, lb, ub))
     Cv = C[:, :n] @ z[:n]
     assert (Cv <= u + EE_BOX_TOL).all() and (Cv >= l - EE_BOX_TOL).all()
     assert (z[:n] >= lb).all() and (z[:n] <= ub).all()

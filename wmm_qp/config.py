@@ -300,8 +300,9 @@ class CollisionParams:
     monitored pair closer than d_i.
 
     Attributes:
-        enabled: add the damper rows to every stage of the qp controller (the commands' ``--scene``
-            turns them on).
+        enabled: add the damper rows to every stage of the qp controller (on by default: every
+            command that drives a robot has them unless ``--no-collision`` or ``enabled = false``;
+            ``wmm-qp experiment`` keeps the paper's setting, off, unless ``--scene``).
         influence_distance: [m] d_i, where a pair's row starts to act.
         safety_distance: [m] d_s, the distance the pair settles at (robot vs robot, robot vs obstacles).
         floor_margin: [m] d_s for every link vs the floor.
@@ -311,7 +312,7 @@ class CollisionParams:
             counts on; the rest is left to the other rows and the task.
     """
 
-    enabled: bool = False
+    enabled: bool = True
     influence_distance: float = 0.15
     safety_distance: float = 0.03
     floor_margin: float = 0.03

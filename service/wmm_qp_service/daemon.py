@@ -478,13 +478,20 @@ class ControlCore:
             self.say(f"wmm-qp serve: live obstacles stale (none for {now - self.obstacles_time:.2f} s); "
                      f"the last set ({len(self.live_obstacles)}) is kept")
 
+    def collision_on(self) -> bool:
+        """The controller has collision rows (the status's and the info's ``collision``)."""
+        return getattr(self.ctl, "collision", None) is not None
+
     def collision_summary(self) -> str:
-        """One line: whether the controller has collision rows, and how many pairs it monitors."""
+        """One line: whether the controller has collision rows, and what they keep apart."""
         rows = getattr(self.ctl, "collision", None)
         if rows is None:
             return "no collision rows"
         geo = rows.geo
-        return f"collision rows on ({len(geo.self_pairs)} self pairs, {len(geo.floor_bodies)} bodies vs the floor)"
+        fence = "fence" if rows.fence.base.shape[0] >= 3 or np.isfinite(rows.fence.ee_lower).any() or np.isfinite(
+            rows.fence.ee_upper).any() else "no fence"
+        return (f"collision rows on ({len(geo.self_pairs)} self pairs, {len(geo.floor_bodies)} bodies vs the floor, "
+                f"{len(rows.obstacles)} obstacles, {fence})")
 
     def on_sim_alive(self, alive: bool) -> None:
         """The sim's liveliness token appeared or vanished."""
@@ -738,7 +745,8 @@ class ControlCore:
             obstacles=len(self.scene.obstacles) + len(self.live_obstacles),
             obstacles_live=len(self.live_obstacles), obstacles_stale=self.obstacles_stale,
             collision_distance=rows.min_distance if rows is not None and math.isfinite(rows.min_distance) else math.nan,
-            collision_pair=rows.closest if rows is not None else "")
+            collision_pair=rows.closest if rows is not None else "",
+            collision=self.collision_on(), collision_summary=self.collision_summary())
 
     def _ee_now(self) -> list[float]:
         """[m] the EE position of the last command, or — when it has none (a safe stop's) — of
@@ -776,7 +784,8 @@ class ControlCore:
         return InfoMsg(robot=self.svc.robot, stamp=time.time(), status=self.status(loop, rejected, accepted),
                        config=self.config_dict(), joints=list(self.robot.arm.joints),
                        wheels=list(self.model.base.wheel_names), base_kind=self.model.base.kind,
-                       task=self.cfg.task.kind, n_arm=self.model.n_arm, n_wheels=self.model.n_wheels)
+                       task=self.cfg.task.kind, n_arm=self.model.n_arm, n_wheels=self.model.n_wheels,
+                       collision=self.collision_on(), collision_summary=self.collision_summary())
 
 
 def _plain(d: Any) -> Any:

@@ -267,6 +267,10 @@ class StatusMsg(_Msg, tag="status"):
             is older than ``obstacles.timeout`` (kept all the same).
         collision_distance, collision_pair: [m] the closest monitored pair of the last tick
             (self, floor, obstacles; nan and "" without collision rows).
+        collision: the controller has collision rows (on by default; off with ``--no-collision``,
+            ``[collision] enabled = false`` or a controller without rows, paper and traditional).
+        collision_summary: one line saying so, e.g. "collision rows on (24 self pairs, 7 bodies
+            vs the floor, 0 obstacles, fence)" or "no collision rows".
     """
 
     mode: str
@@ -304,6 +308,8 @@ class StatusMsg(_Msg, tag="status"):
     obstacles_stale: bool = False
     collision_distance: float = float("nan")
     collision_pair: str = ""
+    collision: bool = False
+    collision_summary: str = ""
 
 
 class TelemetryMsg(_Msg, tag="telemetry"):
@@ -360,6 +366,8 @@ class InfoMsg(_Msg, tag="info"):
         base_kind: ``mecanum``, ``omni``, ``diff_drive`` or ``fixed``.
         task: the task kind, ``position`` (r = 3) or ``pose`` (r = 6: setpoints' ``q`` is used).
         n_arm, n_wheels: the lengths of the arm and wheel vectors (``len(joints)``, ``len(wheels)``).
+        collision, collision_summary: as in :class:`StatusMsg`: whether the controller has
+            collision rows, and one line saying which.
     """
 
     status: StatusMsg
@@ -370,6 +378,8 @@ class InfoMsg(_Msg, tag="info"):
     task: str = ""
     n_arm: int = -1
     n_wheels: int = -1
+    collision: bool = False
+    collision_summary: str = ""
 
 
 _ENC = msgspec.msgpack.Encoder()

@@ -77,6 +77,7 @@ bounds (``_hold_ee_box``; status SATURATED with the reason).
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -99,6 +100,7 @@ SLACK_ACCEPT = 1e-7  # [m/s] slack below this counts as "the task is met"
 TASK_CUT = 1e-6  # [m/s] a stage's max |J v − ẋ_ref| above this: the task was cut (status saturated)
 RETURN_TIME = 0.05  # [s] a joint past a position limit is pulled back in over about this long
 _NO_BOUNDS = np.zeros(0)  # no EE box rows (read only)
+_NO_REF = np.zeros(0)  # _hold_ee_box's reference point: the braking command clip(0, lb, ub) (read only)
 _NO_BOUNDS.setflags(write=False)
 _NO_HOLD = np.zeros(0)  # stage 2 holds no column
 EE_BOX_TOL = 1e-14  # [m] over one tick: an EE box row violated by less is roundoff (the referee allows 1e-9·Δt)
@@ -289,7 +291,8 @@ def _ee_box(
 
 @jit
 def _hold_ee_box(
-    C: FloatArray, l: FloatArray, u: FloatArray, lb: FloatArray, ub: FloatArray, z: FloatArray, n: int
+    C: FloatArray, l: FloatArray, u: FloatArray, lb: FloatArray, ub: FloatArray, z: FloatArray, n: int,
+    ref: FloatArray,
 ) -> float:
     """The EE box re-checked on the achieved command v = z[:n], whatever solved the stage.
 
@@ -297,10 +300,13 @@ def _hold_ee_box(
     (DAQP's and OSQP's are ~1e-6 on these rows; the clip to lb ≤ v ≤ ub does not touch them).
     A row left by more than ``EE_BOX_TOL`` is restored by the Euclidean projection of v onto
     that row's half-space inside the box bounds, v ← clip(v − λ·C_k, lb, ub) with the least λ ≥ 0
-    that meets it (by bisection; it exists: the rows admit v₀ = clip(0, lb, ub), the braking
-    command). If one row's projection moved another out, v ← v₀ + t(v − v₀) with the largest
-    t ∈ [0, 1) that meets every row (both ends inside the box bounds, so v still is). Returns
-    the largest violation found [m over one tick], 0.0 if v met every row (then unchanged).
+    that meets it (by bisection; it exists: the rows admit ``ref``, inside the box: the braking
+    command v₀ = clip(0, lb, ub) — an empty ``ref`` (``_NO_REF``) — or in the stage whose
+    collision rows are relaxed together the command they were relaxed to). If one row's
+    projection moved another out, v ← ref + t(v − ref)
+    with the largest t ∈ [0, 1) that meets every row (both ends inside the box bounds, so v still
+    is). Returns the largest violation found [m over one tick], 0.0 if v met every row (then
+    unchanged).
     """
     worst = 0.0
     for k in range(C.shape[0]):
@@ -334,23 +340,23 @@ def _hold_ee_box(
                 lam_lo = mid
         for i in range(n):
             z[i] = min(max(z[i] - lam_hi * sign * C[k, i], lb[i]), ub[i])
-    if worst > 0.0:  # every row again (a projection may have moved another row); else towards v₀
+    if worst > 0.0:  # every row again (a projection may have moved another row); else towards ref
         t = 1.0
         for k in range(C.shape[0]):
             e, r = 0.0, 0.0
             for i in range(n):
                 e += C[k, i] * z[i]
-                r += C[k, i] * min(max(0.0, lb[i]), ub[i])
+                r += C[k, i] * (ref[i] if ref.shape[0] else min(max(0.0, lb[i]), ub[i]))
             if e > u[k] + EE_BOX_TOL:  # r ≤ u[k] by construction
                 t = min(t, (u[k] - r) / (e - r))
             elif e < l[k] - EE_BOX_TOL:
                 t = min(t, (l[k] - r) / (e - r))
-        if not t >= 0.0:  # NaN, or a row that does not admit v₀ (cannot happen): brake
+        if not t >= 0.0:  # NaN, or a row that does not admit ref (cannot happen): ref
             t = 0.0
         if t < 1.0:
             for i in range(n):
-                v0 = min(max(0.0, lb[i]), ub[i])
-                z[i] = v0 + t * (z[i] - v0)
+                r = ref[i] if ref.shape[0] else min(max(0.0, lb[i]), ub[i])
+                z[i] = r + t * (z[i] - r)
     return worst
 
 
@@ -391,7 +397,8 @@ class QpController(Controller):
         self.task_recovered = 0  # ... and turned out feasible (the penalty alone was too weak)
         self.task_without_objective = 0  # ... of which only with the DM/return terms dropped
         self.ee_box_corrections = 0  # commands the EE box re-check had to pull back into the box
-        self.braking_stages = 0  # stages every solver failed on, commanded the braking command that meets their rows
+        self.braking_stages = 0  # stages every solver failed on, commanded the joint command that meets their rows
+        self.joint_relaxations = 0  # stages whose collision rows were infeasible together, relaxed together
         self._templates: dict[tuple[int, int], QPProblem] = {}
         self._w_inv = 1.0 / weight_matrix_diag(qp.alpha, self.n_wheels, self.n_arm)  # W_x⁻¹, eq. (12)
         self._w_inv_dm = 1.0 / weight_matrix_diag(qp.dm_alpha, self.n_wheels, self.n_arm)  # in DM_NULLSPACE
@@ -450,6 +457,8 @@ class QpController(Controller):
             state = RobotState(q_base=np.zeros(3), q_arm=q)
             for mode in Mode:  # a safe stop among the obstacles is no failure here: the kernels ran
                 self.step(state, Reference(mode))
+            ones = np.ones(self.n_v)  # the retry's kernel (rows relaxed together), which these may not reach
+            Rows(np.zeros((1, self.n_v)), np.zeros(1), damper=np.zeros(1)).relax_together(-ones, ones)
         finally:
             self.collision.set_obstacles(kept)
         self.reset()
@@ -663,9 +672,10 @@ class QpController(Controller):
         self, ctx: TickContext, xdot: FloatArray, mode: Mode, rows: Rows | None = None, brake: bool = False,
         floor: FloorRow | None = None,
     ) -> QPProblem:
-        """Stage 2: the whole robot (see the module docstring); ``brake``: the collision rows (and the
-        σ_min floor's) relaxed to admit the braking command (the retry when the rows together are
-        infeasible). Rows, in order: the EE box, the collision rows, the σ_min floor."""
+        """Stage 2: the whole robot (see the module docstring); ``brake``: the collision rows relaxed
+        together (``Rows.relax_together``) and the σ_min floor's relaxed to admit their command (the
+        retry when the rows are infeasible together). Rows, in order: the EE box, the collision rows,
+        the σ_min floor."""
         C, l, u = self.ee_box_rows(ctx, mode, ctx.lo, ctx.hi)
         if rows is not None and rows.l.shape[0]:
             C = np.vstack((C, rows.C))
@@ -796,8 +806,8 @@ class QpController(Controller):
         if self.config.qp.arm_first and mode in (Mode.TRACK, Mode.HOLD):
             p, w_hold = self.build_arm_first(ctx, xdot, rows)
             z = self._solve(self._arm, p)
-            if z is not None and p.n_in:
-                _hold_ee_box(p.C, p.l, p.u, p.lb, p.ub, z, self.n_arm)  # the collision rows, whatever solved
+            if z is not None and p.n_in:  # the collision rows, whatever solved
+                _hold_ee_box(p.C, p.l, p.u, p.lb, p.ub, z, self.n_arm, _NO_REF)
             if z is not None and (self._closed_form_hit or task_residual(p, z) <= SLACK_ACCEPT):
                 self.last_stage = "arm"
                 return self.finish(ctx, np.concatenate([w_hold, z[: self.n_arm]]), xdot, alpha=0.0)
@@ -818,25 +828,35 @@ class QpController(Controller):
                 problem, z = loose, z_loose
             else:  # the bounds cut the task anyway: the floored stage stands
                 self._last_problem, self._closed_form_hit = problem, False
-        if z is None and (floor is not None or (rows is not None and rows.l.shape[0])):
-            # the rows together infeasible: admit braking
+        ref = _NO_REF  # v₀ = clip(0, lb, ub), the braking command: the rows admit it unless relaxed together
+        has_rows = rows is not None and rows.l.shape[0] > 0
+        if z is None and (floor is not None or has_rows):  # the rows together infeasible: relax them together
+            if has_rows:
+                assert rows is not None
+                n_box = problem.n_in - rows.l.shape[0] - (0 if floor is None else 1)
+                ref = rows.relax_together(ctx.lo, ctx.hi, problem.C[:n_box, : self.n_v], problem.l[:n_box],
+                                          problem.u[:n_box])
+                self.joint_relaxations += 1
+                if floor is not None:  # the floor's row admits the rows' command too
+                    floor = self.last_floor = replace(floor, l_brake=min(floor.l_brake, float(floor.C @ ref)))
             problem = self.build(ctx, xdot, mode, rows, brake=True, floor=floor)
             z = self._solve(self._full, problem)
             if z is None and problem.g[: self.n_v].any():  # still failing: without the DM and return terms
                 problem.g[: self.n_v] = 0.0
                 z = self._solve(self._full, problem)
-        if z is None and (floor is not None or (rows is not None and rows.l.shape[0])):
-            # every solver read the braking stage as infeasible: its rows all pass within 1e-9 m/s of
-            # the braking command v₀ at a vertex of the box, degenerate for an active-set solver
-            # (the UR5 at its position limits, docs/results.md); v₀ itself meets every row and bound
-            v0 = np.clip(0.0, ctx.lo, ctx.hi)
-            e = problem.C[:, : self.n_v] @ v0
+        if z is None and (floor is not None or has_rows):
+            # every solver read the relaxed stage as infeasible: its rows all pass within 1e-9 m/s of
+            # the command they were relaxed to, at a vertex of the box, degenerate for an active-set
+            # solver (the UR5 at its position limits, docs/results.md); that command meets every row
+            if not ref.shape[0]:
+                ref = np.clip(0.0, ctx.lo, ctx.hi)
+            e = problem.C[:, : self.n_v] @ ref
             if bool(((e >= problem.l - EE_BOX_TOL) & (e <= problem.u + EE_BOX_TOL)).all()):
                 self.last_stage = "brake"
                 self.braking_stages += 1
-                return self.finish(ctx, v0, xdot, status=Status.SATURATED,
-                                   reason=f"{self._cut_reason(rows, v0, floor)}: the braking command (qp "
-                                          f"({self.solver}): no solution of the stage that admits it)")
+                why = f"the rows' joint command (qp ({self.solver}): no solution of the stage that admits it)"
+                return self.finish(ctx, ref, xdot, status=Status.SATURATED,
+                                   reason=f"{self._cut_reason(rows, ref, floor)}: {why}")
         if z is None:
             self.last_stage = "failed"
             return self.safe_stop(state, f"qp ({self.solver}): the solver failed")
@@ -849,7 +869,7 @@ class QpController(Controller):
             C, lo, hi = problem.C[:n_hard], problem.l[:n_hard], problem.u[:n_hard]
             e = C[:, : self.n_v] @ z[: self.n_v]
             left = np.flatnonzero((e > hi + EE_BOX_TOL) | (e < lo - EE_BOX_TOL))
-            out = _hold_ee_box(C, lo, hi, problem.lb, problem.ub, z, self.n_v)
+            out = _hold_ee_box(C, lo, hi, problem.lb, problem.ub, z, self.n_v, ref)
             if out > 0.0:
                 self.ee_box_corrections += 1
                 status = Status.SATURATED

@@ -29,13 +29,14 @@ links is not enough: another body of the same links went deeper (verify, the Pan
 Priority: the acceleration bounds (13) win. Each row is relaxed, where the bounds cannot meet it,
 to the most separating rate they admit: l ← min(l, max_{lb ≤ v ≤ ub} C_k v) — the robot then
 separates (or stops approaching) as hard as (13) allows. Each row alone is then feasible; should
-the rows together not be (two contacts pulling apart), the stage is solved again with every row
-relaxed to admit the braking command v₀ = clip(0, lb, ub) (the command nearest zero inside the
-bounds), l ← min(l, C v₀), which no set of rows can exclude: no collision row ever makes a stage
-infeasible, braking is always admitted. (Relaxing to C v₀ alone is not enough: a stage may then keep
-approaching at the braking command's rate tick after tick without ever braking — found by
-``tests/test_collision.py``, the arm folded into its base.) The influence distance must exceed the
-distance the robot needs to stop (docs/model.md gives the numbers).
+the rows together not be (two contacts pulling apart), the stage is solved again with the rows
+relaxed together (:meth:`Rows.relax_together`): l ← min(damper, C v_r), v_r the command inside the
+bounds that comes nearest to meeting every damper at once, which therefore admits v_r: no
+collision row ever makes a stage infeasible. (Not to the braking command v₀ = clip(0, lb, ub): its
+rate for a pair may be an approach, and a stage relaxed to it kept approaching at that rate tick
+after tick — TIAGo's hand into its torso column on the circle, docs/model.md "priority".) The
+influence distance must exceed the distance the robot needs to stop (docs/model.md gives the
+numbers).
 """
 
 from __future__ import annotations
@@ -58,6 +59,9 @@ IntArray = np.ndarray
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 RELAX_MARGIN = 1e-9  # [m/s]
 PARALLEL = 0.995  # two rows of one pair of links this parallel (cos) are one
+JOINT_ITERATIONS = 300  # projected-gradient iterations of the rows' joint command (``Rows.relax_together``)
+JOINT_WEIGHT = 1e-6  # its pull towards the braking command [-]: breaks ties, the shortfalls decide
+JOINT_FLOOR_WEIGHT = 10.0  # its penalty on a row below what the braking command gives it [-]
 MAX_ROWS = 48
 """At most this many body pairs per tick, the nearest to their safety distance first (further pairs
 are left out only while MAX_ROWS nearer ones are within the influence distance), but never one
@@ -78,6 +82,46 @@ class Rows:
     distances: FloatArray = field(default_factory=lambda: np.zeros(0))  # [m], per row
     min_distance: float = math.inf  # the closest monitored pair this tick (also beyond d_i)
     closest: str = ""
+
+    def relax_together(self, lb: FloatArray, ub: FloatArray, C_box: FloatArray | None = None,
+                       l_box: FloatArray | None = None, u_box: FloatArray | None = None) -> FloatArray:
+        """Relax the rows together (``l_brake``), when relaxed one by one (``l``) they exclude each
+        other: each row to min(damper, C_k v_r), v_r a command of the box lb ≤ v ≤ ub that does
+        for no row worse than the braking command v₀ = clip(0, lb, ub) or its damper, whichever
+        asks less (the floor C_k v_r ≥ min(C_k v₀, damper_k)), and within that comes nearest to
+        stopping every approach the braking command lets go on (the target max(floor_k,
+        min(damper_k, 0)); least squares of the shortfalls, :func:`_joint_command`, then moved
+        back towards v₀ as far as the floors and the EE box rows l_box ≤ C_box v ≤ u_box, which
+        admit v₀, need). Every row and bound admits v_r, so the stage is feasible; no row admits
+        more than it did relaxed to v₀ (before); where v₀ keeps a pair approaching, v_r slows
+        that approach as far as the bounds allow with the others: relaxed to v₀, TIAGo's hand
+        went on towards its torso column at the braking command's rate, 2–6 cm/s for 0.8 s, into
+        contact (``wmm-qp experiment circle``, docs/model.md "priority"). Not more than stopping
+        it: v_r asking each pair for its full damper separation moved a Panda deep in
+        self-contact fast along rows of the bodies' capsules that its cylinders did not follow
+        (``wmm-qp verify``, ``panda_link1_0/panda_hand_1`` 1.1 mm deeper in a tick).
+
+        Returns:
+            v_r (the stage's reference point: ``_hold_ee_box`` moves back towards it).
+        """
+        v0 = np.minimum(np.maximum(0.0, lb), ub)
+        floor = np.minimum(self.C @ v0, self.damper)
+        target = np.maximum(floor, np.minimum(self.damper, 0.0))  # no approach, where braking lets one go on
+        v = np.empty(lb.shape[0])
+        _joint_command(self.C, target, floor, lb, ub, v0, JOINT_ITERATIONS, v)
+        lo, hi, C = floor, np.full(floor.shape[0], np.inf), self.C
+        if C_box is not None and l_box is not None and u_box is not None and C_box.shape[0]:
+            lo, hi, C = np.concatenate((lo, l_box)), np.concatenate((hi, u_box)), np.vstack((C, C_box))
+        e0, e1 = C @ v0, C @ v
+        t = 1.0  # the largest step from v₀ towards v that keeps every floor and EE box row
+        for k in range(C.shape[0]):
+            if e1[k] > hi[k] and e1[k] > e0[k]:
+                t = min(t, max(0.0, (hi[k] - e0[k]) / (e1[k] - e0[k])))
+            elif e1[k] < lo[k] and e1[k] < e0[k]:
+                t = min(t, max(0.0, (lo[k] - e0[k]) / (e1[k] - e0[k])))
+        v = v0 + t * (v - v0)
+        self.l_brake = np.minimum(self.damper, self.C @ v) - RELAX_MARGIN
+        return v
 
 
 class Table:
@@ -770,6 +814,51 @@ def _row_bounds(
     linear = -gain * (d_eff - d_s) / (d_i - d_s)
     profile = -math.sqrt(2.0 * braking * a_n * max(d_eff - d_s, 0.0))
     return max(linear, profile) + shift, best, brake
+
+
+@jit
+def _joint_command(C: FloatArray, target: FloatArray, floor: FloatArray, lb: FloatArray, ub: FloatArray,
+                   v0: FloatArray, iterations: int, out: FloatArray) -> None:
+    """out ← the v of lb ≤ v ≤ ub minimising Σ_k max(0, target_k − C_k v)² + w Σ_k max(0,
+    floor_k − C_k v)² + μ‖v − v₀‖² (w = ``JOINT_FLOOR_WEIGHT``, μ = ``JOINT_WEIGHT``): the command
+    nearest to meeting every row at once while keeping each above its floor, by accelerated
+    projected gradient (FISTA) from v₀. Convex; its step 1/L with L = 2((1 + w)‖C‖_F² + μ) (an
+    upper bound of the gradient's Lipschitz constant) converges without line search. Not exact,
+    and need not be: the caller steps back towards v₀ until every floor holds, and relaxes the
+    rows to what that command achieves, so every row admits it."""
+    m, n = C.shape
+    fro = 0.0  # ‖CᵀC‖₂ ≤ ‖C‖_F²
+    for k in range(m):
+        for i in range(n):
+            fro += C[k, i] * C[k, i]
+    lip = 2.0 * ((1.0 + JOINT_FLOOR_WEIGHT) * fro + JOINT_WEIGHT)
+    x = v0.copy()
+    y = v0.copy()
+    grad = np.empty(n)
+    t = 1.0
+    for _ in range(iterations):
+        for i in range(n):
+            grad[i] = 2.0 * JOINT_WEIGHT * (y[i] - v0[i])
+        for k in range(m):
+            e = 0.0
+            for i in range(n):
+                e += C[k, i] * y[i]
+            pull = max(0.0, target[k] - e) + JOINT_FLOOR_WEIGHT * max(0.0, floor[k] - e)
+            if pull > 0.0:
+                for i in range(n):
+                    grad[i] -= 2.0 * pull * C[k, i]
+        t_next = 0.5 * (1.0 + math.sqrt(1.0 + 4.0 * t * t))
+        moved = 0.0
+        for i in range(n):
+            xi = min(max(y[i] - grad[i] / lip, lb[i]), ub[i])
+            y[i] = xi + (t - 1.0) / t_next * (xi - x[i])
+            moved = max(moved, abs(xi - x[i]))
+            x[i] = xi
+        t = t_next
+        if moved < 1e-12:
+            break
+    for i in range(n):
+        out[i] = x[i]
 
 
 @jit

@@ -1,7 +1,11 @@
-"""The cost of the collision rows (issue 13): the track-mode tick with and without them, in one run.
+"""The cost of the collision rows: the track-mode tick with and without them, in one run.
 
-The paper's circle (:mod:`.trajectory`) among obstacles: ``configs/scenes/cluttered.toml`` (a wall,
-a pillar, a ball, a side wall) with one more ball placed on the circle's path near the EE, so that
+``collision_default`` (:func:`run_default`): every shipped robot on the paper's circle with the
+default scene (its rows: self, floor, the fence), the cost of the default.
+
+``collisions`` (:func:`run`): the paper's circle (:mod:`.trajectory`) among obstacles:
+``configs/scenes/cluttered.toml`` (a wall, a pillar, a ball, a side wall) with one more ball
+placed on the circle's path near the EE, so that
 about ten monitored pairs are inside the influence distance (the arm's self pairs, the ball, the
 floor). Both controllers see every state of one trajectory (the rows-on controller's, executed by
 an ideal robot); their ``step`` calls alternate tick by tick, so machine noise hits both alike.
@@ -13,6 +17,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -41,13 +46,52 @@ def run(robot: w.RobotConfig, cfg: w.ControllerConfig, ticks: int, max_seconds: 
         "rows" {p50, max} per tick, "monitored" (pairs the geometry monitors), "violations"}.
     """
     model = w.WmmModel(robot)
+    bot = IdealRobot.at_start(model)
+    scene = bench_scene(model.ee_position(bot.q_base, bot.q_arm))
+    out = _on_off(model, cfg, scene, ticks, max_seconds)
+    return {"robot": robot.name, "scene": "configs/scenes/cluttered.toml + a ball beside the circle", **out,
+            "referee": referee(model, scene, out.pop("_cmds"), out.pop("_dt"))}
+
+
+def run_default(cfg: w.ControllerConfig, ticks: int, max_seconds: float = 30.0,
+                files: list[Path] | None = None) -> dict[str, Any]:
+    """The cost of the default (rows on): for every shipped robot, the track-mode ``step`` on the
+    paper's circle from its ``arm.start`` with the default scene's rows (self, floor, the fence of
+    ``configs/scenes/default.toml``) and without rows, interleaved tick by tick (:func:`_on_off`).
+
+    Returns:
+        {robot name: {"file", "available", "scene", "solver", "ticks", "with_rows" {p50, p99, …},
+        "without_rows" {…}, "ratio_p50", "rows" {p50, max, mean}, "monitored"}} (a robot file that
+        does not load: {"file", "available": False, "reason"}).
+    """
+    from .runner import shipped_robots
+
+    scene = load_scene()  # configs/scenes/default.toml: the fence, no obstacles
+    out: dict[str, Any] = {}
+    for f in files if files is not None else shipped_robots():
+        try:
+            robot = w.load_robot_config(f)
+        except w.ConfigError as e:
+            out[f.stem] = {"file": str(f), "available": False, "reason": str(e)}
+            continue
+        res = _on_off(w.WmmModel(robot), cfg, scene, ticks, max_seconds)
+        res.pop("_cmds"), res.pop("_dt")
+        out[robot.name] = {"file": str(f), "available": True, "scene": "configs/scenes/default.toml",
+                           "solver": cfg.qp.solver, **res}
+    return out
+
+
+def _on_off(model: w.WmmModel, cfg: w.ControllerConfig, scene: w.scene.Scene, ticks: int,
+            max_seconds: float) -> dict[str, Any]:
+    """``step`` with the rows (and ``scene``) and without them, on the states of one circle (the
+    rows-on controller's commands executed by an ideal robot), alternating which runs first."""
+    robot = model.config
     on = w.make_controller("qp", model, cfg.with_(collision={"enabled": True}))
     off = w.make_controller("qp", w.WmmModel(robot), cfg.with_(collision={"enabled": False}))
     for c in (on, off):
         c.warm_up()
     bot = IdealRobot.at_start(model)
     x0 = model.ee_position(bot.q_base, bot.q_arm)
-    scene = bench_scene(x0)
     on.set_scene(scene)  # type: ignore[attr-defined]
     t_on: list[int] = []
     t_off: list[int] = []
@@ -77,8 +121,6 @@ def run(robot: w.RobotConfig, cfg: w.ControllerConfig, ticks: int, max_seconds: 
     geo = on.collision.geo  # type: ignore[attr-defined]
     r = np.array(rows[100:] or [0])
     return {
-        "robot": robot.name,
-        "scene": "configs/scenes/cluttered.toml + a ball beside the circle",
         "ticks": len(t_on),
         "with_rows": s_on,
         "without_rows": s_off,
@@ -86,7 +128,7 @@ def run(robot: w.RobotConfig, cfg: w.ControllerConfig, ticks: int, max_seconds: 
         "rows": {"p50": float(np.median(r)), "max": int(r.max()), "mean": round(float(r.mean()), 1)},
         "monitored": {"self_pairs": len(geo.self_pairs), "floor_bodies": len(geo.floor_bodies),
                       "obstacles": len(scene.obstacles), "bodies": len(geo.bodies)},
-        "referee": referee(model, scene, cmds, on.dt),
+        "_cmds": cmds, "_dt": on.dt,
     }
 
 

@@ -112,8 +112,10 @@ def run_case(
         "duration_s": round(duration, 2),
         "loadavg_before": loadavg(),
         "logs": str(log_dir),
+        "collision": False,
     }
     args = ["--trigger", trigger] + ([] if controller_file is None else ["--controller-config", str(controller_file)])
+    args += ["--no-collision"]  # the loop as its figures were taken (docs/benchmarks.md §5); rows: collision_default
     breakdown_file = log_dir / "breakdown.json"
     if breakdown:
         args += ["--breakdown", str(breakdown_file)]

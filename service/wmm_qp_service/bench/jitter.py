@@ -56,7 +56,7 @@ def step_after_idle(ticks: int) -> dict[str, Any]:
 
     from .controller import CleanCase
 
-    robot, cfg = w.load_robot_config(), w.load_controller_config()
+    robot, cfg = w.load_robot_config(), w.load_controller_config().with_(collision={"enabled": False})
     idles = ("none", "sleep", "spin")
     cases = {i: CleanCase(robot, cfg, cfg.qp.solver) for i in idles}
     per_round = max(1, min(500, ticks))

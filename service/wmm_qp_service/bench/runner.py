@@ -16,7 +16,7 @@ from .machine import machine_info
 from .stats import now_ns
 
 SECTIONS: tuple[str, ...] = ("controller", "oneshot", "pink", "scaling", "robots", "e2e", "daemon", "collisions",
-                             "jitter")
+                             "collision_default", "jitter")
 
 
 def shipped_robots() -> list[Path]:
@@ -112,6 +112,10 @@ def run_bench(
     """
     robot = w.load_robot_config() if robot is None else robot
     cfg = w.load_controller_config() if cfg is None else cfg
+    rows_cfg = cfg  # collision_default: the controller config as given, its rows on and off
+    # the other sections time the controller as their figures were taken, without collision rows
+    # (the paper's setting); what the default rows cost: collision_default
+    cfg = cfg.with_(collision={"enabled": False})
     solvers = solvers or available_solvers()
     modes = modes or list(controller.MODES)
     out: dict[str, Any] = {"machine": machine_info(), "robot": robot.name, "robot_file": str(robot.path),
@@ -160,6 +164,10 @@ def run_bench(
     if "collisions" in sections:
         say("collisions: the track-mode step with and without the collision rows")
         out["collisions"] = collision.run(robot, cfg, min(ticks, 10000), max_seconds)
+        done += 1
+    if "collision_default" in sections:
+        say("collision_default: every shipped robot's track-mode step with and without the default rows")
+        out["collision_default"] = collision.run_default(rows_cfg, min(ticks, 10000), max_seconds)
         done += 1
     if "jitter" in sections:
         say("jitter: the daemon's fixed-rate loop with no work (the machine's floor), then ctl.step after idling")

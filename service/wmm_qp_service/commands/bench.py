@@ -20,7 +20,8 @@ from .common import add_config_arguments, load_configs
 
 HELP = "measure per-tick controller time and the loop over Zenoh"
 
-_SECTIONS = ("controller", "oneshot", "pink", "scaling", "robots", "e2e", "daemon", "collisions", "jitter")
+_SECTIONS = ("controller", "oneshot", "pink", "scaling", "robots", "e2e", "daemon", "collisions", "collision_default",
+             "jitter")
 _MODES = ("hold", "track", "dm_cartesian", "dm_nullspace")
 
 
@@ -131,6 +132,13 @@ def _print_report(r: dict[str, Any]) -> None:
         print(f"daemon     {case:>10s} Hz: tick {_fmt(b['tick'])}, tick/step p50 ×{b.get('tick_over_step_p50')}")
         for name, st in b["stages"].items():
             print(f"           {name:18s} {_fmt(st)}")
+    for name, c in r.get("collision_default", {}).items():
+        if not c.get("available"):
+            print(f"rows       {name}: {c.get('reason')}")
+            continue
+        print(f"rows       {name:16s} with {_fmt(c['with_rows'])}")
+        print(f"           {'':16s} w/o  {_fmt(c['without_rows'])}  ×{c['ratio_p50']} p50, "
+              f"rows p50 {c['rows']['p50']:g} max {c['rows']['max']}")
     for rate, j in r.get("jitter", {}).items():
         print(f"jitter     {rate:>5s} Hz, no work, {j['scheduling']}: {j['deadline_misses']} deadline misses in "
               f"{j['ticks']} ticks ({j['misses_per_10k']} per 10k), late {j['late_us']} µs, "

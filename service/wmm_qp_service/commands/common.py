@@ -52,6 +52,27 @@ def add_scene_argument(parser: argparse.ArgumentParser, default: str | None = No
     )
 
 
+def add_collision_argument(parser: argparse.ArgumentParser) -> None:
+    """``--no-collision``: drive the robot without the qp controller's collision rows (on by
+    default: self, floor, the scene's fence and obstacles)."""
+    parser.add_argument(
+        "--no-collision", action="store_true",
+        help="no collision rows in the qp controller (default: on — the robot's self and floor pairs, "
+             "the scene's fence and obstacles; also off with [collision] enabled = false in the controller file)",
+    )
+
+
+def collision_config(args: argparse.Namespace, cfg: ControllerConfig) -> ControllerConfig:
+    """The controller config with the command line's collision choice: ``--no-collision`` turns the
+    rows off; else ``--scene FILE`` turns them on; else the controller file decides (on unless it
+    says ``[collision] enabled = false``)."""
+    if getattr(args, "no_collision", False):
+        return cfg.with_(collision={"enabled": False})
+    if getattr(args, "scene", None) is not None:
+        return cfg.with_(collision={"enabled": True})
+    return cfg
+
+
 def load_scene_arg(args: argparse.Namespace) -> Scene:
     """The scene of ``--scene`` (a bad file raises :class:`wmm_qp.ConfigError`: one line, exit 2)."""
     return load_scene(getattr(args, "scene", None))

@@ -23,7 +23,7 @@ from typing import Any
 
 from ..progress import ProgressLine
 from ..verdict import EXIT_CODES_HELP, Verdict, judge
-from .common import add_robot_argument, add_scene_argument, load_robot, load_scene_arg
+from .common import add_collision_argument, add_robot_argument, add_scene_argument, load_robot, load_scene_arg
 
 HELP = "start sim and daemon on loopback, drive every mode, print a summary"
 
@@ -43,6 +43,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the daemon's controller.toml (default: configs/controller.toml)")
     add_robot_argument(parser)
     add_scene_argument(parser)
+    add_collision_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -64,8 +65,9 @@ def run(args: argparse.Namespace) -> int:
     log_dir = log_folder(args.logs, "demo")
     daemon_args = [] if args.controller_config is None else ["--controller-config",
                                                              str(Path(args.controller_config).resolve())]
+    daemon_args += ["--no-collision"] if args.no_collision else []  # else the rows are the daemon's default: on
     stack = Stack(svc, rate_hz=args.rate, log_dir=log_dir, robot_file=robot.path,
-                  scene_file=scene.path if args.scene is not None else None,  # a scene: collision rows on
+                  scene_file=scene.path if args.scene is not None else None,
                   extra_daemon_args=daemon_args)
     from ..bench.machine import CPU_HOW, CpuMeter
 
@@ -106,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
               f"{summary['duration_s']:.1f} s at {lp['rate_hz']:g} Hz — ticks {lp['ticks']}, "
               f"deadline misses {lp['deadline_misses']}, tick p50 {lp['tick_p50_us']:.0f} µs, "
               f"p99 {lp['tick_p99_us']:.0f} µs, max {lp['tick_max_us']:.0f} µs")
-        print(f"      violations {summary['violations_total']} {summary['violations']}")
+        print(f"      violations {summary['violations_total']} {summary['violations']}; {summary['collision_summary']}")
         print(f"      CPU % of one core (the scenario's wall time) {cpu}")
         e = summary["ee_error_max"]
         print(f"      EE error max (ground truth) {'n/a' if e is None else f'{e * 100:.2f} cm'}; "
@@ -258,6 +260,8 @@ def _drive(svc: Any, duration: float, bar: ProgressLine,
         "ee_error_max": max(ee_err, default=None),
         "dm_start": dm_start,
         "dm_end": next(p["dm"] for p in per_phase if p["phase"] == "dm_nullspace"),
+        "collision": final.status.collision,
+        "collision_summary": final.status.collision_summary,
         "rejected": final.status.rejected,
         "last_fault": final.status.last_fault,
         "faults": final.status.faults,

@@ -102,9 +102,9 @@ def run(args: argparse.Namespace) -> int:
     if args.task is not None and args.realtime:
         return _fail("--task does not apply with --realtime (the daemon loads its own --controller-config)")
     robot, ctl_cfg = load_configs(args)
-    # in process, the paper's setting by default: no obstacles and no collision rows (the sim's
-    # referee still checks self and floor collisions); --scene adds the scene and the qp
-    # controller's rows. --realtime runs the service's own stack (its daemon: rows on).
+    # the paper's setting by default: no obstacles and no collision rows (the sim's referee still
+    # checks self and floor collisions); --scene adds the scene and the qp controller's rows (in
+    # process and, with --realtime, in the daemon, which otherwise runs with --no-collision)
     scene = load_scene_arg(args) if args.scene is not None else None
     ctl_cfg = ctl_cfg.with_(collision={"enabled": scene is not None})
     if args.task is not None:
@@ -126,6 +126,8 @@ def run(args: argparse.Namespace) -> int:
                               "controller": args.controller}
     if args.controller == "qp":
         result["solver"] = args.solver
+    # the controller's collision rows: the qp controller's with --scene only (the baselines have none)
+    result["collision"] = getattr(first.controller, "collision", None) is not None
     if args.controller == "traditional":
         result["wheel_units"] = args.wheel_units
     if args.name == "circle":

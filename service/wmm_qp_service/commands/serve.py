@@ -14,11 +14,12 @@ HELP = "run the control daemon (Zenoh)"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from ..cli_common import add_service_arguments
-    from .common import add_robot_argument, add_scene_argument
+    from .common import add_collision_argument, add_robot_argument, add_scene_argument
 
     add_service_arguments(parser)
     add_robot_argument(parser)
     add_scene_argument(parser)
+    add_collision_argument(parser)
     parser.add_argument("--rate", type=float, help="[Hz] control rate (default: the service config's)")
     parser.add_argument("--trigger", choices=("rate", "state"),
                         help="what starts a tick: the fixed-rate clock, or each new state (default: the "
@@ -38,17 +39,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def controller_config(args: argparse.Namespace) -> w.ControllerConfig:
-    """The controller config of ``--controller-config`` with the command line's changes: collision
-    rows on with ``--scene``, the task kind of ``--task``.
+    """The controller config of ``--controller-config`` with the command line's changes: the
+    collision rows (on unless ``--no-collision`` or the file's ``[collision] enabled = false``;
+    ``--scene`` turns them on), the task kind of ``--task``.
 
     Raises:
         wmm_qp.ConfigError: a bad controller file (one line, exit 2).
     """
     import wmm_qp as w
 
-    ctl_cfg = w.load_controller_config(args.controller_config)
-    if args.scene is not None:  # a scene given: the qp controller's collision rows on
-        ctl_cfg = ctl_cfg.with_(collision={"enabled": True})
+    from .common import collision_config
+
+    ctl_cfg = collision_config(args, w.load_controller_config(args.controller_config))
     if args.task is not None:
         ctl_cfg = ctl_cfg.with_(task={"kind": args.task})
     return ctl_cfg

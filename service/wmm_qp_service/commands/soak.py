@@ -12,7 +12,7 @@ from typing import Any
 
 from ..progress import ProgressLine
 from ..verdict import EXIT_CODES_HELP, judge
-from .common import add_robot_argument, load_robot
+from .common import add_collision_argument, add_robot_argument, load_robot
 
 HELP = "run sim + daemon + client for a long time and report drift in time and memory"
 
@@ -28,6 +28,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--trigger", choices=("rate", "state"),
                         help="the daemon's loop.trigger (default: the service config's)")
     add_robot_argument(parser)
+    add_collision_argument(parser)
 
 
 def rss_kib(pid: int) -> int | None:
@@ -58,8 +59,9 @@ def run(args: argparse.Namespace) -> int:
     robot = load_robot(args)  # a bad file: one line, exit 2, before anything starts
     svc = isolated_config(robot=robot)
     log_dir = log_folder(args.logs, "soak")
-    stack = Stack(svc, rate_hz=args.rate, log_dir=log_dir, robot_file=robot.path,
-                  extra_daemon_args=[] if args.trigger is None else ["--trigger", args.trigger])
+    daemon_args = [] if args.trigger is None else ["--trigger", args.trigger]
+    daemon_args += ["--no-collision"] if args.no_collision else []  # else the daemon's default: rows on
+    stack = Stack(svc, rate_hz=args.rate, log_dir=log_dir, robot_file=robot.path, extra_daemon_args=daemon_args)
     out: dict[str, Any] = {}
     bar = ProgressLine("soak")
     up = False
@@ -116,6 +118,7 @@ def run(args: argparse.Namespace) -> int:
         misses = lp.deadline_misses - loop0.deadline_misses
         loads = [x["load1"] for x in samples]
         out = {"robot": robot.name, "duration_s": args.duration, "rate_hz": args.rate, "trigger": lp.trigger,
+               "collision": final.status.collision, "collision_summary": final.status.collision_summary,
                "window_ticks": n, "window_misses": misses,
                "misses_per_10k": round(1e4 * misses / n, 2) if n else None,
                "watchdog_ticks": lp.watchdog_ticks - loop0.watchdog_ticks,

@@ -58,6 +58,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"lease      {lease}   sim instance {s.sim_instance or 'none'}   round trip {s.round_trip_ms:.1f} ms"
           f"   operator {s.operator or 'none'} (conflicts {s.operator_conflicts})")
     print(f"sim        violations {total_viol} {s.sim_violations if total_viol else ''}".rstrip())
+    print(f"collision  {info.collision_summary or 'unknown (an older daemon)'}")
     if s.x:
         print(f"EE         x {[round(v, 4) for v in s.x]}   x_d {[round(v, 4) for v in s.x_d]}"
               f"   DM {s.dm:.3f}")

@@ -18,7 +18,7 @@ from wmm_qp.verify import KINDS, verify_controller
 
 from ..progress import ProgressLine
 from ..verdict import EXIT_CODES_HELP, judge
-from .common import add_config_arguments, add_scene_argument, load_configs, load_scene_arg
+from .common import add_collision_argument, add_config_arguments, add_scene_argument, load_configs, load_scene_arg
 
 HELP = "sample random states and check every command against every hard bound"
 
@@ -53,8 +53,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--task", choices=TASK_KINDS, default=None,
                         help="task kind, overriding the controller config's [task] kind")
     add_config_arguments(parser)
-    add_scene_argument(parser, "none: the bounds only; a scene turns the qp controller's collision rows on and "
-                               "referees collisions too (states sampled near self-collisions, obstacles, the fence)")
+    add_scene_argument(parser, "configs/scenes/default.toml: a fence 3 m around the start, no obstacles; every "
+                               "command is refereed for collisions too — self, floor, the scene's obstacles and "
+                               "fence — and states are sampled near self-collisions, obstacles and the fence")
+    add_collision_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -63,8 +65,16 @@ def run(args: argparse.Namespace) -> int:
         cfg = cfg.with_(qp={"solver": args.solver})
     if args.task:
         cfg = cfg.with_(task={"kind": args.task})
-    scene = load_scene_arg(args) if args.scene is not None else None
-    if scene is not None:  # the scene's obstacles and fence: the qp controller's rows on
+    if args.no_collision and args.scene is not None:
+        print("wmm-qp verify: error: --scene and --no-collision exclude each other (--no-collision referees "
+              "the bounds only, without a scene)", file=sys.stderr)
+        return 2
+    # collisions refereed by default (self, floor, the default scene's fence; --scene: its obstacles
+    # too); --no-collision: the bounds only, and the qp controller without rows
+    scene = None if args.no_collision else load_scene_arg(args)
+    if args.no_collision:
+        cfg = cfg.with_(collision={"enabled": False})
+    elif args.scene is not None:  # a scene's obstacles: the qp controller's rows on
         cfg = cfg.with_(collision={"enabled": True})
     model = w.WmmModel(robot)
     ctl = w.make_controller(args.controller, model, cfg)
@@ -99,6 +109,8 @@ def run(args: argparse.Namespace) -> int:
                     "seed": args.seed,
                     "scene": None if scene is None else str(scene.path),
                     **verdict.json_fields(),
+                    "collision": scene is not None,
+                    "collision_rows": getattr(ctl, "collision", None) is not None,
                 }
             )
         )

@@ -200,7 +200,8 @@ class StackOptions:
         log_dir: the processes' logs go here.
         robot: the robot; both processes load its file and run under its name (None: their default).
         controller_file: the daemon's controller config (None: its default).
-        scene_file: the scene both processes load (``--scene``; None: their default).
+        scene_file: the scene both processes load (``--scene``: the daemon's collision rows on;
+            None: their default scene and, the paper's setting, no collision rows).
     """
 
     controller: str
@@ -222,7 +223,8 @@ def _on_stack(opts: StackOptions, drive: Callable[[Client, Recorder], Any]) -> t
     """
     svc = isolated_config(robot=opts.robot)
     daemon_args = ["--controller", opts.controller, *(["--solver", opts.solver] if opts.solver else []),
-                   *([] if opts.controller_file is None else ["--controller-config", str(opts.controller_file)])]
+                   *([] if opts.controller_file is None else ["--controller-config", str(opts.controller_file)]),
+                   *(["--no-collision"] if opts.scene_file is None else [])]  # the paper's setting: no rows
     sim_args = _sim_config_file(opts.slip, opts.log_dir) + ([] if opts.seed is None else ["--seed", str(opts.seed)])
     stack = Stack(svc, rate_hz=opts.rate_hz, log_dir=opts.log_dir, extra_daemon_args=daemon_args,
                   extra_sim_args=sim_args, robot_file=None if opts.robot is None else opts.robot.path,
@@ -266,6 +268,7 @@ def _on_stack(opts: StackOptions, drive: Callable[[Client, Recorder], Any]) -> t
             "tick_p99_us": round(l1.tick_p99_us, 1),
             "rejected": dict(info1.status.rejected),
             "last_fault": info1.status.last_fault,
+            "collision": info1.status.collision,
         }
     return out, rec, service
 
