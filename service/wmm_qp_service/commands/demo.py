@@ -187,7 +187,7 @@ def _drive(svc: Any, duration: float, bar: ProgressLine,
         phase = ""
 
         def violations_now() -> str:
-            s = c.latest_state()
+            s = c.latest_truth()
             return f"phase {phase}, {sum(s.violations.values()) if s is not None else '?'} violations so far"
 
         def drain() -> None:
@@ -210,7 +210,7 @@ def _drive(svc: Any, duration: float, bar: ProgressLine,
         dm_start = info.status.dm
         t_start = time.monotonic()
         faults0 = dict(info.status.faults)
-        st0 = c.latest_state() or c.wait_state(2.0)
+        st0 = c.latest_truth() or c.wait_truth(2.0)
         viol0 = dict(st0.violations) if st0 is not None else {}
         for k, (name, d) in enumerate(PHASES):
             d *= scale
@@ -231,9 +231,9 @@ def _drive(svc: Any, duration: float, bar: ProgressLine,
                 wait(d, drain)
             drain()
             i = c.info()
-            st = c.latest_state()
+            tp = c.latest_truth()
             faults = dict(i.status.faults) if i else faults0
-            viol = dict(st.violations) if st is not None else viol0
+            viol = dict(tp.violations) if tp is not None else viol0
             per_phase.append({"phase": name, "duration_s": round(d, 2),
                               "ee_error_max": max(ee_err[n0:], default=None),  # None: untracked
                               "dm": i.status.dm if i else None,
@@ -243,11 +243,11 @@ def _drive(svc: Any, duration: float, bar: ProgressLine,
                               "new_violations": _delta(viol0, viol)})
             faults0, viol0 = faults, viol
         final = c.info()
-        st = c.latest_state()
+        st, tr = c.latest_state(), c.latest_truth()
         if final is None:
             return None
         elapsed = time.monotonic() - t_start
-        violations = dict(st.violations) if st is not None else dict(final.status.sim_violations)
+        violations = dict(tr.violations) if tr is not None else dict(final.status.sim_violations)
     import msgspec
 
     return {

@@ -22,7 +22,7 @@ from wmm_qp import ConfigError, RobotConfig
 
 from ..client import Client
 from ..config import ServiceConfig
-from ..protocol import InfoMsg, StateMsg, StatusMsg
+from ..protocol import InfoMsg, StateMsg, StatusMsg, TruthMsg
 
 
 class ConsoleError(w.WmmQpError):
@@ -208,6 +208,11 @@ class RobotLink:
     def state(self) -> StateMsg | None:
         with self._lock:
             return self._client.latest_state() if self._client is not None else None
+
+    def truth(self) -> TruthMsg | None:
+        """The sim's last evaluation data (None: none, e.g. a real robot's driver without one)."""
+        with self._lock:
+            return self._client.latest_truth() if self._client is not None else None
 
     def status(self) -> StatusMsg | None:
         with self._lock:
