@@ -33,6 +33,7 @@ from wmm_qp.config import FloatArray
 from .collision import CollisionReferee
 from .config import BoxConfig, SimConfig
 from .contact import Box
+from .gripper import Gripper
 from .referee import Referee
 from .slip import SlipModel, integrate_pose
 
@@ -103,6 +104,7 @@ class SimState:
         protective_stops: protective stops since reset.
         protective_reason: why the last protective stop started ("" = none yet).
         refused_commands: commands the firmware refused since reset.
+        gripper_width: [m] the gripper's opening (nan: the robot file declares no gripper).
     """
 
     t: float
@@ -125,6 +127,7 @@ class SimState:
     protective_stops: int = 0
     protective_reason: str = ""
     refused_commands: int = 0
+    gripper_width: float = float("nan")
 
 
 class SimRobot:
@@ -241,7 +244,13 @@ class SimRobot:
         self.tau = np.zeros(self.n_arm)
         self.force = np.zeros(3)
         self.stalled_joint: int | None = None
+        g = self.model.config.gripper
+        self.gripper = Gripper(g) if g is not None else None
         return self.state()
+
+    def command_gripper(self, action: str, width: float = 0.0, speed: float = 0.05, force: float = 0.0) -> bool:
+        """Start a gripper command (see :mod:`.gripper`); False: no gripper, or an unknown action."""
+        return self.gripper is not None and self.gripper.command(action, width, speed, force)
 
     def place_box(self, box: BoxConfig | None) -> None:
         """Put a box in the scene now (or remove it with None), keeping the robot's state."""
@@ -255,6 +264,8 @@ class SimRobot:
 
         Never raises; a malformed command is ignored and counted.
         """
+        if self.gripper is not None:
+            self.gripper.step(dt)
         if command is not None and not command.is_valid(self.n_wheels, self.n_arm):
             self.rejected += 1
             command = None
@@ -405,6 +416,7 @@ class SimRobot:
             protective_stops=self.protective_stops,
             protective_reason=self.protective_reason,
             refused_commands=self.refused,
+            gripper_width=self.gripper.width if self.gripper is not None else float("nan"),
         )
 
     def robot_state(self) -> wmm_qp.RobotState:

@@ -50,7 +50,7 @@ import numpy as np
 import zenoh
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.keys import Keys
-from wmm_qp_service.protocol import BoxMsg, CommandMsg, ObstaclesMsg, StateMsg, TruthMsg, encode
+from wmm_qp_service.protocol import BoxMsg, CommandMsg, GripperMsg, ObstaclesMsg, StateMsg, TruthMsg, encode
 from wmm_qp_service.rate_loop import RateLoop, realtime_priority
 from wmm_qp_service.transport import ROLE_SIM, open_session
 from wmm_qp_service.validation import Validator
@@ -144,6 +144,7 @@ class SimNode:
                                   n_wheels=robot.n_wheels)
         self.validate_box = Validator(BoxMsg, svc.robot, svc.validation)
         self.validate_obstacles = Validator(ObstaclesMsg, svc.robot, svc.validation)
+        self.validate_gripper = Validator(GripperMsg, svc.robot, svc.validation)
         self.loop = RateLoop(sim_cfg.rate_hz, spin_s, clock=time.monotonic)  # the inbox's clock
         self.t0 = 0.0  # [s] monotonic time of step 0 (run() sets it)
         self.steps = 0  # steps run since t0
@@ -270,6 +271,16 @@ class SimNode:
                                      center_y=msg.center_y, width=msg.width, height=msg.height))
         return True
 
+    def command_gripper(self, data: bytes) -> bool:
+        """Validate a gripper command and start it (False: rejected, or no gripper: ``refused.gripper``)."""
+        msg = self.validate_gripper(data)
+        if msg is None:
+            return False
+        if not self.sim.command_gripper(msg.action, msg.width, msg.speed, msg.force):
+            self.refused["gripper"] += 1
+            return False
+        return True
+
     def set_obstacles(self, data: bytes) -> bool:
         """Validate a live obstacles message and hand its set to the referee (False: rejected)."""
         if self.validate_obstacles(data) is None:
@@ -282,7 +293,7 @@ class SimNode:
         return StateMsg(
             robot=self.svc.robot, seq=seq, stamp=time.time(), t=st.t,
             q_base=st.base_odom.tolist(), q_arm=st.q_arm.tolist(), v_arm=st.v_arm.tolist(),
-            wheel_speeds=st.wheel_speeds.tolist(), tau=st.tau.tolist(),
+            wheel_speeds=st.wheel_speeds.tolist(), tau=st.tau.tolist(), gripper_width=st.gripper_width,
             stale_stop=st.stale_stop, cmd_seq=self.cmd_seq,
             instance=self.instance, lease=self.holder, protective_stop=st.protective_stop,
             protective_stops=st.protective_stops, protective_reason=st.protective_reason,
@@ -327,6 +338,7 @@ class SimNode:
             sub = session.declare_subscriber(k.cmd, zenoh.handlers.Callback(on_command, indirect=False))
             sub_box = session.declare_subscriber(k.sim_box, zenoh.handlers.FifoChannel(16))
             sub_obstacles = session.declare_subscriber(k.obstacles, zenoh.handlers.RingChannel(1))
+            sub_gripper = session.declare_subscriber(k.gripper, zenoh.handlers.FifoChannel(16))
             pub = session.declare_publisher(k.state, express=True,
                                             congestion_control=zenoh.CongestionControl.DROP,
                                             priority=zenoh.Priority.REAL_TIME)
@@ -347,6 +359,8 @@ class SimNode:
                         self.on_lease(str(a.key_expr).rsplit("/", 1)[-1], a.kind == zenoh.SampleKind.PUT)
                     while (b := sub_box.try_recv()) is not None:
                         self.place_box(b.payload.to_bytes())
+                    while (g := sub_gripper.try_recv()) is not None:
+                        self.command_gripper(g.payload.to_bytes())
                     if (o := sub_obstacles.try_recv()) is not None:  # the referee checks the live set too
                         self.set_obstacles(o.payload.to_bytes())
                     st = self.advance(now, inbox)
@@ -363,7 +377,7 @@ class SimNode:
                         pub_truth.put(encode(self.truth_msg(st, self.publications)))
                     now = self.loop.wait()
             finally:
-                for ent in (token, lease_sub, sub, sub_box, sub_obstacles, pub, pub_truth):
+                for ent in (token, lease_sub, sub, sub_box, sub_obstacles, sub_gripper, pub, pub_truth):
                     with contextlib.suppress(Exception):
                         if ent is not None:
                             ent.undeclare()
