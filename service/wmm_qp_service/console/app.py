@@ -27,6 +27,8 @@ from .view import RobotView
 if TYPE_CHECKING:
     import viser
 
+GRIPPER_SLIDER_MAX = 0.1
+"""[m] the width slider's range (a robot clamps a width past its own ``[gripper] width_max``)."""
 MODES = ("hold", "track", "dm_cartesian", "dm_nullspace")
 MODE_LABELS = {"hold": "Hold", "track": "Track", "dm_cartesian": "DM Cartesian", "dm_nullspace": "DM null space"}
 TRACKING_MODES = ("track", "dm_nullspace")
@@ -178,6 +180,16 @@ class Console:
                                              hint="u of eq. (8), base frame (used by the DM modes)")
             self.stop_button = gui.add_button("STOP (hold)", color="red", icon=None, hint="mode hold, at once")
             self.stop_button.on_click(partial(self._mode_clicked, "hold"))
+        with gui.add_folder("Gripper"):
+            self.gripper_buttons: dict[str, Any] = {}
+            for action in ("open", "close"):
+                b = gui.add_button(f"{action.capitalize()} gripper", hint=f"{action} the gripper fully")
+                b.on_click(partial(self._gripper_clicked, action))
+                self.gripper_buttons[action] = b
+            self.gripper_width = gui.add_slider("Width [m]", min=0.0, max=GRIPPER_SLIDER_MAX, step=0.001,
+                                                initial_value=GRIPPER_SLIDER_MAX,
+                                                hint="move the fingers to this width (the robot clamps it)")
+            self.gripper_width.on_update(self._gripper_width_moved)
         with gui.add_folder("Status"):
             self.status_md = gui.add_markdown("**daemon**: no status yet")
         with gui.add_folder("Last 30 s"):
@@ -233,6 +245,12 @@ class Console:
     # ----------------------------------------------------------------- commands
     def _mode_clicked(self, mode: str, _event: Any) -> None:
         self.set_mode(mode)
+
+    def _gripper_clicked(self, action: str, _event: Any) -> None:
+        self.link.gripper(action)
+
+    def _gripper_width_moved(self, _event: Any) -> None:
+        self.link.gripper("move", width=float(self.gripper_width.value))
 
     def set_mode(self, mode: str) -> None:
         """A mode button: the mode, with the panel's DM direction for the DM modes."""

@@ -232,6 +232,12 @@ class RobotLink:
             self._client.send_setpoint(x, q=q)
             self.setpoints_sent += 1
 
+    def gripper(self, action: str, width: float = 0.0) -> None:
+        """A gripper command (``open``, ``close``, ``move`` to ``width`` [m]) at 0.05 m/s."""
+        with self._lock:
+            if self._client is not None:
+                self._client.gripper(action, width=width, speed=0.05)
+
     def set_mode(self, mode: str, direction: Sequence[float] | None = None) -> None:
         """hold | track | dm_cartesian | dm_nullspace (direction: DM u, base frame)."""
         with self._lock:
