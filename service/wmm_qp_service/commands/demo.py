@@ -8,6 +8,11 @@ both get ``--robot-config``; a robot whose EE starts outside the DM box of the c
 (``dm.ee_box_lower/upper``) holds during the Cartesian DM phase. When a fault ends, the daemon
 holds until a mode message (``watchdog.resume = "manual"``): the demo then resends the phase's
 mode, as an operator would, and counts it (``phases[].resumes``).
+
+With ``--driver franka --robot-ip IP`` the scenario runs through a real robot's driver
+(``wmm-qp driver franka``, started by the demo) against a robot already running at that address
+(a Franka FR3, or franky-sim) instead of a sim; ``violations`` are then the driver's referee
+(its ``sim/truth``), and the EE error is n/a (no ground truth).
 """
 
 from __future__ import annotations
@@ -41,6 +46,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "temporary directory, kept and named on the verdict line)")
     parser.add_argument("--controller-config", type=Path, default=None, metavar="FILE",
                         help="the daemon's controller.toml (default: configs/controller.toml)")
+    parser.add_argument("--driver", choices=("franka",), default=None,
+                        help="run the scenario through this real robot's driver instead of a sim "
+                             "(needs --robot-ip; docs/drivers.md)")
+    parser.add_argument("--robot-ip", metavar="IP", default=None,
+                        help="the address of the running robot the --driver drives (e.g. franky-sim's)")
     add_robot_argument(parser)
     add_scene_argument(parser)
 
@@ -51,6 +61,10 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if not 10.0 <= args.rate <= 2000.0:
         print("wmm-qp demo: error: --rate must be in [10, 2000] Hz", file=sys.stderr)
+        return 2
+    if (args.driver is None) != (args.robot_ip is None):
+        print("wmm-qp demo: error: --driver and --robot-ip go together (--driver franka --robot-ip IP)",
+              file=sys.stderr)
         return 2
     import wmm_qp as w
 
@@ -73,8 +87,13 @@ def run(args: argparse.Namespace) -> int:
     cpu: dict[str, float | None] = {}
     bar = ProgressLine("demo")
     try:
-        bar.update(f"starting the sim and the daemon (logs: {log_dir})")
-        stack.start()
+        if args.driver is not None:
+            bar.update(f"starting the {args.driver} driver for {args.robot_ip} and the daemon (logs: {log_dir})")
+            stack.start_driver(args.driver, args.robot_ip)
+            stack.start_daemon()
+        else:
+            bar.update(f"starting the sim and the daemon (logs: {log_dir})")
+            stack.start()
         summary = _drive(svc, args.duration, bar,
                          on_ready=lambda: meters.append(CpuMeter({n: p.pid for n, p in stack.procs.items()})))
         if meters:
