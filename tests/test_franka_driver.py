@@ -26,7 +26,7 @@ pytest.importorskip("franky_sim", reason="needs franky-sim (pip install franky-s
 import zenoh
 from wmm_qp_service.keys import Keys
 from wmm_qp_service.processes import isolated_config
-from wmm_qp_service.protocol import CommandMsg, StateMsg, TruthMsg, decode, encode
+from wmm_qp_service.protocol import CommandMsg, GripperMsg, StateMsg, TruthMsg, decode, encode
 from wmm_qp_service.transport import ROLE_DAEMON, open_session
 
 import wmm_qp as w
@@ -71,6 +71,7 @@ class Daemon:
         self.sub_truth = session.declare_subscriber(keys.sim_truth, zenoh.handlers.RingChannel(1))
         self.truth: TruthMsg | None = None
         self.pub = session.declare_publisher(keys.cmd, express=True)
+        self.pub_gripper = session.declare_publisher(keys.gripper)
         self.seq = 0
         self.stream = 1
         self.state: StateMsg | None = None
@@ -266,3 +267,30 @@ def test_serve_tracks_through_the_driver_and_resumes_after_the_robot_braked_in_i
         sim.join(10)
         if sim.is_alive():
             sim.kill()
+
+
+def test_the_franka_hand_closes_and_opens_through_gripper_commands(rig: Any) -> None:
+    """franky-sim serves the Franka Hand (libfranka's gripper port): a GripperMsg on
+    ``<robot>/gripper`` moves its fingers, and the state reports the measured width."""
+    d, _ = rig
+
+    def grip(action: str, **kw: float) -> None:
+        d.seq += 1
+        d.pub_gripper.put(encode(GripperMsg(robot=d.robot, seq=d.seq, stamp=time.time(), action=action,
+                                            speed=0.1, source="test", **kw)))
+
+    def width_until(pred: Any, timeout: float = 20.0) -> float:
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            st = d.wait(0.05)
+            if pred(st.gripper_width):
+                return float(st.gripper_width)
+        raise AssertionError(f"gripper width {d.state.gripper_width if d.state else None}")
+
+    width_until(lambda x: np.isfinite(x))  # the hand's child process has read it
+    grip("close")
+    assert width_until(lambda x: x < 0.005) < 0.005
+    grip("move", width=0.05)
+    assert abs(width_until(lambda x: abs(x - 0.05) < 0.003) - 0.05) < 0.003
+    grip("open")
+    assert width_until(lambda x: x > 0.075) > 0.075

@@ -25,6 +25,11 @@ truth, what a real robot cannot give is NaN: ``base_true`` and ``ee_true`` (no m
 ``box_position``; ``stalled_joint`` is −1 and ``contact_force`` the robot's estimate of the
 external force at the EE (``O_F_ext_hat_K``, its first three entries).
 
+The Franka Hand (a robot file with ``[gripper]``, as ``fr3.toml``): ``gripper`` commands
+(:class:`~..protocol.GripperMsg`) are validated and handed to pylibfranka's ``Gripper`` in a
+child process (:mod:`.franka_hand`: it holds the GIL through a whole gripper motion); the
+state's ``gripper_width`` is the width it last measured (nan without a hand).
+
 libfranka's errors: a ``ControlException`` (a reflex of the robot: a limit, a collision, a
 discontinuity) is reported as a protective stop (``protective_reason`` names it); the driver
 asks the robot to recover automatically and starts a new control, which follows only a new
@@ -53,9 +58,10 @@ import wmm_qp as w
 
 from ..config import ServiceConfig
 from ..keys import Keys
-from ..protocol import CommandMsg, StateMsg, TruthMsg, encode
+from ..protocol import CommandMsg, GripperMsg, StateMsg, TruthMsg, encode
 from ..transport import ROLE_SIM, open_session
 from ..validation import Validator
+from .franka_hand import FrankaHand
 from .franka_stream import CommandShaper, StreamLimits
 
 DT = 1e-3
@@ -97,6 +103,9 @@ class FrankaDriver:
         self.t = 0.0  # [s] the robot's time: the sum of its cycles
         self.seq = 0
         self._stopped = False  # the shaper was in a stale or protective stop at the last cycle
+        self.validate_gripper = Validator(GripperMsg, svc.robot, svc.validation)
+        g = robot.gripper
+        self.hand = FrankaHand(g.width_max, g.speed_max, g.force_max) if g is not None else None
 
     @property
     def holder(self) -> str:
@@ -166,6 +175,17 @@ class FrankaDriver:
         self._stopped = stopped
         return v
 
+    def on_gripper(self, data: bytes) -> bool:
+        """A gripper command: validated, then queued to the hand (False: rejected, or no hand:
+        ``refused.gripper``)."""
+        msg = self.validate_gripper(data)
+        if msg is None:
+            return False
+        if self.hand is None or not self.hand.command(msg.action, msg.width, msg.speed, msg.force):
+            self.refused["gripper"] += 1
+            return False
+        return True
+
     def fault(self, reason: str) -> None:
         """libfranka refused the motion (a reflex): report a protective stop, restart from rest."""
         self.shaper.reset(f"robot: {reason}")
@@ -217,6 +237,7 @@ class FrankaDriver:
         with open_session(self.svc, ROLE_SIM) as session:
             k = self.keys
             sub = session.declare_subscriber(k.cmd, zenoh.handlers.FifoChannel(1024))
+            sub_gripper = session.declare_subscriber(k.gripper, zenoh.handlers.FifoChannel(16))
             pub = session.declare_publisher(k.state, express=True, congestion_control=zenoh.CongestionControl.DROP,
                                             priority=zenoh.Priority.REAL_TIME)
             pub_truth = session.declare_publisher(k.sim_truth, congestion_control=zenoh.CongestionControl.DROP)
@@ -231,18 +252,24 @@ class FrankaDriver:
                     print(f"wmm-qp driver franka: error: cannot connect to the robot at {robot_ip}: {e}",
                           file=sys.stderr, flush=True)
                     return 1
+                if self.hand is not None:
+                    self.hand.start(robot_ip)
                 token = session.liveliness().declare_token(k.alive("sim"))
                 print(f"wmm-qp driver franka: {k.state.rsplit('/', 1)[0]} driving the robot at {robot_ip} "
                       f"(instance {self.instance})", file=sys.stderr, flush=True)
-                return self._loop(fr, robot, ctl, sub, lease_sub, (pub, pub_truth), stop, max_cycles, robot_ip)
+                return self._loop(fr, robot, ctl, (sub, sub_gripper), lease_sub, (pub, pub_truth), stop, max_cycles,
+                                  robot_ip)
             finally:
-                for ent in (token, lease_sub, sub, pub, pub_truth):
+                if self.hand is not None:
+                    self.hand.close()
+                for ent in (token, lease_sub, sub, sub_gripper, pub, pub_truth):
                     if ent is not None:
                         with contextlib.suppress(Exception):
                             ent.undeclare()
 
-    def _loop(self, fr: Any, robot: Any, ctl: Any, sub: Any, lease_sub: Any, pubs: tuple[Any, Any],
+    def _loop(self, fr: Any, robot: Any, ctl: Any, subs: tuple[Any, Any], lease_sub: Any, pubs: tuple[Any, Any],
               stop: threading.Event, max_cycles: int | None, robot_ip: str) -> int:
+        sub, sub_gripper = subs
         pub, pub_truth = pubs
         n = 0
         finishing = False
@@ -271,7 +298,10 @@ class FrankaDriver:
                 if done:
                     cmd.motion_finished = True
                 ctl.writeOnce(cmd)
-                pub.put(encode(self.state_msg(q, np.array(st.tau_ext_hat_filtered, dtype=float))))
+                if (g := sub_gripper.try_recv()) is not None:
+                    self.on_gripper(g.payload.to_bytes())
+                width = self.hand.width if self.hand is not None else math.nan
+                pub.put(encode(self.state_msg(q, np.array(st.tau_ext_hat_filtered, dtype=float), width)))
                 if n % TRUTH_EVERY == 1 or done:
                     pub_truth.put(encode(self.truth_msg(np.array(st.O_F_ext_hat_K, dtype=float)[:3])))
                 if done:
