@@ -119,3 +119,23 @@ def test_it_refuses_a_command_past_the_limits_with_a_protective_stop(controller:
 def test_after_a_stop_only_a_new_stream_resumes(controller: Any) -> None:
     c, _, _ = controller
     contract.check_stops_the_stopped_stream(c)
+
+
+def test_the_kit_catches_a_robot_without_firmware(tmp_path: Path) -> None:
+    """The kit can fail: a sim whose firmware is off (``firmware = false``) applies a command past
+    the velocity limit, and :func:`~wmm_qp_service.contract.check_refuses_past_limits` says so."""
+    from wmm_qp.config import default_config_dir as cfg_dir
+
+    sim_toml = tmp_path / "sim_no_firmware.toml"
+    sim_toml.write_text((cfg_dir() / "sim.toml").read_text().replace("firmware = true", "firmware = false"))
+    robot = w.load_robot_config()
+    stack = Stack(isolated_config(robot=robot), log_dir=tmp_path, extra_sim_args=["--sim-config", str(sim_toml)])
+    stack.start_sim()
+    try:
+        with contract.Controller(stack.svc, robot) as c:
+            c.until(lambda st: True, 90.0, "a first state from the sim")
+            contract.check_lease(c)
+            with pytest.raises(contract.ContractError, match="protective stop"):
+                contract.check_refuses_past_limits(c)
+    finally:
+        stack.stop()
