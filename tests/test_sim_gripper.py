@@ -96,3 +96,56 @@ def test_the_client_opens_and_closes_the_sims_gripper(tmp_path: Path) -> None:
             assert st is not None and st.gripper_width == pytest.approx(0.08)
     finally:
         assert stack.stop() == {"sim": 0}
+
+
+@pytest.mark.integration
+def test_the_consoles_gripper_buttons_move_the_sims_gripper(tmp_path: Path) -> None:
+    """The console's own buttons (a real viser server and the console's link to the robot, their
+    click callbacks as a browser's click runs them) close and open the gripper of ``wmm-qp sim``."""
+    import socket
+    import time
+    from types import SimpleNamespace
+
+    viser = pytest.importorskip("viser")
+    from wmm_qp_service.client import Client
+    from wmm_qp_service.console import Console
+    from wmm_qp_service.console.link import RobotLink
+    from wmm_qp_service.processes import Stack, isolated_config
+
+    robot = w.load_robot_config(FR3)
+    stack = Stack(isolated_config(robot=robot), log_dir=tmp_path, robot_file=FR3)
+    stack.start_sim()
+    link = RobotLink(stack.svc).open()
+    c = Console(link)
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    c.server = viser.ViserServer(host="127.0.0.1", port=port, verbose=False)
+    try:
+        c._build_panel()
+        with Client(stack.svc, name="observer") as obs:
+
+            def width_until(pred: object, timeout: float = 60.0) -> float:
+                end = time.monotonic() + timeout
+                while time.monotonic() < end:
+                    st = obs.wait_state(1.0)
+                    if st is not None and pred(st.gripper_width):  # type: ignore[operator]
+                        return st.gripper_width
+                raise AssertionError(f"gripper width {obs.latest_state()}")
+
+            def click(action: str) -> None:
+                for cb in c.gripper_buttons[action]._impl.update_cb:
+                    cb(SimpleNamespace(target=c.gripper_buttons[action]))
+
+            width_until(lambda x: x == pytest.approx(0.08))
+            end = time.monotonic() + 30.0
+            while link.state() is None and time.monotonic() < end:  # the link's session reaches the sim
+                time.sleep(0.05)
+            click("close")
+            assert width_until(lambda x: x == 0.0) == 0.0
+            click("open")
+            assert width_until(lambda x: x == pytest.approx(0.08)) == pytest.approx(0.08)
+    finally:
+        c.server.stop()
+        link.close()
+        stack.stop()
