@@ -44,12 +44,12 @@ def main() -> int:
             wait_for("r2 in track", lambda: track(c2), timeout=90.0, every=0.0)
             wait_for("r1 in track", lambda: track(c1), timeout=90.0, every=0.0)
             st2 = wait_for("r2's EE", lambda: (s := c2.latest_status()) and s.x and s)
-            ee1_0 = np.asarray(wait_for("r1's state", c1.wait_state).ee_true)
+            ee1_0 = np.asarray(wait_for("r1's truth", c1.wait_truth).ee_true)
             target = np.asarray(st2.x) + np.array([0.05, 0.03, -0.04])
             drag = Drag(url, target)
 
             def near() -> bool:
-                s = c2.latest_state()
+                s = c2.latest_truth()
                 if s is not None and float(np.linalg.norm(np.asarray(s.ee_true) - target)) < 0.01:
                     return True
                 if not track(c2):  # a safe stop on a loaded machine: resume and drag again
@@ -60,14 +60,14 @@ def main() -> int:
             try:
                 wait_for("r2's EE at the operator console's target", near, timeout=90.0)
             except AssertionError as e:
-                s, st = c2.latest_status(), c2.latest_state()
+                s, st = c2.latest_status(), c2.latest_truth()
                 ee = None if st is None else np.round(st.ee_true, 4).tolist()
                 raise AssertionError(f"{e}: target {target.round(4).tolist()}, EE {ee}, status {s}") from None
             out["operator_drove_r2"] = True
             s2 = c2.latest_status()
             out["r2_operator"] = s2.operator if s2 is not None else ""
             time.sleep(1.0)
-            ee1 = np.asarray(wait_for("r1's state", c1.wait_state).ee_true)
+            ee1 = np.asarray(wait_for("r1's truth", c1.wait_truth).ee_true)
             out["r1_moved_mm"] = float(1000 * np.linalg.norm(ee1 - ee1_0))
         # a viewer's console on r1: the page works, its gizmo reaches nothing
         st1 = wait_for("r1's status", lambda: (s := c1.latest_status()) and s.x and s)
@@ -75,14 +75,14 @@ def main() -> int:
         port = free_port()
         args = ["--port", str(port), "--prefix", prefix, "--robot", "r1", "--zenoh-config", str(viewer_cfg)]
         with console_process(args, logdir / "console_viewer.log") as (p, url):
-            ee1_0 = np.asarray(wait_for("r1's state", c1.wait_state).ee_true)
+            ee1_0 = np.asarray(wait_for("r1's truth", c1.wait_truth).ee_true)
             target = np.asarray(st1.x) + np.array([0.05, 0.0, 0.0])
             for _ in range(5):
                 move_gizmo(url, target)
                 time.sleep(0.3)
             time.sleep(2.0)
             s1 = c1.latest_status()
-            ee1 = np.asarray(wait_for("r1's state", c1.wait_state).ee_true)
+            ee1 = np.asarray(wait_for("r1's truth", c1.wait_truth).ee_true)
             out["viewer_moved_r1_mm"] = float(1000 * np.linalg.norm(ee1 - ee1_0))
             out["viewer_setpoints_accepted"] = (s1.accepted.get("setpoint", 0) - accepted0) if s1 else -1
             out["viewer_console_attached"] = True

@@ -459,7 +459,7 @@ def test_rogue_session_cannot_command(tmp_path_factory: pytest.TempPathFactory, 
         assert after.status.accepted["mode"] == before.status.accepted["mode"]
         assert after.status.accepted["setpoint"] == before.status.accepted["setpoint"]
         assert sum(after.status.rejected.values()) == sum(before.status.rejected.values())
-        st = op.wait_state(TIMEOUT)
+        st = op.wait_truth(TIMEOUT)
         assert st is not None and math.isnan(st.box_position)  # nor the box
         # the operator's own setpoints still get through
         n0 = after.status.accepted["setpoint"]
@@ -469,7 +469,7 @@ def test_rogue_session_cannot_command(tmp_path_factory: pytest.TempPathFactory, 
         _until(lambda: op.info().status.accepted["setpoint"] > n0)
         # ... and so does its box (sim/box)
         op.place_box(26.0, 0.65, x0[0] + 0.5, x0[1])
-        _until(lambda: (st := op.wait_state(0.5)) is not None and math.isfinite(st.box_position))
+        _until(lambda: (st := op.wait_truth(0.5)) is not None and math.isfinite(st.box_position))
         # no credentials: no session at all
         with Client(svc, name="anonymous") as anon:  # configs/zenoh/peer.json5: no credentials
             assert anon.wait_for_daemon(3.0) is None

@@ -163,3 +163,33 @@ def test_a_gizmo_move_streams_position_and_with_the_pose_task_orientation() -> N
     assert sent[0] == ([0.6, 0.1, 0.5], None)                     # position task: no orientation
     assert sent[1][0] == [0.6, 0.1, 0.5]
     assert sent[1][1] == pytest.approx([0.0, 0.0, np.sin(0.25), np.cos(0.25)])  # [x, y, z, w]
+
+
+def test_the_gripper_buttons_and_width_slider_send_gripper_commands() -> None:
+    """The panel's "Open gripper"/"Close gripper" buttons and width slider (a real viser server,
+    their own click and update callbacks) each send one gripper command through the link."""
+    import socket
+    from types import SimpleNamespace
+
+    viser = pytest.importorskip("viser")
+    from wmm_qp_service.console import Console
+
+    sent: list[tuple[str, float]] = []
+    link = SimpleNamespace(gripper=lambda action, width=0.0: sent.append((action, width)),
+                           svc=SimpleNamespace(robot="fr3"))
+    c = Console(link)  # type: ignore[arg-type]
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    c.server = viser.ViserServer(host="127.0.0.1", port=port, verbose=False)
+    try:
+        c._build_panel()
+        assert set(c.gripper_buttons) == {"open", "close"}
+        assert c.gripper_buttons["close"].label == "Close gripper"
+        for action in ("close", "open"):
+            for cb in c.gripper_buttons[action]._impl.update_cb:
+                cb(SimpleNamespace(target=c.gripper_buttons[action]))
+        c.gripper_width.value = 0.03  # as the browser's slider moves it
+        assert sent == [("close", 0.0), ("open", 0.0), ("move", pytest.approx(0.03))]
+    finally:
+        c.server.stop()

@@ -121,7 +121,7 @@ def _drive(page: Any, url: str, obs: Any, tmp_path: Path) -> None:
     drag = Drag(url, target)
 
     def near() -> bool:
-        s, state = obs.latest_status(), obs.latest_state()
+        s, state = obs.latest_status(), obs.latest_truth()
         if state is not None and float(np.linalg.norm(np.asarray(state.ee_true) - target)) < 0.01:
             return True
         if s is not None and s.resume_needed:  # a safe stop on a loaded machine: resume as an operator would
@@ -133,7 +133,7 @@ def _drive(page: Any, url: str, obs: Any, tmp_path: Path) -> None:
     try:
         wait_for(f"the simulated EE at the gizmo's {target.round(3).tolist()}", near, timeout=90.0)
     except AssertionError as e:
-        st = obs.latest_state()
+        st = obs.latest_truth()
         raise AssertionError(f"{e}: EE {None if st is None else np.round(st.ee_true, 4).tolist()}, "
                              f"status {obs.latest_status()}") from None
     s = obs.latest_status()

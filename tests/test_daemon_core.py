@@ -27,7 +27,8 @@ class Plant:
         self.wheels = np.zeros(model.n_wheels)
         self.seq = 0
         self.instance = "sim-A"
-        self.violations: dict[str, int] = {"position": 0}
+        self.protective_stops = 0
+        self.refused: dict[str, int] = {}
         self.cmd_seq = -1
 
     def apply(self, cmd: w.Command) -> None:
@@ -40,9 +41,8 @@ class Plant:
         d: dict[str, object] = dict(
             robot="wmm", seq=self.seq, stamp=0.0, t=0.0, q_base=self.q_base.tolist(),
             q_arm=self.q_arm.tolist(), v_arm=self.v_arm.tolist(), wheel_speeds=self.wheels.tolist(),
-            base_true=self.q_base.tolist(), ee_true=self.model.ee_position(self.q_base, self.q_arm).tolist(),
-            tau=[0.0] * self.model.n_arm, contact_force=[0.0] * 3, instance=self.instance, lease="core",
-            violations=dict(self.violations), cmd_seq=self.cmd_seq)
+            tau=[0.0] * self.model.n_arm, instance=self.instance, lease="core", cmd_seq=self.cmd_seq,
+            protective_stops=self.protective_stops, refused=dict(self.refused))
         d.update(kw)
         return StateMsg(**d)  # type: ignore[arg-type]
 

@@ -15,7 +15,7 @@ import pytest
 from test_daemon_core import DT, Plant, max_step_ratio
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.daemon import ControlCore, Daemon
-from wmm_qp_service.protocol import ModeMsg, SetpointMsg, StateMsg
+from wmm_qp_service.protocol import ModeMsg, SetpointMsg, StateMsg, TruthMsg
 
 import wmm_qp as w
 
@@ -116,21 +116,42 @@ def test_a_state_whose_seq_does_not_increase_is_refused(robot: w.RobotConfig) ->
 
 
 # ---------------------------------------------------------------- 3. the sim's referee and firmware
-def test_rising_sim_violation_counts_are_a_fault(robot: w.RobotConfig) -> None:
+def test_rising_firmware_counts_are_a_fault(robot: w.RobotConfig) -> None:
+    """The robot's own reports (protective stops, commands its firmware refused), not an
+    evaluation's referee, are what the daemon reacts to: a rise is a fault."""
     core, plant = make(robot)
-    plant.violations = {"position": 12}  # counts from before this daemon: the baseline
+    plant.protective_stops, plant.refused = 2, {"firmware": 5}  # from before this daemon: the baseline
     t = 0.0
     for _ in range(5):
         core.on_state(plant.msg(), t)
         tick(core, plant, t)
         t += DT
     assert not core.safe
-    plant.violations = {"position": 12, "velocity": 3}  # e.g. a rogue client's commands
+    plant.refused = {"firmware": 8}  # e.g. a rogue client's commands, refused by the firmware
     core.on_state(plant.msg(), t)
     cmd = tick(core, plant, t)
     assert cmd.status == w.Status.SAFE_STOP and core.safe
-    assert "sim referee counted 3 new violation" in core.last_fault
-    assert core.faults["sim referee"] == 1
+    assert "robot firmware reported 3 new protective stop(s) or refused command(s)" in core.last_fault
+    assert core.faults["robot firmware"] == 1
+
+
+def test_the_daemon_ignores_the_truth_on_the_control_path(robot: w.RobotConfig) -> None:
+    """``sim/truth`` feeds telemetry's ee_error only: rising referee counts in it are no fault,
+    and a truth of another instance is not kept."""
+    core, plant = make(robot)
+    t = 0.0
+    x = core.model.ee_position(plant.q_base, plant.q_arm).tolist()
+    for k in range(5):
+        core.on_state(plant.msg(), t)
+        core.on_truth(TruthMsg(robot="wmm", t=t, instance=plant.instance, state_seq=plant.seq, base_true=[0.0] * 3,
+                               ee_true=x, contact_force=[0.0] * 3, violations={"velocity": 3 * k}))
+        tick(core, plant, t)
+        t += DT
+    assert not core.safe and not core.faults
+    assert core.truth is not None and core.truth.violations == {"velocity": 12}
+    core.on_truth(TruthMsg(robot="wmm", t=t, instance="another", state_seq=1, base_true=[0.0] * 3,
+                           ee_true=x, contact_force=[0.0] * 3))
+    assert core.truth.instance == plant.instance
 
 
 def test_a_protective_stop_of_the_sim_breaks_the_stream(robot: w.RobotConfig) -> None:

@@ -114,6 +114,7 @@ class _FakeClient:
     def __init__(self) -> None:
         self.modes: list[str] = []
         self.setpoints: list[list[float]] = []
+        self.grips: list[str] = []
 
     def set_mode(self, mode: str, direction: object = None) -> None:
         self.modes.append(mode)
@@ -123,6 +124,9 @@ class _FakeClient:
 
     def latest_status(self) -> None:
         return None
+
+    def gripper(self, action: str, width: float = 0.0, speed: float = 0.05, force: float = 0.0) -> None:
+        self.grips.append(action)
 
 
 def test_device_teleop_streams_while_moving_and_hold_holds() -> None:
@@ -149,3 +153,18 @@ def test_device_teleop_streams_while_moving_and_hold_holds() -> None:
     kb.press("q", 1.0)
     t.tick(1.02)
     assert t.quit
+
+
+def test_the_gripper_keys_close_and_open_the_gripper_once_per_press() -> None:
+    from wmm_qp_service.teleop import DeviceTeleop
+
+    kb = KeyboardDevice()
+    c = _FakeClient()
+    t = DeviceTeleop(c, kb, TargetIntegrator([0.5, 0, 0.4], speed=0.1), stream_s=0.3)  # type: ignore[arg-type]
+    t._last = 0.0
+    assert kb.press("c", 0.0)
+    t.tick(0.02)
+    t.tick(0.04)  # reported once
+    assert kb.press("v", 0.05)
+    t.tick(0.06)
+    assert c.grips == ["close", "open"] and not c.modes

@@ -26,7 +26,7 @@ pytest.importorskip("franky_sim", reason="needs franky-sim (pip install franky-s
 import zenoh
 from wmm_qp_service.keys import Keys
 from wmm_qp_service.processes import isolated_config
-from wmm_qp_service.protocol import CommandMsg, StateMsg, decode, encode
+from wmm_qp_service.protocol import CommandMsg, GripperMsg, StateMsg, TruthMsg, decode, encode
 from wmm_qp_service.transport import ROLE_DAEMON, open_session
 
 import wmm_qp as w
@@ -68,7 +68,10 @@ class Daemon:
         self.keys, self.robot = keys, robot
         self.token = session.liveliness().declare_token(keys.lease("testlease"))
         self.sub = session.declare_subscriber(keys.state, zenoh.handlers.RingChannel(1))
+        self.sub_truth = session.declare_subscriber(keys.sim_truth, zenoh.handlers.RingChannel(1))
+        self.truth: TruthMsg | None = None
         self.pub = session.declare_publisher(keys.cmd, express=True)
+        self.pub_gripper = session.declare_publisher(keys.gripper)
         self.seq = 0
         self.stream = 1
         self.state: StateMsg | None = None
@@ -76,7 +79,15 @@ class Daemon:
     def poll(self) -> StateMsg | None:
         if (s := self.sub.try_recv()) is not None:
             self.state = decode(StateMsg, s.payload.to_bytes())
+        if (s := self.sub_truth.try_recv()) is not None:
+            self.truth = decode(TruthMsg, s.payload.to_bytes())
         return self.state
+
+    def violations(self) -> dict[str, int]:
+        """The driver's referee counts (``sim/truth``, published every 10 cycles)."""
+        self.wait(0.05)
+        assert self.truth is not None, "no sim/truth from the driver"
+        return dict(self.truth.violations)
 
     def send_for(self, duration: float, rates: Any) -> None:
         """Send rates(t) [rad/s] every 2 ms for duration [s] of wall time; t is the commands' own
@@ -153,7 +164,7 @@ def test_the_driver_streams_within_the_fr3s_limits_and_brakes_when_the_commands_
     moved = abs(shared[13])  # joint 7 follows 0.5 rad/s
     assert moved > 0.3, f"joint 7 at {moved} rad/s"
     assert shared[15] == 0 and shared[16] == 0, "franky-sim saw a joint past a limit"
-    assert not any(st.violations.values()), st.violations
+    assert not any((v := d.violations()).values()), v
     # the command source dies: stale after 0.025 s, at rest 0.5/10 s later (robot time; franky-sim's
     # clock runs slower than the wall's on a loaded host). At rest, franky-sim's joint 7 chatters
     # at about ±0.08 rad/s around a still position (its D controller on a light link): rest is
@@ -173,7 +184,7 @@ def test_a_command_past_the_limits_is_refused_with_a_protective_stop(rig: Any) -
     d.send_for(0.3, lambda t: too_fast)
     st = d.wait(0.3)
     assert st.protective_stop and "joint 5" in st.protective_reason and st.refused.get("firmware", 0) > 0
-    assert st.violations.get("velocity", 0) > 0  # the referee judged the command as received
+    assert d.violations().get("velocity", 0) > 0  # the referee judged the command as received
     q0 = np.array(shared[0:7])
     d.wait(0.3)
     assert abs(shared[4] - q0[4]) < 0.005 and shared[16] == 0  # joint 5 never moved off: refused
@@ -239,10 +250,10 @@ def test_serve_tracks_through_the_driver_and_resumes_after_the_robot_braked_in_i
             assert mid is not None and mid.status.faults, mid  # the daemon saw its stream broken
             assert c.resume("track", timeout=20), "the daemon did not resume after the robot's stale stop"
             follow(1.5, k)
-            state = c.latest_state()
+            state, truth = c.latest_state(), c.latest_truth() or c.wait_truth(1.0)
             info = c.info()
         assert state is not None and not state.stale_stop and not state.protective_stop, state
-        assert not any(state.violations.values()), state.violations
+        assert truth is not None and not any(truth.violations.values()), truth.violations
         assert info is not None and not any(info.status.sim_violations.values())
         assert shared[15] == 0 and shared[16] == 0, "franky-sim saw a joint past a limit"
     finally:
@@ -256,3 +267,30 @@ def test_serve_tracks_through_the_driver_and_resumes_after_the_robot_braked_in_i
         sim.join(10)
         if sim.is_alive():
             sim.kill()
+
+
+def test_the_franka_hand_closes_and_opens_through_gripper_commands(rig: Any) -> None:
+    """franky-sim serves the Franka Hand (libfranka's gripper port): a GripperMsg on
+    ``<robot>/gripper`` moves its fingers, and the state reports the measured width."""
+    d, _ = rig
+
+    def grip(action: str, **kw: float) -> None:
+        d.seq += 1
+        d.pub_gripper.put(encode(GripperMsg(robot=d.robot, seq=d.seq, stamp=time.time(), action=action,
+                                            speed=0.1, source="test", **kw)))
+
+    def width_until(pred: Any, timeout: float = 20.0) -> float:
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            st = d.wait(0.05)
+            if pred(st.gripper_width):
+                return float(st.gripper_width)
+        raise AssertionError(f"gripper width {d.state.gripper_width if d.state else None}")
+
+    width_until(lambda x: np.isfinite(x))  # the hand's child process has read it
+    grip("close")
+    assert width_until(lambda x: x < 0.005) < 0.005
+    grip("move", width=0.05)
+    assert abs(width_until(lambda x: abs(x - 0.05) < 0.003) - 0.05) < 0.003
+    grip("open")
+    assert width_until(lambda x: x > 0.075) > 0.075

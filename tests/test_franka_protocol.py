@@ -45,7 +45,7 @@ def test_only_the_lease_holders_commands_for_this_instance_with_increasing_seq_a
     assert d.on_command(cmd(d, 5, small), READY, 0.0) and d.cmd_seq == 5
     assert not d.on_command(cmd(d, 5, small), READY, 0.001)  # replayed
     assert d.refused == {"lease": 1, "instance": 1, "invalid": 1, "seq": 1}
-    st = d.state_msg(READY, np.zeros(7), np.zeros(3))
+    st = d.state_msg(READY, np.zeros(7))
     assert st.lease == "L1" and st.cmd_seq == 5 and st.instance == d.instance and st.refused == d.refused
     d.on_lease("L1", False)  # the holder's token vanished: L2 holds
     assert d.holder == "L2" and d.on_command(cmd(d, 1, small, lease="L2"), READY, 0.002)
@@ -57,19 +57,21 @@ def test_a_robot_reflex_is_a_protective_stop_that_only_a_new_stream_releases(drv
     for _ in range(5):
         d.cycle(1e-3, READY)
     d.fault("joint_velocity_violation")
-    st = d.state_msg(READY, np.zeros(7), np.zeros(3))
+    st = d.state_msg(READY, np.zeros(7))
     assert st.protective_stop and st.protective_stops == 1 and st.protective_reason == "robot: joint_velocity_violation"
     assert st.v_arm == [0.0] * 7  # the robot stopped: the next stream starts from rest
     assert not d.on_command(cmd(d, 2, [0.0] * 7), READY, 0.001)  # the same stream: refused
     assert d.refused["firmware"] == 1
     assert d.on_command(cmd(d, 3, [0.0] * 7, stream=3), READY, 0.002)  # a new stream: resumes
-    assert not d.state_msg(READY, np.zeros(7), np.zeros(3)).protective_stop
+    assert not d.state_msg(READY, np.zeros(7)).protective_stop
 
 
-def test_the_state_has_no_ground_truth_and_counts_the_referees_violations(drv: FrankaDriver) -> None:
+def test_the_truth_has_no_ground_truth_and_counts_the_referees_violations(drv: FrankaDriver) -> None:
     d = drv
     d.on_command(cmd(d, 1, [0.5] + [0.0] * 6), READY, 0.0)  # from rest: 0.5 rad/s in one 2 ms period
-    st = d.state_msg(READY, np.zeros(7), np.zeros(3))
-    assert all(math.isnan(x) for x in st.base_true + st.ee_true) and math.isnan(st.box_position)
-    assert st.wheel_speeds == [] and st.stalled_joint == -1
-    assert st.violations == {"acceleration": 1}  # judged as received, before the shaper smooths it
+    st = d.state_msg(READY, np.zeros(7))
+    assert st.wheel_speeds == [] and math.isnan(st.gripper_width)
+    tr = d.truth_msg(np.zeros(3))
+    assert all(math.isnan(x) for x in tr.base_true + tr.ee_true) and math.isnan(tr.box_position)
+    assert tr.stalled_joint == -1 and tr.instance == st.instance and tr.state_seq == st.seq
+    assert tr.violations == {"acceleration": 1}  # judged as received, before the shaper smooths it

@@ -54,11 +54,7 @@ def _state_msg(st: Any, seq: int) -> StateMsg:
         q_arm=st.q_arm.tolist(),
         v_arm=st.v_arm.tolist(),
         wheel_speeds=st.wheel_speeds.tolist(),
-        base_true=st.base_true.tolist(),
-        ee_true=st.ee_true.tolist(),
         tau=st.tau.tolist(),
-        contact_force=st.contact_force.tolist(),
-        violations=dict(st.violations),
         stale_stop=st.stale_stop,
     )
     d.update(seq=seq, stamp=st.t, instance="sim-hold-recovery", lease="core")

@@ -17,7 +17,7 @@ import pytest
 from test_integration_service import TIMEOUT, until
 from wmm_qp_service.client import Client
 from wmm_qp_service.processes import Stack, _service_args, free_port
-from wmm_qp_service.protocol import CommandMsg, StateMsg, encode
+from wmm_qp_service.protocol import CommandMsg, StateMsg, TruthMsg, encode
 
 import wmm_qp as w
 
@@ -86,11 +86,13 @@ def test_a_second_sim_under_the_same_id_is_a_fault_not_mixed(service_stack: Any)
                 # the twin applies none of the daemon's commands: they are for the other instance
                 s2 = until(lambda: (s := bridge.wait_state(2.0)) is not None
                            and s.instance == twin_state.instance and s.refused.get("instance", 0) > 0 and s)
-                assert s2.cmd_seq == -1 and sum(s2.violations.values()) == 0
+                t2 = until(lambda: (t := bridge.wait_truth(2.0)) is not None
+                           and t.instance == twin_state.instance and t)
+                assert s2.cmd_seq == -1 and sum(t2.violations.values()) == 0
         finally:
             twin.stop()
-        s1 = until(lambda: (s := c.wait_state(2.0)) is not None and s.instance == latched and s)
-        assert sum(s1.violations.values()) == 0, s1.violations
+        t1 = until(lambda: (t := c.wait_truth(2.0)) is not None and t.instance == latched and t)
+        assert sum(t1.violations.values()) == 0, t1.violations
 
 
 def test_a_client_publishing_cmd_meets_the_robots_own_protection(service_stack: Any) -> None:
@@ -102,6 +104,7 @@ def test_a_client_publishing_cmd_meets_the_robots_own_protection(service_stack: 
     with Client(stack.svc, name="rogue") as c:
         ready(c)
         st: StateMsg = until(lambda: c.wait_state(2.0))
+        tr0: TruthMsg = until(lambda: c.wait_truth(2.0))
         arm = [0.0] * robot.n_arm
         arm[3] = 100.0
         seq = 10**6
@@ -114,11 +117,13 @@ def test_a_client_publishing_cmd_meets_the_robots_own_protection(service_stack: 
             time.sleep(0.0005)
         after: StateMsg = until(lambda: c.wait_state(2.0))
         assert after.protective_stops >= 1 and "refused command" in after.protective_reason
-        assert after.violations["velocity"] > 0  # the referee counts what was commanded
-        assert after.violations["position"] == 0 and np.all(np.array(after.q_arm) <= hi + 1e-9)
-        assert np.linalg.norm(np.subtract(after.base_true[:2], st.base_true[:2])) < 0.05
+        tr: TruthMsg = until(lambda: c.wait_truth(2.0))
+        assert tr.violations["velocity"] > 0  # the referee counts what was commanded
+        assert tr.violations["position"] == 0 and np.all(np.array(after.q_arm) <= hi + 1e-9)
+        assert np.linalg.norm(np.subtract(tr.base_true[:2], tr0.base_true[:2])) < 0.05
         status = until(lambda: (i := c.info()) is not None and
-                       (i.status.faults.get("sim referee", 0) or i.status.faults.get("sim protective stop", 0)) and i)
+                       (i.status.faults.get("robot firmware", 0) or i.status.faults.get("sim protective stop", 0))
+                       and i)
         assert status.status.faults
 
 

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 from wmm_qp_service.client import Client
-from wmm_qp_service.protocol import ModeMsg, SetpointMsg, StateMsg, TelemetryMsg, encode
+from wmm_qp_service.protocol import ModeMsg, SetpointMsg, StateMsg, TelemetryMsg, TruthMsg, encode
 
 import wmm_qp as w
 
@@ -66,12 +66,12 @@ def test_stream_tracked_mode_change_smooth_and_malformed_rejected(service_stack:
         # the daemon holds until a resume (as the docs' client does: resend the mode), so wait for
         # the state asserted instead of asserting it at a fixed time.
 
-        def arrived() -> StateMsg | None:
+        def arrived() -> TruthMsg | None:
             c.send_setpoint(last)
             s = c.latest_status()
             if s is not None and s.resume_needed:
                 c.set_mode("track")
-            st = c.wait_state(2.0)
+            st = c.wait_truth(2.0)
             return st if st is not None and np.linalg.norm(np.array(st.ee_true) - last) < 0.01 else None
 
         until(arrived, timeout=60.0, period=0.02)
@@ -120,8 +120,7 @@ def test_stream_tracked_mode_change_smooth_and_malformed_rejected(service_stack:
                 time.sleep(0.03)  # ring channels of depth 1: one at a time
         st_bad = StateMsg(robot=stack.svc.robot, seq=1, stamp=0.0, t=0.0, q_base=[0.0] * 3,
                           q_arm=[np.inf] * 7, v_arm=[0.0] * 7, wheel_speeds=[0.0] * 4,
-                          base_true=[0.0] * 3, ee_true=[0.0] * 3, tau=[0.0] * 7,
-                          contact_force=[0.0] * 3, instance="forged")
+                          tau=[0.0] * 7, instance="forged")
         for _ in range(50):  # the sim's own states overwrite the ring: send a burst
             c.put_raw("state", encode(st_bad))
             time.sleep(0.001)
@@ -138,8 +137,8 @@ def test_stream_tracked_mode_change_smooth_and_malformed_rejected(service_stack:
         assert after.status.loop.ticks > before.status.loop.ticks
         assert after.status.mode == "hold"  # neither the unknown mode nor the foreign one applied
         assert after.status.state_ok and not after.status.safe_stop
-        st = c.wait_state(5.0)
-        assert st is not None and sum(st.violations.values()) == 0, st.violations if st else None
+        tr = c.wait_truth(5.0)
+        assert tr is not None and sum(tr.violations.values()) == 0, tr.violations if tr else None
 
 
 # Killing the sim / the daemon (safe stop, the sim's own stop, restarts): extended with
@@ -171,8 +170,7 @@ def test_a_stack_of_another_robot(tmp_path: Any, base: str) -> None:
             # a state with the Mecanum robot's 4 wheel speeds: rejected, never used
             forged = StateMsg(robot=stack.svc.robot, seq=1, stamp=0.0, t=0.0, q_base=[0.0] * 3,
                               q_arm=list(st.q_arm), v_arm=[0.0] * 7, wheel_speeds=[0.0] * 4,
-                              base_true=[0.0] * 3, ee_true=[0.0] * 3, tau=[0.0] * 7,
-                              contact_force=[0.0] * 3, instance="forged")
+                              tau=[0.0] * 7, instance="forged")
             size0 = info.status.rejected.get("size", 0)
             for _ in range(50):
                 c.put_raw("state", encode(forged))
@@ -186,13 +184,13 @@ def test_a_stack_of_another_robot(tmp_path: Any, base: str) -> None:
             while time.monotonic() - t0 < TIMEOUT:
                 c.send_setpoint(target)
                 time.sleep(0.01)
-                if (st := c.latest_state()) is not None and np.linalg.norm(np.array(st.ee_true) - target) < 0.005:
+                if (tr := c.latest_truth()) is not None and np.linalg.norm(np.array(tr.ee_true) - target) < 0.005:
                     break
                 if (s := c.latest_status()) is not None and s.resume_needed:  # a stall on a loaded machine
                     c.set_mode("track")
-            st = c.wait_state(2.0)
-            assert st is not None and np.linalg.norm(np.array(st.ee_true) - target) < 0.01
-            assert sum(st.violations.values()) == 0, st.violations
+            st, tr = c.wait_state(2.0), c.wait_truth(2.0)
+            assert st is not None and tr is not None and np.linalg.norm(np.array(tr.ee_true) - target) < 0.01
+            assert sum(tr.violations.values()) == 0, tr.violations
             assert not st.protective_stops
     finally:
         codes = stack.stop()
@@ -224,3 +222,40 @@ def test_a_sim_started_with_a_robot_file_is_found_under_its_name(tmp_path: Any) 
     finally:
         sim.terminate()
         sim.wait(timeout=10)
+
+
+def test_the_daemon_runs_every_mode_without_the_sims_truth(service_stack: Any) -> None:
+    """``wmm-qp sim --no-truth``: a robot that reports only what a real one does (no ``sim/truth``
+    on the wire). The daemon tracks, raises DM both ways and holds as with it; only what comes
+    from the truth is missing: telemetry's ee_error is nan, the status's sim_violations empty."""
+    stack = service_stack(500.0, extra_sim_args=["--no-truth"])
+    with Client(stack.svc, name="test", telemetry=True) as c:
+        info = ready(c)
+        x0 = np.array(info.status.x)
+        target = x0 + np.array([0.03, 0.02, 0.0])
+        c.set_mode("track")
+
+        def there() -> bool:
+            c.send_setpoint(target)
+            if (s := c.latest_status()) is not None and s.resume_needed:  # a stall on a loaded machine
+                c.set_mode("track")
+            i = c.info()
+            return i is not None and i.status.mode == "track" and np.linalg.norm(np.array(i.status.x) - target) < 0.005
+
+        until(there, timeout=60.0, period=0.02)
+        for mode in ("dm_cartesian", "dm_nullspace", "hold"):
+            c.set_mode(mode)
+            i = until(lambda m=mode: (i := c.info()) is not None and i.status.mode == m and i)  # type: ignore[misc]
+            t_end = time.monotonic() + 1.0
+            while time.monotonic() < t_end:
+                if mode == "dm_nullspace":
+                    c.send_setpoint(target)
+                time.sleep(0.02)
+            i = c.info()
+            assert i is not None and i.status.state_ok and i.status.mode == mode, (mode, i)
+        tel = c.telemetry()
+        assert tel and all(np.isnan(m.ee_error) and all(np.isnan(m.ee_true)) for m in tel)
+        assert c.latest_truth() is None and c.wait_truth(0.5) is None  # nothing on sim/truth
+        final = c.info()
+        assert final is not None and final.status.sim_violations == {}
+        assert final.status.dm > info.status.dm  # DM raised without any ground truth

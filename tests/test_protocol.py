@@ -13,9 +13,11 @@ from wmm_qp_service.keys import Keys
 from wmm_qp_service.protocol import (
     PROTOCOL_VERSION,
     CommandMsg,
+    GripperMsg,
     ModeMsg,
     SetpointMsg,
     StateMsg,
+    TruthMsg,
     encode,
 )
 from wmm_qp_service.validation import Reject, Rejected, Validator
@@ -30,11 +32,31 @@ def validator(cls: type, robot: str = "r1", n_arm: int = N_ARM, n_wheels: int = 
 
 def state(**kw: object) -> StateMsg:
     d: dict[str, object] = dict(robot="r1", t=0.0, q_base=[0.0] * 3, q_arm=[0.1] * 7, v_arm=[0.0] * 7,
-                                wheel_speeds=[0.0] * 4, base_true=[0.0] * 3, ee_true=[0.6, 0, 0.5],
-                                tau=[0.0] * 7, contact_force=[0.0] * 3, box_position=0.0,
-                                instance="sim-1", seq=1, stamp=1.0)
+                                wheel_speeds=[0.0] * 4, tau=[0.0] * 7, gripper_width=0.04, instance="sim-1",
+                                seq=1, stamp=1.0)
     d.update(kw)
     return StateMsg(**d)  # type: ignore[arg-type]
+
+
+def truth(**kw: object) -> TruthMsg:
+    d: dict[str, object] = dict(robot="r1", t=0.0, instance="sim-1", state_seq=1, base_true=[0.0] * 3,
+                                ee_true=[0.6, 0, 0.5], contact_force=[0.0] * 3, box_position=0.0, seq=1, stamp=1.0)
+    d.update(kw)
+    return TruthMsg(**d)  # type: ignore[arg-type]
+
+
+def grip(**kw: object) -> GripperMsg:
+    d: dict[str, object] = dict(robot="r1", action="move", width=0.05, speed=0.1, source="op", seq=1, stamp=1.0)
+    d.update(kw)
+    return GripperMsg(**d)  # type: ignore[arg-type]
+
+
+def test_the_state_holds_only_what_a_real_robot_reports() -> None:
+    """Ground truth, the box, the contact model and the referee are the sim's truth, not state."""
+    fields = set(StateMsg.__struct_fields__)
+    assert not fields & {"base_true", "ee_true", "box_position", "stalled_joint", "violations", "contact_force"}
+    assert {"base_true", "ee_true", "box_position", "stalled_joint", "violations"} <= set(TruthMsg.__struct_fields__)
+    assert math.isnan(state(gripper_width=math.nan).gripper_width)  # nan: no gripper
 
 
 def sp(**kw: object) -> SetpointMsg:
@@ -65,6 +87,8 @@ def test_valid_messages_round_trip() -> None:
         (SetpointMsg, sp(robot="r1", x=[0.6, 0.0, 0.5], xd=[0.01, 0.0, 0.0])),
         (ModeMsg, ModeMsg(robot="r1", mode="dm_nullspace", direction=[0, 0, 1.0])),
         (CommandMsg, cmd()),
+        (TruthMsg, truth()),
+        (GripperMsg, grip(action="grasp", width=0.02, force=40.0)),
     ]:
         v = validator(cls)
         assert v(encode(msg)) == msg
@@ -111,6 +135,13 @@ def test_valid_messages_round_trip() -> None:
         (CommandMsg, encode(cmd(period=math.nan)), Reject.NON_FINITE),
         (SetpointMsg, encode(sp(source="")), Reject.SCHEMA),
         (StateMsg, encode(state(instance="")), Reject.SCHEMA),
+        (TruthMsg, encode(truth(ee_true=[0.0] * 2)), Reject.SIZE),
+        (GripperMsg, encode(grip(action="crush")), Reject.RANGE),
+        (GripperMsg, encode(grip(width=-0.01)), Reject.RANGE),
+        (GripperMsg, encode(grip(speed=0.0)), Reject.RANGE),
+        (GripperMsg, encode(grip(force=1e6)), Reject.RANGE),
+        (GripperMsg, encode(grip(width=math.nan)), Reject.NON_FINITE),
+        (GripperMsg, encode(grip(source="")), Reject.SCHEMA),
     ],
 )
 def test_rejections(cls: type, payload: bytes, reason: Reject) -> None:

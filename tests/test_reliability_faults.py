@@ -76,8 +76,7 @@ def _core_run(loss: float, burst: tuple[int, int] | None, n: int = 1500) -> tupl
         if k == 0 or not lost:
             core.on_state(StateMsg(robot="wmm", seq=k + 1, stamp=t, t=t, q_base=q_base.tolist(),
                                    q_arm=q_arm.tolist(), v_arm=v_arm.tolist(), wheel_speeds=wheels.tolist(),
-                                   base_true=q_base.tolist(), ee_true=[0.0] * 3, tau=[0.0] * robot.n_arm,
-                                   contact_force=[0.0] * 3, instance="sim"), t)
+                                   tau=[0.0] * robot.n_arm, instance="sim"), t)
         if k == 1:
             core.on_mode(ModeMsg(robot="wmm", seq=1, stamp=t, mode="track"))
         x = x0 + 0.05 * np.array([np.sin(2 * t), 1 - np.cos(2 * t), 0.0])

@@ -64,12 +64,12 @@ def test_keyboard_teleop_in_tmux(tmp_path: Path) -> None:
             x0 = wait_for("the teleop's screen", tmux.target, timeout=60.0)
             assert "mode" in tmux.screen() and "daemon" in tmux.screen()
             wait_for("mode track", lambda: (s := obs.latest_status()) is not None and s.mode == "track")
-            ee0 = np.asarray(wait_for("a state", obs.latest_state).ee_true)
+            ee0 = np.asarray(wait_for("a truth", obs.latest_truth).ee_true)
 
             def pressed_forward() -> bool:  # w: +x, a key press at a time, as a held key repeats
                 tmux.keys("w")
                 time.sleep(0.05)
-                t, st = tmux.target(), obs.latest_state()
+                t, st = tmux.target(), obs.latest_truth()
                 return t is not None and t[0] > x0[0] + 0.04 and st is not None and st.ee_true[0] > ee0[0] + 0.03
 
             wait_for("the target and the simulated EE 3-4 cm forward", pressed_forward, timeout=60.0, every=0.0)

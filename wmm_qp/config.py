@@ -67,6 +67,21 @@ class ShapeConfig:
 
 
 @dataclass(frozen=True)
+class GripperConfig:
+    """A parallel gripper (the robot file's ``[gripper]`` table, docs/robots.md).
+
+    Attributes:
+        width_max: [m] the fingers' full opening.
+        speed_max: [m/s] the fingers' top speed (a command's speed is clamped to it).
+        force_max: [N] the largest grasp force (a command's force is clamped to it).
+    """
+
+    width_max: float
+    speed_max: float
+    force_max: float
+
+
+@dataclass(frozen=True)
 class RobotCollisionConfig:
     """The robot's collision geometry (the robot file's ``[collision]`` table, docs/robots.md).
 
@@ -200,6 +215,8 @@ class RobotConfig:
     name: str = "wmm"
     path: Path | None = None
     collision: RobotCollisionConfig = field(default_factory=RobotCollisionConfig)
+    gripper: GripperConfig | None = None
+    """The robot's gripper (None: none)."""
 
     @property
     def n_arm(self) -> int:
@@ -554,7 +571,7 @@ def load_robot_config(path: Path | str | None = None) -> RobotConfig:
 
     path = Path(path) if path is not None else default_robot_file()
     r = TomlTable(path, read_toml(path))
-    r.unknown({"name", "arm", "base", "collision"})
+    r.unknown({"name", "arm", "base", "collision", "gripper"})
     a = r.table("arm")
     a.unknown(
         {
@@ -641,7 +658,15 @@ def load_robot_config(path: Path | str | None = None) -> RobotConfig:
     )
     base = _load_base(r.table("base"))
     collision = _load_collision(r.table("collision", required=False), path, full, chain.joints)
-    return RobotConfig(arm=arm, base=base, name=r.string("name", "wmm"), path=path, collision=collision)
+    gripper = None
+    if r.has("gripper"):
+        g = r.table("gripper")
+        g.unknown({"width_max", "speed_max", "force_max"})
+        gripper = GripperConfig(width_max=g.number("width_max", positive=True),
+                                speed_max=g.number("speed_max", positive=True),
+                                force_max=g.number("force_max", positive=True))
+    return RobotConfig(arm=arm, base=base, name=r.string("name", "wmm"), path=path, collision=collision,
+                       gripper=gripper)
 
 
 def load_shape(t: TomlTable, name: str, link: str, kinds: tuple[str, ...] = SHAPE_KINDS) -> ShapeConfig:

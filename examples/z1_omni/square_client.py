@@ -79,7 +79,7 @@ def main(argv: list[str] | None = None) -> int:
             elif c.resume("track"):  # after a fault: the deliberate act the daemon waits for
                 resumes += 1
             last = time.monotonic()
-            if at >= 0 and (st := c.latest_state()) is not None:
+            if at >= 0 and (st := c.latest_truth()) is not None:
                 closest[at] = min(closest[at], float(np.linalg.norm(corners[at + 1] - st.ee_true)))
             time.sleep(0.01)
         c.set_mode("hold")

@@ -12,6 +12,7 @@ Example::
             c.resume("track")                        # after a fault: resume deliberately
         print(c.info().status.loop)                  # query: status + config
         st = c.latest_state()                        # the sim's last state (or None)
+        tr = c.latest_truth()                        # the sim's ground truth, referee (or None)
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from .config import ServiceConfig, check_name, load_service_config
 from .keys import Keys
 from .protocol import (
     BoxMsg,
+    GripperMsg,
     InfoMsg,
     ModeMsg,
     ObstaclesMsg,
@@ -41,6 +43,7 @@ from .protocol import (
     StateMsg,
     StatusMsg,
     TelemetryMsg,
+    TruthMsg,
     encode,
 )
 from .transport import ROLE_CLIENT, open_session
@@ -111,9 +114,11 @@ class Client:
         self._seq = 0
         self.session: zenoh.Session | None = None
         self._last_state: StateMsg | None = None
+        self._last_truth: TruthMsg | None = None
         self._last_status: StatusMsg | None = None
         self._status_count = 0  # statuses received
         self._dec_state = msgspec.msgpack.Decoder(StateMsg)
+        self._dec_truth = msgspec.msgpack.Decoder(TruthMsg)
         self._dec_status = msgspec.msgpack.Decoder(StatusMsg)
         self._dec_tel = msgspec.msgpack.Decoder(TelemetryMsg)
         self._dec_info = msgspec.msgpack.Decoder(InfoMsg)
@@ -147,7 +152,10 @@ class Client:
                                             reliability=zenoh.Reliability.RELIABLE)
         self._pub_obstacles = s.declare_publisher(k.obstacles, congestion_control=zenoh.CongestionControl.BLOCK,
                                                   reliability=zenoh.Reliability.RELIABLE)
+        self._pub_gripper = s.declare_publisher(k.gripper, congestion_control=zenoh.CongestionControl.BLOCK,
+                                                reliability=zenoh.Reliability.RELIABLE)
         self._sub_state = s.declare_subscriber(k.state, zenoh.handlers.RingChannel(1))
+        self._sub_truth = s.declare_subscriber(k.sim_truth, zenoh.handlers.RingChannel(1))
         self._sub_status = s.declare_subscriber(k.status, zenoh.handlers.RingChannel(1))
         self._sub_tel = (s.declare_subscriber(k.telemetry, zenoh.handlers.FifoChannel(100_000))
                          if self._want_telemetry else None)
@@ -267,6 +275,29 @@ class Client:
                      width=float(width), height=float(height))
         self._pub_box.put(encode(msg))
 
+    def gripper(self, action: str, width: float = 0.0, speed: float = 0.05, force: float = 0.0) -> None:
+        """Send a gripper command (``open``, ``close``, ``move``, ``grasp``; see
+        :class:`~.protocol.GripperMsg`): width [m], speed [m/s], force [N]."""
+        self._pub_gripper.put(encode(GripperMsg(
+            robot=self.svc.robot, seq=self._next(), stamp=time.time(), action=action, width=float(width),
+            speed=float(speed), force=float(force), source=self.source)))
+
+    def gripper_open(self, speed: float = 0.05) -> None:
+        """Open the gripper fully at ``speed`` [m/s]."""
+        self.gripper("open", speed=speed)
+
+    def gripper_close(self, speed: float = 0.05) -> None:
+        """Close the gripper fully at ``speed`` [m/s]."""
+        self.gripper("close", speed=speed)
+
+    def gripper_move(self, width: float, speed: float = 0.05) -> None:
+        """Move the fingers to ``width`` [m] at ``speed`` [m/s]."""
+        self.gripper("move", width=width, speed=speed)
+
+    def gripper_grasp(self, width: float, force: float, speed: float = 0.05) -> None:
+        """Close to ``width`` [m] at ``speed`` [m/s] and hold with ``force`` [N]."""
+        self.gripper("grasp", width=width, speed=speed, force=force)
+
     def put_obstacles(self, obstacles: Sequence[dict[str, Any]]) -> None:
         """Replace the live obstacle set (daemon and sim): tables with the keys of a scene file's
         ``[[obstacles]]`` (world frame), e.g. ``{"id": "ball", "kind": "sphere", "radius": 0.1,
@@ -330,12 +361,33 @@ class Client:
         return None
 
     def latest_state(self) -> StateMsg | None:
-        """The sim's most recent state (kept from earlier calls when nothing new arrived)."""
+        """The robot's most recent state (kept from earlier calls when nothing new arrived)."""
         s = self._sub_state.try_recv()
         if s is not None:
             with contextlib.suppress(msgspec.DecodeError):
                 self._last_state = self._dec_state.decode(s.payload.to_bytes())
         return self._last_state
+
+    def latest_truth(self) -> TruthMsg | None:
+        """The sim's most recent evaluation data (``sim/truth``; None: none yet, or a robot that
+        publishes none). Nothing on the control path needs it."""
+        s = self._sub_truth.try_recv()
+        if s is not None:
+            with contextlib.suppress(msgspec.DecodeError):
+                self._last_truth = self._dec_truth.decode(s.payload.to_bytes())
+        return self._last_truth
+
+    def wait_truth(self, timeout: float = 5.0) -> TruthMsg | None:
+        """Wait for fresh evaluation data from the sim (None after ``timeout`` [s])."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            s = self._sub_truth.try_recv()
+            if s is not None:
+                with contextlib.suppress(msgspec.DecodeError):
+                    self._last_truth = self._dec_truth.decode(s.payload.to_bytes())
+                    return self._last_truth
+            time.sleep(0.005)
+        return None
 
     def latest_status(self) -> StatusMsg | None:
         """The daemon's most recent published status (it also feeds the fault bookkeeping:

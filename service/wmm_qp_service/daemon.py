@@ -46,6 +46,7 @@ from .protocol import (
     StateMsg,
     StatusMsg,
     TelemetryMsg,
+    TruthMsg,
     encode,
 )
 from .rate_loop import LoopTiming, Mailbox, RateLoop, StateLoop, realtime_priority
@@ -231,7 +232,8 @@ class ControlCore:
         # not of this daemon's stream, until the robot applies one of this daemon's (-1: none)
         self.inherited_cmd_seq = -1
         # the sim's own referee and firmware
-        self.sim_violations_seen = -1  # total count of the latched instance (-1: no state yet)
+        self.firmware_seen = -1  # protective stops + firmware refusals of the latched instance (-1: no state yet)
+        self.truth: TruthMsg | None = None  # the latched instance's last evaluation data (optional)
         self.event_fault = ""  # a fault that happened (not a condition): holds the safe stop
         self.event_until = -math.inf
         self.protective = ""
@@ -293,7 +295,8 @@ class ControlCore:
             self.anchor_on_command = False  # a new robot: its rates are what it executes
             self.cmd = None  # and the last command was another robot's
             self.last_state_seq = -1
-            self.sim_violations_seen = -1
+            self.firmware_seen = -1
+            self.truth = None
             self._reset_age()
         if msg.seq <= self.last_state_seq or (self.last_state_seq >= 0
                                               and msg.seq > self.last_state_seq + SEQ_JUMP_MAX):
@@ -308,12 +311,11 @@ class ControlCore:
         self.state_time = now
         self.state_fresh = True
         self.lease_holder = msg.lease
-        total = sum(msg.violations.values())
-        if 0 <= self.sim_violations_seen < total:
-            new = {k: v for k, v in msg.violations.items() if v}
-            self._event(f"sim referee counted {total - self.sim_violations_seen} new violation(s) {new}",
-                        "sim referee", now)
-        self.sim_violations_seen = total
+        total = msg.protective_stops + msg.refused.get("firmware", 0)
+        if 0 <= self.firmware_seen < total:  # the robot's own reports, not an evaluation's
+            self._event(f"robot firmware reported {total - self.firmware_seen} new protective stop(s) or "
+                        f"refused command(s) ({msg.protective_reason or 'no reason given'})", "robot firmware", now)
+        self.firmware_seen = total
         self.protective = msg.protective_reason if msg.protective_stop else ""
         cs = msg.cmd_seq
         if cs >= max(0, self.stream_start) and self._sent_seq[cs % _SENT] == cs:  # this stream's only
@@ -326,6 +328,12 @@ class ControlCore:
                 if self.follow_state_age:
                     self._set_latency(self.command_timeout + min(ages[-1], self.svc.watchdog.state_age_max))
         return True
+
+    def on_truth(self, msg: TruthMsg) -> None:
+        """A validated ``sim/truth`` message: kept for telemetry's ``ee_error`` and the status's
+        ``sim_violations`` when it is the latched instance's; the control path never reads it."""
+        if msg.instance == self.instance:
+            self.truth = msg
 
     def _set_latency(self, latency: float) -> None:
         """Bounds (13)'s latency margin [s] (and the collision rows', which share it): the
@@ -596,9 +604,9 @@ class ControlCore:
                 or now - self.setpoint_time > wd.setpoint_timeout):
             self.orient.bring_to_rest()
         # ground-truth error of the state (the previous tick's command) against its target
-        if self.ref_valid and self.state_msg is not None and self.mode != w.Mode.DM_CARTESIAN:
+        if self.ref_valid and self.truth is not None and self.mode != w.Mode.DM_CARTESIAN:
             x_prev = self.ref.x_d
-            self.ee_error = math.dist(self.state_msg.ee_true, x_prev.tolist()) if x_prev is not None else math.nan
+            self.ee_error = math.dist(self.truth.ee_true, x_prev.tolist()) if x_prev is not None else math.nan
         else:
             self.ee_error = math.nan
         stages = self.stages
@@ -732,7 +740,7 @@ class ControlCore:
             last_fault_age=self.now - self.last_fault_time if math.isfinite(self.last_fault_time) else math.nan,
             loop=loop.stats(), rejected=dict(rejected),
             accepted=accepted,
-            sim_violations=dict(self.state_msg.violations) if self.state_msg else {},
+            sim_violations=dict(self.truth.violations) if self.truth is not None else {},
             x=self._ee_now(), x_d=_xd(self.ref),
             dm=float(cmd.dm) if cmd is not None else math.nan, sim_alive=self.sim_alive,
             faults=dict(self.faults), lease=self.lease, lease_holder=self.lease_holder,
@@ -830,6 +838,7 @@ class Daemon:
         self.keys = Keys.of(svc.prefix, svc.robot)
         lim = svc.validation
         self.v_state = Validator(StateMsg, svc.robot, lim, n_arm=robot.n_arm, n_wheels=robot.n_wheels)
+        self.v_truth = Validator(TruthMsg, svc.robot, lim)
         self.v_mode = Validator(ModeMsg, svc.robot, lim)
         self.v_setpoint = Validator(SetpointMsg, svc.robot, lim)
         self.v_obstacles = Validator(ObstaclesMsg, svc.robot, lim)
@@ -839,7 +848,7 @@ class Daemon:
     def rejected(self) -> Counter[str]:
         """Rejected and refused messages by reason, all keys together."""
         return (self.v_state.rejected + self.v_mode.rejected + self.v_setpoint.rejected
-                + self.v_obstacles.rejected + self.core.refused)
+                + self.v_obstacles.rejected + self.v_truth.rejected + self.core.refused)
 
     def accepted(self) -> dict[str, int]:
         """Accepted messages by key."""
@@ -922,6 +931,7 @@ class Daemon:
         sub_setpoint = session.declare_subscriber(k.setpoint, ring(1))
         sub_mode = session.declare_subscriber(k.mode, fifo(256))
         sub_obstacles = session.declare_subscriber(k.obstacles, ring(1))  # the latest set wins
+        sub_truth = session.declare_subscriber(k.sim_truth, ring(1))  # optional: telemetry only
         queryable = session.declare_queryable(k.info, fifo(64))
         alive_sub = session.liveliness().declare_subscriber(k.alive("sim"), fifo(64), history=True)
         token = session.liveliness().declare_token(k.alive("daemon"))
@@ -1007,6 +1017,9 @@ class Daemon:
                 s = sub_obstacles.try_recv()
                 if s is not None and self.v_obstacles(s.payload.to_bytes()) is not None:
                     core.on_obstacles(self.v_obstacles.shapes, now)
+                s = sub_truth.try_recv()
+                if s is not None and (tr := self.v_truth(s.payload.to_bytes())) is not None:
+                    core.on_truth(tr)
                 if stages is not None:
                     stages.lap(_POLL)
                 core.check_obstacles(now)
@@ -1031,7 +1044,7 @@ class Daemon:
                     # ---- after the command: telemetry (when someone listens), status, queries
                     if tel_listened and loop.ticks % tel_every == 0:
                         fresh = core.cmd_state_seq >= 0
-                        ee = core.state_msg.ee_true if core.state_msg is not None else _NAN3
+                        ee = core.truth.ee_true if core.truth is not None else _NAN3
                         pub_tel.put(encode(TelemetryMsg(
                             robot=svc.robot, seq=seq, stamp=cmd_stamp, t=now - t0,
                             mode=core.mode.value, x=cmd.x.tolist(), x_d=_xd(core.ref),
@@ -1063,8 +1076,8 @@ class Daemon:
             core.say = _say
             gc.unfreeze()
             final = core.status(loop, self.rejected(), self.accepted())
-            for ent in (token, lease_token, sub_state, ring_state, sub_setpoint, sub_mode, sub_obstacles, queryable,
-                        alive_sub, pub_cmd, pub_status, pub_tel):
+            for ent in (token, lease_token, sub_state, ring_state, sub_setpoint, sub_mode, sub_obstacles, sub_truth,
+                        queryable, alive_sub, pub_cmd, pub_status, pub_tel):
                 with contextlib.suppress(Exception):
                     if ent is not None:
                         ent.undeclare()

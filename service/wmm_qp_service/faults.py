@@ -10,6 +10,7 @@ time.time() just before the fault``, free of the observer's polling delay.
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import signal
 import subprocess
@@ -27,13 +28,13 @@ import wmm_qp as w
 
 from .client import Client
 from .processes import Stack
-from .protocol import StateMsg, StatusMsg, TelemetryMsg
+from .protocol import StateMsg, StatusMsg, TelemetryMsg, TruthMsg
 
 SAFE = w.Status.SAFE_STOP.value
 
 
 class Probe:
-    """A client that keeps every telemetry, state and status message with its stamp.
+    """A client that keeps every telemetry, state, truth and status message with its stamp.
 
     Args:
         stack: the running stack.
@@ -48,7 +49,11 @@ class Probe:
         k = self.client.keys
         self._sub_state = s.declare_subscriber(k.state, zenoh.handlers.FifoChannel(200_000))
         self._sub_status = s.declare_subscriber(k.status, zenoh.handlers.FifoChannel(10_000))
+        self._sub_truth = s.declare_subscriber(k.sim_truth, zenoh.handlers.RingChannel(1))
         self._dec_state = msgspec.msgpack.Decoder(StateMsg)
+        self._dec_truth = msgspec.msgpack.Decoder(TruthMsg)
+        self.truth: TruthMsg | None = None
+        """The sim's last evaluation data (``sim/truth``)."""
         self._dec_status = msgspec.msgpack.Decoder(StatusMsg)
         self.tel: list[TelemetryMsg] = []
         self.states: list[StateMsg] = []
@@ -69,6 +74,9 @@ class Probe:
                 self.states.append(self._dec_state.decode(s.payload.to_bytes()))
             except msgspec.DecodeError:  # not a state on the state key: count it
                 self.misrouted[str(s.key_expr)] += 1
+        if (s := self._sub_truth.try_recv()) is not None:
+            with contextlib.suppress(msgspec.DecodeError):
+                self.truth = self._dec_truth.decode(s.payload.to_bytes())
         while (s := self._sub_status.try_recv()) is not None:
             try:
                 self.statuses.append(self._dec_status.decode(s.payload.to_bytes()))
@@ -78,7 +86,7 @@ class Probe:
     def clear(self) -> None:
         """Forget what was collected (and drain what is pending)."""
         self.drain()
-        self.tel, self.states, self.statuses = [], [], []
+        self.tel, self.states, self.statuses, self.truth = [], [], [], None
 
     def until(self, pred: Callable[[], Any], timeout: float = 30.0, stream: np.ndarray | None = None) -> Any:
         """Drain (and stream ``stream`` as setpoint) until ``pred()`` is truthy; returns it."""
@@ -113,6 +121,11 @@ class Probe:
                 return _moving(self.states[-1])
             time.sleep(0.01)
         return _moving(self.states[-1]) if self.states else 0.0
+
+    def violations(self) -> dict[str, int]:
+        """The sim's referee counts from a fresh ``sim/truth`` message."""
+        tr = self.until(lambda: self.truth)
+        return dict(tr.violations)
 
     def first_tel(self, pred: Callable[[TelemetryMsg], bool], after: float) -> TelemetryMsg | None:
         """The first telemetry stamped after ``after`` [s, wall] satisfying ``pred``."""
@@ -176,11 +189,10 @@ def sim_kill_and_restart(p: Probe, rate_hz: float) -> dict[str, Any]:
     seq = [m for m in p.tel if m.stamp >= first.stamp]
     steps = [p.step_bound_ratio(b, np.array(a.arm_rates), np.array(a.wheel_speeds), dt)
              for a, b in itertools.pairwise(seq) if b.seq == a.seq + 1]
-    last = p.until(lambda: p.states and p.states[-1])
     return {"detect_s": safe.stamp - t_kill, "zero_s": zero.stamp - t_kill, "fault": fault,
             "resume_s": first.stamp - t_start, "first_cmd_ratio": ratio,
             "max_step_ratio": max(steps) if steps else float("nan"), "resumed_ticks": len(seq),
-            "violations": dict(last.violations)}
+            "violations": p.violations()}
 
 
 def daemon_kill_and_restart(p: Probe) -> dict[str, Any]:
@@ -214,13 +226,14 @@ def daemon_kill_and_restart(p: Probe) -> dict[str, Any]:
     while time.monotonic() < t_end:
         p.client.send_setpoint(target)
         time.sleep(0.01)
-        if p.states and float(np.linalg.norm(np.array(p.states[-1].ee_true) - target)) < 0.002:
+        p.drain()
+        if p.truth is not None and float(np.linalg.norm(np.array(p.truth.ee_true) - target)) < 0.002:
             break
     p.clear()
-    st = p.until(lambda: p.states and p.states[-1])
+    tr = p.until(lambda: p.truth)
     return {"speed_at_kill": speed, "detect_s": det.stamp - t_kill, "stop_s": stop.stamp - t_kill,
-            "resume_s": resume, "tracking_error": float(np.linalg.norm(np.array(st.ee_true) - target)),
-            "violations": dict(st.violations)}
+            "resume_s": resume, "tracking_error": float(np.linalg.norm(np.array(tr.ee_true) - target)),
+            "violations": dict(tr.violations)}
 
 
 _FLOODER = """
@@ -306,13 +319,12 @@ def state_faults(p: Probe, sim_args: list[str], seconds: float = 3.0) -> dict[st
     p.drain()
     tel = [m for m in p.tel if m.mode == "track"]
     err = [m.ee_error for m in tel if np.isfinite(m.ee_error)]
-    st = p.until(lambda: p.states and p.states[-1])
     i = p.client.info()
     out = {"sim_args": sim_args, "ticks": len(tel), "safe_stop_ticks": sum(m.status == SAFE for m in tel),
            "ee_error_max": max(err) if err else float("nan"),
            "ee_error_p50": float(np.median(err)) if err else float("nan"),
            "state_ok": bool(i and i.status.state_ok), "last_fault": i.status.last_fault if i else "",
-           "faults": dict(i.status.faults) if i else {}, "violations": dict(st.violations)}
+           "faults": dict(i.status.faults) if i else {}, "violations": p.violations()}
     # the next scenarios need a healthy stack: a delayed state is a fault the daemon now holds on
     p.stack.kill("sim", signal.SIGKILL)
     p.stack.extra_sim_args = []
@@ -359,8 +371,7 @@ def sigstop(p: Probe, name: str, hold_s: float = 3.0) -> dict[str, Any]:
             and i.status.loop.ticks > 0 and i, timeout=60.0)
     out["resume_s"] = time.time() - t1
     p.move(x0, 1.0)
-    st = p.until(lambda: p.states and p.states[-1])
-    out["violations"] = dict(st.violations)
+    out["violations"] = p.violations()
     out["probe_misrouted"] = sum(p.misrouted.values()) - misrouted0
     i = p.client.info()
     out["daemon_rejected"] = dict(i.status.rejected) if i else {}

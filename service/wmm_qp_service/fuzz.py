@@ -52,9 +52,8 @@ def templates(robot: str, config: w.RobotConfig | None = None) -> dict[str, dict
     x0 = model.ee_position(np.zeros(3), config.arm.start).tolist()
     msgs: dict[str, msgspec.Struct] = {
         "state": StateMsg(robot=robot, seq=1, stamp=time.time(), t=1.0, q_base=[0.0] * 3, q_arm=q,
-                          v_arm=[0.0] * na, wheel_speeds=[0.0] * nw, base_true=[0.0] * 3,
-                          ee_true=x0, tau=[0.0] * na, contact_force=[0.0] * 3,
-                          box_position=0.0, violations={"position": 0}, instance="fuzz-sim"),
+                          v_arm=[0.0] * na, wheel_speeds=[0.0] * nw, tau=[0.0] * na,
+                          gripper_width=0.04, instance="fuzz-sim"),
         "setpoint": SetpointMsg(robot=robot, seq=1, stamp=time.time(), x=[x0[0], x0[1] + 0.01, x0[2]],
                                 xd=[0.0, 0.01, 0.0], source="fuzz", q=[0.0, 0.0, 0.0, 1.0],
                                 w=[0.0, 0.0, 0.1]),
@@ -284,6 +283,6 @@ def fuzz_wire(client: Any, n: int, rate_hz: float = 4000.0, seed: int = 0,
         rep.ticks = a.loop.ticks - b.loop.ticks
         rep.tick_max_us = a.loop.tick_max_us
         rep.measured_hz = a.loop.measured_hz
-    st = client.wait_state(5.0)
-    rep.violations = dict(st.violations) if st is not None else {}
+    tr = client.wait_truth(5.0)
+    rep.violations = dict(tr.violations) if tr is not None else {}
     return rep

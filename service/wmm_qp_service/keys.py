@@ -46,6 +46,17 @@ class Keys:
         return f"{self.root}/sim/box"
 
     @property
+    def sim_truth(self) -> str:
+        """sim (or a driver's referee) → observers: evaluation data (:class:`~.protocol.TruthMsg`),
+        with each state; nothing on the control path needs it."""
+        return f"{self.root}/sim/truth"
+
+    @property
+    def gripper(self) -> str:
+        """client → robot: a gripper command (:class:`~.protocol.GripperMsg`), never dropped."""
+        return f"{self.root}/gripper"
+
+    @property
     def obstacles(self) -> str:
         """client → daemon and sim: the live obstacles (:class:`~.protocol.ObstaclesMsg`), latest wins."""
         return f"{self.root}/obstacles"

@@ -109,6 +109,11 @@ class Stack:
         return self._spawn("daemon", ["serve", *_service_args(self.svc, self.robot_file, self.scene_file),
                                       "--rate", f"{self.rate_hz:g}", *self.extra_daemon_args])
 
+    def start_driver(self, kind: str, robot_ip: str) -> subprocess.Popen[bytes]:
+        """Start a real robot's driver (``wmm-qp driver KIND --robot-ip IP``) in the sim's place."""
+        return self._spawn("driver", ["driver", kind, "--robot-ip", robot_ip,
+                                      *_service_args(self.svc, self.robot_file)])
+
     def start(self) -> Stack:
         """Start both."""
         self.start_sim()

@@ -17,9 +17,10 @@ from typing import Any, TypeVar
 
 import msgspec
 
-PROTOCOL_VERSION = 2
+PROTOCOL_VERSION = 3
 """Bumped on any incompatible change of a schema below (2: the sim instance, the control lease,
-the setpoint's source and the command's period and state seq are required fields). Optional
+the setpoint's source and the command's period and state seq are required fields; 3: the state
+holds only what a real robot reports, the sim's evaluation data moved to :class:`TruthMsg`). Optional
 fields with a default may be added within a version (2 gained the setpoint's ``q`` and ``w``,
 the status's ``quat_d``, ``orientation_ignored``, ``fault_active``, ``last_fault_age`` and
 ``orientation_error``, and the info reply's robot description)."""
@@ -44,34 +45,32 @@ class Header(msgspec.Struct, forbid_unknown_fields=False):
 
 
 class StateMsg(_Msg, tag="state", kw_only=True):
-    """sim → daemon: the robot's measured state (published at the sim's rate).
+    """robot → daemon: what the robot measures and its firmware reports (at the robot's rate).
+
+    Only what a real robot reports: the sim's evaluation data (ground truth, the box, the
+    referee) is in :class:`TruthMsg`, which nothing on the control path needs.
 
     Attributes:
-        t: [s] sim time.
+        t: [s] robot time.
         q_base: [m, m, rad] base pose from odometry (what a controller may use).
         q_arm: [rad or m] n_arm joint values (the robot description's joint order).
         v_arm: [rad/s or m/s] n_arm executed joint rates.
         wheel_speeds: [rad/s] n_wheels executed wheel speeds (the base kind's wheel order).
-        base_true: [m, m, rad] ground-truth base pose (for evaluation only).
-        ee_true: [m] ground-truth EE position ("motion capture").
-        tau: [N·m or N] n_arm joint torques from the contact model.
-        contact_force: [N] 3 EE contact force.
-        box_position: [m] box position along the push axis (nan: no box).
-        stalled_joint: the joint (0-based) that stalled the push this step (-1: none).
-        violations: limit-referee counts by kind.
-        stale_stop: the sim is braking because commands went stale.
-        cmd_seq: seq of the last command the sim applied (-1: none).
-        instance: this sim process's identity (random, fixed for its life): the daemon
+        tau: [N·m or N] n_arm measured joint torques (the sim: from its contact model).
+        gripper_width: [m] the gripper's opening (nan: no gripper).
+        stale_stop: the firmware is braking because commands went stale.
+        cmd_seq: seq of the last command the robot applied (-1: none).
+        instance: this robot process's identity (random, fixed for its life): the daemon
             latches it and treats states of another instance as a second source (a fault).
-        lease: the control lease holder whose commands the sim applies ("" = none).
+        lease: the control lease holder whose commands the robot applies ("" = none).
         protective_stop: the robot's firmware is braking (a refused command or a motion that
-            could not stop before a limit), or holds it at rest until a legal command.
-        protective_stops: protective stops since the sim started.
+            could not stop before a limit), or holds it at rest until a new command stream.
+        protective_stops: protective stops since the robot process started.
         protective_reason: why the last one started.
         refused: commands not applied, by reason (``lease``, ``instance``, ``firmware``,
             and the validation reasons).
 
-    ``seq`` is the sim's step counter: consecutive states of one instance have consecutive seq.
+    ``seq`` is the robot's step counter: consecutive states of one instance have consecutive seq.
     """
 
     t: float
@@ -79,13 +78,8 @@ class StateMsg(_Msg, tag="state", kw_only=True):
     q_arm: list[float]
     v_arm: list[float]
     wheel_speeds: list[float]
-    base_true: list[float]
-    ee_true: list[float]
     tau: list[float]
-    contact_force: list[float]
-    box_position: float = float("nan")
-    stalled_joint: int = -1
-    violations: dict[str, int] = msgspec.field(default_factory=dict)
+    gripper_width: float = float("nan")
     stale_stop: bool = False
     cmd_seq: int = -1
     instance: str
@@ -94,6 +88,35 @@ class StateMsg(_Msg, tag="state", kw_only=True):
     protective_stops: int = 0
     protective_reason: str = ""
     refused: dict[str, int] = msgspec.field(default_factory=dict)
+
+
+class TruthMsg(_Msg, tag="truth", kw_only=True):
+    """sim (or a driver's referee) → observers: evaluation data no controller may use.
+
+    Published on ``<robot>/sim/truth`` with each state; the daemon runs the same without it
+    (its telemetry's ``ee_error`` is then nan and its status's ``sim_violations`` empty).
+
+    Attributes:
+        t: [s] robot time of the state this truth belongs to.
+        instance: the publishing robot process's instance (as its states').
+        state_seq: seq of the state published with it.
+        base_true: [m, m, rad] ground-truth base pose (nan: unknown, e.g. a real robot).
+        ee_true: [m] ground-truth EE position ("motion capture"; nan: unknown).
+        contact_force: [N] 3 EE contact force of the sim's contact model (nan: unknown).
+        box_position: [m] box position along the push axis (nan: no box).
+        stalled_joint: the joint (0-based) that stalled the push this step (-1: none).
+        violations: limit-referee counts by kind.
+    """
+
+    t: float
+    instance: str
+    state_seq: int
+    base_true: list[float]
+    ee_true: list[float]
+    contact_force: list[float]
+    box_position: float = float("nan")
+    stalled_joint: int = -1
+    violations: dict[str, int] = msgspec.field(default_factory=dict)
 
 
 class CommandMsg(_Msg, tag="cmd", kw_only=True):
@@ -141,6 +164,30 @@ class BoxMsg(_Msg, tag="box"):
     center_y: float
     width: float = 0.4
     height: float = 0.6
+
+
+GRIPPER_ACTIONS = ("open", "close", "move", "grasp")
+"""The gripper commands: ``open`` and ``close`` (to the gripper's full and zero width at
+``speed``), ``move`` (to ``width`` at ``speed``), ``grasp`` (close to ``width`` at ``speed``,
+holding with ``force``)."""
+
+
+class GripperMsg(_Msg, tag="gripper", kw_only=True):
+    """client → robot: one gripper command, applied at once (a new one replaces a running one).
+
+    Attributes:
+        action: one of :data:`GRIPPER_ACTIONS`.
+        width: [m] the target opening (``move``, ``grasp``; ignored by ``open``/``close``).
+        speed: [m/s] the fingers' speed (the robot clamps it to its ``[gripper] speed_max``).
+        force: [N] the grasp force (``grasp``; clamped to ``[gripper] force_max``).
+        source: the sender's id.
+    """
+
+    action: str
+    width: float = 0.0
+    speed: float = 0.05
+    force: float = 0.0
+    source: str
 
 
 class SetpointMsg(_Msg, tag="setpoint", kw_only=True):
@@ -240,7 +287,8 @@ class StatusMsg(_Msg, tag="status"):
         loop: timing figures.
         rejected: rejected messages, by reason.
         accepted: accepted messages, by key (state, setpoint, mode).
-        sim_violations: the sim's referee counts, by kind (from the last state).
+        sim_violations: the referee's counts, by kind (from the last ``sim/truth`` message;
+            empty without one).
         x, x_d: [m] EE position (model, odometry: of the last command, or of the last state
             when the command has none, as a safe stop's; never NaN, [] before a state) and
             smoothed target.
@@ -254,7 +302,7 @@ class StatusMsg(_Msg, tag="status"):
         resume_needed: a safe stop ended, and the daemon holds until a mode message resumes.
         round_trip_ms: [ms] the smallest command → state round trip of the recent window
             (an upper bound of the state's age measured without shared clocks).
-        protective_stop: the sim's firmware reports a protective stop.
+        protective_stop: the robot's firmware reports a protective stop.
         quat_d: the orientation target, a quaternion [x, y, z, w] (world), pose task only
             ([] with the position task).
         orientation_error: [rad] angle between the EE's orientation (last state; model,
@@ -320,8 +368,8 @@ class TelemetryMsg(_Msg, tag="telemetry"):
         mode: current mode.
         x: [m] EE position (model, odometry base pose).
         x_d, xd_d: [m], [m/s] the reference handed to the controller.
-        ee_true: [m] ground-truth EE position from the last state.
-        ee_error: [m] ‖ee_true − x_d‖ (tracking modes), nan otherwise.
+        ee_true: [m] ground-truth EE position from the last ``sim/truth`` message (nan: none).
+        ee_error: [m] ‖ee_true − x_d‖ (tracking modes, with a truth), nan otherwise.
         wheel_speeds, arm_rates: [rad/s] the command (n_wheels, n_arm).
         status: controller status.
         dm: directional manipulability.

@@ -101,6 +101,8 @@ class DeviceTeleop:
         if s.quit:
             self.quit = True
             return
+        if s.gripper:
+            self.client.gripper(s.gripper)
         if s.hold:
             self.client.set_mode("hold")
             self.holding = True
@@ -146,7 +148,7 @@ def keyboard_screen(t: DeviceTeleop, robot: str, task: str) -> list[str]:
                   f"fault   {st.last_fault or 'none'}",
                   f"EE      {' '.join(f'{v:+.3f}' for v in st.x)}   operator {st.operator or 'none'}"]
     rot = "  u/o yaw  i/k pitch  j/l roll" if t.integ.R is not None else ""
-    lines.append(f"keys    w/s x  a/d y  r/f z{rot}  space hold  t track  q quit")
+    lines.append(f"keys    w/s x  a/d y  r/f z{rot}  space hold  t track  c/v gripper close/open  q quit")
     return lines
 
 

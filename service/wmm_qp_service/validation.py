@@ -13,8 +13,12 @@ centre y within ``position_abs_max``, width and height in (0, 10] m. A command: 
 ``lease`` and ``instance``, ``period`` in (0, ``PERIOD_MAX``]. A setpoint: a non-empty
 ``source``; its optional orientation ``q`` finite, entries ≤ 1e6, norm > 1e-9 (the controller
 normalises it), its angular velocity ``w`` finite with norm ≤ ``angular_speed_max``. A state: a
-non-empty ``instance``. An obstacles message (:class:`~.protocol.ObstaclesMsg`): a non-empty
-``source``, at most ``obstacles_max`` obstacles, each one a valid scene-file obstacle table
+non-empty ``instance``. A truth (:class:`~.protocol.TruthMsg`): 3-vectors of size 3 (NaN
+allowed: unknown). A gripper command (:class:`~.protocol.GripperMsg`): an action of
+``GRIPPER_ACTIONS`` (else ``range``), a non-empty ``source``, finite width in [0, 1] m, speed
+in (0, 1] m/s, force in [0, 1000] N (the robot clamps them to its own gripper). An obstacles message
+(:class:`~.protocol.ObstaclesMsg`): a non-empty ``source``, at most ``obstacles_max`` obstacles,
+each one a valid scene-file obstacle table
 (:func:`wmm_qp.scene.obstacle_from_table`; else ``range`` with the key), ids unique, positions within
 ``position_abs_max`` and sizes within ``obstacle_size_max``; its payload may be up to
 ``obstacles_payload_max_bytes``. The validator keeps the accepted set's primitives in
@@ -38,21 +42,26 @@ from wmm_qp.scene import obstacles_from_tables
 
 from .config import ValidationConfig
 from .protocol import (
+    GRIPPER_ACTIONS,
     PROTOCOL_VERSION,
     BoxMsg,
     CommandMsg,
+    GripperMsg,
     Header,
     ModeMsg,
     ObstaclesMsg,
     SetpointMsg,
     StateMsg,
     TelemetryMsg,
+    TruthMsg,
 )
 
 BOX_MASS_MAX = 1000.0  # [kg]
 BOX_MU_MAX = 5.0  # [-]
 BOX_SIZE_MAX = 10.0  # [m] face width, height
 PERIOD_MAX = 0.1  # [s] the longest control period a command may claim
+GRIPPER_SIZE_MAX = 1.0  # [m] a gripper width, [m/s] its speed (the robot clamps to its own limits)
+GRIPPER_FORCE_MAX = 1000.0  # [N] a grasp force (the robot clamps to its own limit)
 _HEADER_FIELDS = ("type", "v", "robot", "seq", "stamp")
 QUAT_ABS_MAX = 1e6
 """A quaternion's entries are bounded (normalised later: |q|² must not overflow)."""
@@ -231,8 +240,21 @@ class Validator(Generic[M]):
             _finite("t", [msg.t])
             for name, n in (("q_base", 3), ("q_arm", na), ("v_arm", na), ("wheel_speeds", nw)):
                 _vector(name, getattr(msg, name), n, m)
-            for name, n in (("base_true", 3), ("ee_true", 3), ("tau", na), ("contact_force", 3)):
-                _size(name, getattr(msg, name), n)
+            _size("tau", msg.tau, na)
+        elif isinstance(msg, TruthMsg):
+            for name in ("base_true", "ee_true", "contact_force"):
+                _size(name, getattr(msg, name), 3)
+        elif isinstance(msg, GripperMsg):
+            if msg.action not in GRIPPER_ACTIONS:
+                raise Rejected(Reject.RANGE, f"gripper action {msg.action!r}: not one of {', '.join(GRIPPER_ACTIONS)}")
+            if not msg.source:
+                raise Rejected(Reject.SCHEMA, "source is empty")
+            _finite("gripper", [msg.width, msg.speed, msg.force])
+            for name, v, ok in (("width", msg.width, 0.0 <= msg.width <= GRIPPER_SIZE_MAX),
+                                ("speed", msg.speed, 0.0 < msg.speed <= GRIPPER_SIZE_MAX),
+                                ("force", msg.force, 0.0 <= msg.force <= GRIPPER_FORCE_MAX)):
+                if not ok:
+                    raise Rejected(Reject.RANGE, f"gripper {name} = {v:g} outside its range")
         elif isinstance(msg, BoxMsg):
             _finite("box", [msg.mass, msg.mu, msg.face_x, msg.center_y, msg.width, msg.height])
             for name, v, ok in (("mass", msg.mass, 0.0 < msg.mass <= BOX_MASS_MAX),

@@ -35,6 +35,7 @@ from .collision import CollisionReferee
 from .command import SimCommand
 from .config import BoxConfig, SimConfig
 from .contact import Box
+from .gripper import Gripper
 from .plant import Plant, PlantState
 from .plants import make_plant
 from .referee import Referee
@@ -183,7 +184,13 @@ class SimRobot:
         self.stream: int | None = None  # the stream of the last command received (and not refused for it)
         self.stopped_stream: int | None = None  # the stream a stale or protective stop ended
         self.drives = {"torque_limit": [0] * self.n_arm, "tracking": [0] * self.n_arm}
+        g = self.model.config.gripper
+        self.gripper = Gripper(g) if g is not None else None
         return self.state()
+
+    def command_gripper(self, action: str, width: float = 0.0, speed: float = 0.05, force: float = 0.0) -> bool:
+        """Start a gripper command (see :mod:`.gripper`); False: no gripper, or an unknown action."""
+        return self.gripper is not None and self.gripper.command(action, width, speed, force)
 
     def place_box(self, box: BoxConfig | None) -> None:
         """Put a box in the scene now (or remove it with None), keeping the robot's state."""
@@ -197,6 +204,8 @@ class SimRobot:
 
         Never raises; a malformed command is ignored and counted.
         """
+        if self.gripper is not None:
+            self.gripper.step(dt)
         if command is not None and not command.is_valid(self.n_wheels, self.n_arm):
             self.rejected += 1
             command = None
@@ -341,6 +350,7 @@ class SimRobot:
             protective_reason=self.protective_reason,
             refused_commands=self.refused,
             drives={k: list(v) for k, v in self.drives.items()},
+            gripper_width=self.gripper.width if self.gripper is not None else float("nan"),
         )
 
     def robot_state(self) -> wmm_qp.RobotState:

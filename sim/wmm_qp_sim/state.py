@@ -39,6 +39,7 @@ class SimState:
         drives: per joint, since reset: ``torque_limit`` the steps it was at its torque limit,
             ``tracking`` the steps it could not follow its commanded rate (a physics plant only;
             the first such joint of a step is counted). Reports, not violations.
+        gripper_width: [m] the gripper's opening (nan: the robot file declares no gripper).
     """
 
     t: float
@@ -62,3 +63,4 @@ class SimState:
     protective_reason: str = ""
     refused_commands: int = 0
     drives: dict[str, list[int]] = field(default_factory=dict)
+    gripper_width: float = float("nan")

@@ -7,8 +7,9 @@ kept executing its last command, and past ``stale_timeout`` braked by itself, as
 would have (:class:`CommandInbox`, :meth:`SimNode.advance`). Commands are stamped when they reach
 the process (a callback on Zenoh's thread) and applied at the step their arrival falls in, each
 validated and judged by the referee as received (the latest of a step is executed). The state is
-published once per wake-up (odometry
-and ground truth, torques, the referee's violation counts) and holds a liveliness token.
+published once per wake-up (odometry, torques, the firmware's reports: only what a real robot
+reports), and with it the evaluation data on ``sim/truth`` (ground truth, the box, the referee's
+violation counts; ``truth=False``: none); the node holds a liveliness token.
 When commands go stale the pure model brakes the robot to rest by itself. A client may place
 a box in the scene at run time (``sim/box``, :class:`~wmm_qp_service.protocol.BoxMsg`, FIFO,
 validated on receipt); it is applied between two steps with :meth:`SimRobot.place_box`. The live
@@ -49,7 +50,7 @@ import numpy as np
 import zenoh
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.keys import Keys
-from wmm_qp_service.protocol import BoxMsg, CommandMsg, ObstaclesMsg, StateMsg, encode
+from wmm_qp_service.protocol import BoxMsg, CommandMsg, GripperMsg, ObstaclesMsg, StateMsg, TruthMsg, encode
 from wmm_qp_service.rate_loop import RateLoop, realtime_priority
 from wmm_qp_service.transport import ROLE_SIM, open_session
 from wmm_qp_service.validation import Validator
@@ -127,12 +128,15 @@ class SimNode:
         sim: the robot to drive, built by the caller (its model must be ``robot``'s; e.g. with
             a physics plant); None: a :class:`SimRobot` on its kinematic plant from ``sim_cfg``,
             ``seed``, ``ramp`` and ``scene``.
+        truth: publish the evaluation data on ``sim/truth`` with each state (False: a robot
+            that reports only what a real one does; the daemon runs the same).
     """
 
     def __init__(self, svc: ServiceConfig, sim_cfg: SimConfig, robot: w.RobotConfig,
                  seed: int | None = None, ramp: bool = True, spin_s: float = 0.0,
                  state_loss: float = 0.0, state_delay: float = 0.0, fault_seed: int = 0,
-                 rt_priority: int = 0, scene: Scene | None = None, sim: SimRobot | None = None) -> None:
+                 rt_priority: int = 0, scene: Scene | None = None, sim: SimRobot | None = None,
+                 truth: bool = True) -> None:
         svc = svc.with_robot(robot)
         self.svc = svc
         self.cfg = sim_cfg
@@ -147,6 +151,7 @@ class SimNode:
                                   n_wheels=robot.n_wheels)
         self.validate_box = Validator(BoxMsg, svc.robot, svc.validation)
         self.validate_obstacles = Validator(ObstaclesMsg, svc.robot, svc.validation)
+        self.validate_gripper = Validator(GripperMsg, svc.robot, svc.validation)
         self.loop = RateLoop(sim_cfg.rate_hz, spin_s, clock=time.monotonic)  # the inbox's clock
         self.t0 = 0.0  # [s] monotonic time of step 0 (run() sets it)
         self.steps = 0  # steps run since t0
@@ -166,6 +171,7 @@ class SimNode:
         self._delayed: deque[tuple[float, bytes]] = deque()
         self.states_dropped = 0
         self.rt_priority = rt_priority
+        self.truth = truth
         self.scheduling = "not started"  # set by run(): the step loop's scheduling policy
 
     @property
@@ -271,6 +277,16 @@ class SimNode:
                                      center_y=msg.center_y, width=msg.width, height=msg.height))
         return True
 
+    def command_gripper(self, data: bytes) -> bool:
+        """Validate a gripper command and start it (False: rejected, or no gripper: ``refused.gripper``)."""
+        msg = self.validate_gripper(data)
+        if msg is None:
+            return False
+        if not self.sim.command_gripper(msg.action, msg.width, msg.speed, msg.force):
+            self.refused["gripper"] += 1
+            return False
+        return True
+
     def set_obstacles(self, data: bytes) -> bool:
         """Validate a live obstacles message and hand its set to the referee (False: rejected)."""
         if self.validate_obstacles(data) is None:
@@ -283,14 +299,19 @@ class SimNode:
         return StateMsg(
             robot=self.svc.robot, seq=seq, stamp=time.time(), t=st.t,
             q_base=st.base_odom.tolist(), q_arm=st.q_arm.tolist(), v_arm=st.v_arm.tolist(),
-            wheel_speeds=st.wheel_speeds.tolist(), base_true=st.base_true.tolist(),
-            ee_true=st.ee_true.tolist(), tau=st.tau.tolist(),
-            contact_force=st.contact_force.tolist(), box_position=st.box_position,
-            stalled_joint=-1 if st.stalled_joint is None else st.stalled_joint,
-            violations=dict(st.violations), stale_stop=st.stale_stop, cmd_seq=self.cmd_seq,
+            wheel_speeds=st.wheel_speeds.tolist(), tau=st.tau.tolist(), gripper_width=st.gripper_width,
+            stale_stop=st.stale_stop, cmd_seq=self.cmd_seq,
             instance=self.instance, lease=self.holder, protective_stop=st.protective_stop,
             protective_stops=st.protective_stops, protective_reason=st.protective_reason,
             refused={**self.refused, "firmware": st.refused_commands} if st.refused_commands else dict(self.refused))
+
+    def truth_msg(self, st: SimState, seq: int) -> TruthMsg:
+        """The evaluation data of a sim state (``sim/truth``), for the state of seq ``seq``."""
+        return TruthMsg(
+            robot=self.svc.robot, seq=seq, stamp=time.time(), t=st.t, instance=self.instance, state_seq=seq,
+            base_true=st.base_true.tolist(), ee_true=st.ee_true.tolist(),
+            contact_force=st.contact_force.tolist(), box_position=st.box_position,
+            stalled_joint=-1 if st.stalled_joint is None else st.stalled_joint, violations=dict(st.violations))
 
     def outgoing(self, payload: bytes, now: float) -> list[bytes]:
         """The state payloads to publish now, after the injected loss and delay (if any).
@@ -323,9 +344,12 @@ class SimNode:
             sub = session.declare_subscriber(k.cmd, zenoh.handlers.Callback(on_command, indirect=False))
             sub_box = session.declare_subscriber(k.sim_box, zenoh.handlers.FifoChannel(16))
             sub_obstacles = session.declare_subscriber(k.obstacles, zenoh.handlers.RingChannel(1))
+            sub_gripper = session.declare_subscriber(k.gripper, zenoh.handlers.FifoChannel(16))
             pub = session.declare_publisher(k.state, express=True,
                                             congestion_control=zenoh.CongestionControl.DROP,
                                             priority=zenoh.Priority.REAL_TIME)
+            pub_truth = (session.declare_publisher(k.sim_truth, congestion_control=zenoh.CongestionControl.DROP)
+                         if self.truth else None)
             token = session.liveliness().declare_token(k.alive("sim"))
             lease_sub = session.liveliness().declare_subscriber(k.lease_all, zenoh.handlers.FifoChannel(64),
                                                                 history=True)
@@ -341,6 +365,8 @@ class SimNode:
                         self.on_lease(str(a.key_expr).rsplit("/", 1)[-1], a.kind == zenoh.SampleKind.PUT)
                     while (b := sub_box.try_recv()) is not None:
                         self.place_box(b.payload.to_bytes())
+                    while (g := sub_gripper.try_recv()) is not None:
+                        self.command_gripper(g.payload.to_bytes())
                     if (o := sub_obstacles.try_recv()) is not None:  # the referee checks the live set too
                         self.set_obstacles(o.payload.to_bytes())
                     st = self.advance(now, inbox)
@@ -353,9 +379,12 @@ class SimNode:
                     for payload in self.outgoing(encode(self.state_msg(st, self.publications)),
                                                  time.monotonic()):
                         pub.put(payload)
+                    if pub_truth is not None:  # evaluation data: published as it is, never delayed
+                        pub_truth.put(encode(self.truth_msg(st, self.publications)))
                     now = self.loop.wait()
             finally:
-                for ent in (token, lease_sub, sub, sub_box, sub_obstacles, pub):
+                for ent in (token, lease_sub, sub, sub_box, sub_obstacles, sub_gripper, pub, pub_truth):
                     with contextlib.suppress(Exception):
-                        ent.undeclare()
+                        if ent is not None:
+                            ent.undeclare()
             return st

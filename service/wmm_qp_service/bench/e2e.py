@@ -124,6 +124,7 @@ def run_case(
     svc = stack.svc
     info0 = info1 = None
     states_raw: list[bytes] = []
+    truths: dict[int, Any] = {}
     tel: list[Any] = []
     cpu: dict[str, float | None] = {}
     load_during: list[float] = []
@@ -135,7 +136,7 @@ def run_case(
             while info is not None and not info.status.state_ok and time.monotonic() < end:
                 time.sleep(0.1)
                 info = c.info()
-            st = c.wait_state(5.0)
+            st = c.wait_truth(5.0)
             if info is None or not info.status.state_ok or st is None:
                 return out | {"available": False, "reason": f"the stack did not come up (logs: {log_dir})"}
             out["controller"] = info.config.get("controller", {}).get("kind")
@@ -168,7 +169,7 @@ def run_case(
             rec.drain()
             c.set_mode("hold")
             rec.close()
-            states_raw, tel = rec.states, rec.telemetry
+            states_raw, tel, truths = rec.states, rec.telemetry, rec.truth_by_seq()
     finally:
         out["exit_codes"] = stack.stop()
     if breakdown:
@@ -184,7 +185,7 @@ def run_case(
         "cpu_pct": cpu,
         "cpu_how": CPU_HOW,
         "loadavg_during": load_during,
-        "violations": dict(states[-1].violations),
+        "violations": dict(truths[max(truths)].violations) if truths else {},
         "rejected": dict(info1.status.rejected),
         "last_fault": info1.status.last_fault,
         "faults": dict(info1.status.faults),

@@ -8,6 +8,11 @@ both get ``--robot-config``; a robot whose EE starts outside the DM box of the c
 (``dm.ee_box_lower/upper``) holds during the Cartesian DM phase. When a fault ends, the daemon
 holds until a mode message (``watchdog.resume = "manual"``): the demo then resends the phase's
 mode, as an operator would, and counts it (``phases[].resumes``).
+
+With ``--driver franka --robot-ip IP`` the scenario runs through a real robot's driver
+(``wmm-qp driver franka``, started by the demo) against a robot already running at that address
+(a Franka FR3, or franky-sim) instead of a sim; ``violations`` are then the driver's referee
+(its ``sim/truth``), and the EE error is n/a (no ground truth).
 """
 
 from __future__ import annotations
@@ -41,6 +46,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "temporary directory, kept and named on the verdict line)")
     parser.add_argument("--controller-config", type=Path, default=None, metavar="FILE",
                         help="the daemon's controller.toml (default: configs/controller.toml)")
+    parser.add_argument("--driver", choices=("franka",), default=None,
+                        help="run the scenario through this real robot's driver instead of a sim "
+                             "(needs --robot-ip; docs/drivers.md)")
+    parser.add_argument("--robot-ip", metavar="IP", default=None,
+                        help="the address of the running robot the --driver drives (e.g. franky-sim's)")
     add_robot_argument(parser)
     add_scene_argument(parser)
     add_collision_argument(parser)
@@ -52,6 +62,10 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if not 10.0 <= args.rate <= 2000.0:
         print("wmm-qp demo: error: --rate must be in [10, 2000] Hz", file=sys.stderr)
+        return 2
+    if (args.driver is None) != (args.robot_ip is None):
+        print("wmm-qp demo: error: --driver and --robot-ip go together (--driver franka --robot-ip IP)",
+              file=sys.stderr)
         return 2
     import wmm_qp as w
 
@@ -75,8 +89,13 @@ def run(args: argparse.Namespace) -> int:
     cpu: dict[str, float | None] = {}
     bar = ProgressLine("demo")
     try:
-        bar.update(f"starting the sim and the daemon (logs: {log_dir})")
-        stack.start()
+        if args.driver is not None:
+            bar.update(f"starting the {args.driver} driver for {args.robot_ip} and the daemon (logs: {log_dir})")
+            stack.start_driver(args.driver, args.robot_ip)
+            stack.start_daemon()
+        else:
+            bar.update(f"starting the sim and the daemon (logs: {log_dir})")
+            stack.start()
         summary = _drive(svc, args.duration, bar,
                          on_ready=lambda: meters.append(CpuMeter({n: p.pid for n, p in stack.procs.items()})))
         if meters:
@@ -189,7 +208,7 @@ def _drive(svc: Any, duration: float, bar: ProgressLine,
         phase = ""
 
         def violations_now() -> str:
-            s = c.latest_state()
+            s = c.latest_truth()
             return f"phase {phase}, {sum(s.violations.values()) if s is not None else '?'} violations so far"
 
         def drain() -> None:
@@ -212,7 +231,7 @@ def _drive(svc: Any, duration: float, bar: ProgressLine,
         dm_start = info.status.dm
         t_start = time.monotonic()
         faults0 = dict(info.status.faults)
-        st0 = c.latest_state() or c.wait_state(2.0)
+        st0 = c.latest_truth() or c.wait_truth(2.0)
         viol0 = dict(st0.violations) if st0 is not None else {}
         for k, (name, d) in enumerate(PHASES):
             d *= scale
@@ -233,9 +252,9 @@ def _drive(svc: Any, duration: float, bar: ProgressLine,
                 wait(d, drain)
             drain()
             i = c.info()
-            st = c.latest_state()
+            tp = c.latest_truth()
             faults = dict(i.status.faults) if i else faults0
-            viol = dict(st.violations) if st is not None else viol0
+            viol = dict(tp.violations) if tp is not None else viol0
             per_phase.append({"phase": name, "duration_s": round(d, 2),
                               "ee_error_max": max(ee_err[n0:], default=None),  # None: untracked
                               "dm": i.status.dm if i else None,
@@ -245,11 +264,11 @@ def _drive(svc: Any, duration: float, bar: ProgressLine,
                               "new_violations": _delta(viol0, viol)})
             faults0, viol0 = faults, viol
         final = c.info()
-        st = c.latest_state()
+        st, tr = c.latest_state(), c.latest_truth()
         if final is None:
             return None
         elapsed = time.monotonic() - t_start
-        violations = dict(st.violations) if st is not None else dict(final.status.sim_violations)
+        violations = dict(tr.violations) if tr is not None else dict(final.status.sim_violations)
     import msgspec
 
     return {

@@ -28,6 +28,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "pip install 'wmm-qp[physics]') (default: the sim config's [physics] plant)")
     parser.add_argument("--no-ramp", action="store_true",
                         help="apply each command at once (no drive acceleration ramp)")
+    parser.add_argument("--no-truth", action="store_true",
+                        help="publish no evaluation data on <robot>/sim/truth (ground truth, the referee's "
+                             "counts): a robot that reports only what a real one does")
     f = parser.add_argument_group("fault injection (reliability tests)")
     f.add_argument("--state-loss", type=float, default=0.0, metavar="P",
                    help="drop each state publication with probability P in [0, 1)")
@@ -61,7 +64,8 @@ def run(args: argparse.Namespace) -> int:
         print("wmm-qp sim: error: --rt-priority must be in [0, 99]", file=sys.stderr)
         return 2
     node = SimNode(svc, sim_cfg, robot, seed=args.seed, ramp=not args.no_ramp,
-                   state_loss=args.state_loss, state_delay=args.state_delay_ms * 1e-3, rt_priority=prio, scene=scene)
+                   state_loss=args.state_loss, state_delay=args.state_delay_ms * 1e-3, rt_priority=prio, scene=scene,
+                   truth=not args.no_truth)
     stop = stop_on_signals()
     print(f"wmm-qp sim: {svc.prefix}/{svc.robot} at {sim_cfg.rate_hz:g} Hz ({robot.n_arm} joints, "
           f"{robot.base.kind} base with {robot.n_wheels} wheels; {sim_cfg.physics.plant} plant; scene {scene.path}: "

@@ -81,8 +81,8 @@ def run(args: argparse.Namespace) -> int:
 
             def tick() -> None:
                 def text() -> str:
-                    st = c.latest_state()
-                    v = sum(st.violations.values()) if st is not None else "?"
+                    tr = c.latest_truth()
+                    v = sum(tr.violations.values()) if tr is not None else "?"
                     return f"{time.monotonic() - t0:.0f}/{args.duration:g} s, {v} violations so far"
                 bar.update(text)
             c.set_mode("track")
@@ -110,6 +110,7 @@ def run(args: argparse.Namespace) -> int:
             cpu = meter.shares()
             final = c.info()
             st = c.latest_state() or c.wait_state(2.0)
+            tr = c.latest_truth() or c.wait_truth(2.0)
             rss1 = {n: rss_kib(pid) for n, pid in pids.items()}
         if final is None:
             return _no_stack(out, stack, log_dir, args.json, "the daemon stopped answering")
@@ -129,7 +130,7 @@ def run(args: argparse.Namespace) -> int:
                "deadline_misses": lp.deadline_misses, "tick_p50_us": lp.tick_p50_us,
                "tick_p99_us": lp.tick_p99_us, "tick_max_us": lp.tick_max_us,
                "measured_hz": lp.measured_hz, "rss_kib_start": rss0, "rss_kib_end": rss1,
-               "violations": dict(st.violations) if st else final.status.sim_violations,
+               "violations": dict(tr.violations) if tr else final.status.sim_violations,
                "rejected": final.status.rejected, "last_fault": final.status.last_fault,
                "faults": final.status.faults,
                "protective_stops": st.protective_stops if st else None,

@@ -19,7 +19,7 @@ import numpy as np
 
 from wmm_qp import Scene
 
-from ..protocol import StateMsg, StatusMsg
+from ..protocol import StatusMsg, TruthMsg
 from .geometry import Series, wxyz_to_xyzw, xyzw_to_wxyz
 from .link import Attached, ConsoleError, RobotLink
 from .view import RobotView
@@ -27,14 +27,17 @@ from .view import RobotView
 if TYPE_CHECKING:
     import viser
 
+GRIPPER_SLIDER_MAX = 0.1
+"""[m] the width slider's range (a robot clamps a width past its own ``[gripper] width_max``)."""
 MODES = ("hold", "track", "dm_cartesian", "dm_nullspace")
 MODE_LABELS = {"hold": "Hold", "track": "Track", "dm_cartesian": "DM Cartesian", "dm_nullspace": "DM null space"}
 TRACKING_MODES = ("track", "dm_nullspace")
 
 
-def status_markdown(st: StatusMsg | None, state: StateMsg | None, source: str) -> str:
+def status_markdown(st: StatusMsg | None, truth: TruthMsg | None, source: str) -> str:
     """The panel's status text: rate, deadline misses, safe stop, last fault, rejected and clamped
-    counts (``clamped`` where the daemon reports it), the sim's violations, who holds the stream."""
+    counts (``clamped`` where the daemon reports it), the sim's violations, who holds the stream,
+    and with the sim's ground truth (``truth``; None: a robot without one) the EE's error."""
     if st is None:
         return "**daemon**: no status yet"
     lp = st.loop
@@ -63,9 +66,9 @@ def status_markdown(st: StatusMsg | None, state: StateMsg | None, source: str) -
         + (" · **protective stop**" if st.protective_stop else ""),
         f"**DM** {st.dm:.3f} · **stream** {stream}",
     ]
-    if state is not None and st.x_d:
-        err = float(np.linalg.norm(np.asarray(state.ee_true) - np.asarray(st.x_d)))
-        lines.append(f"**EE** {_fmt(state.ee_true)} · **target** {_fmt(st.x_d)} · error {1000 * err:.1f} mm")
+    if truth is not None and st.x_d:
+        err = float(np.linalg.norm(np.asarray(truth.ee_true) - np.asarray(st.x_d)))
+        lines.append(f"**EE** {_fmt(truth.ee_true)} · **target** {_fmt(st.x_d)} · error {1000 * err:.1f} mm")
     return "  \n".join(lines)
 
 
@@ -177,6 +180,16 @@ class Console:
                                              hint="u of eq. (8), base frame (used by the DM modes)")
             self.stop_button = gui.add_button("STOP (hold)", color="red", icon=None, hint="mode hold, at once")
             self.stop_button.on_click(partial(self._mode_clicked, "hold"))
+        with gui.add_folder("Gripper"):
+            self.gripper_buttons: dict[str, Any] = {}
+            for action in ("open", "close"):
+                b = gui.add_button(f"{action.capitalize()} gripper", hint=f"{action} the gripper fully")
+                b.on_click(partial(self._gripper_clicked, action))
+                self.gripper_buttons[action] = b
+            self.gripper_width = gui.add_slider("Width [m]", min=0.0, max=GRIPPER_SLIDER_MAX, step=0.001,
+                                                initial_value=GRIPPER_SLIDER_MAX,
+                                                hint="move the fingers to this width (the robot clamps it)")
+            self.gripper_width.on_update(self._gripper_width_moved)
         with gui.add_folder("Status"):
             self.status_md = gui.add_markdown("**daemon**: no status yet")
         with gui.add_folder("Last 30 s"):
@@ -232,6 +245,12 @@ class Console:
     # ----------------------------------------------------------------- commands
     def _mode_clicked(self, mode: str, _event: Any) -> None:
         self.set_mode(mode)
+
+    def _gripper_clicked(self, action: str, _event: Any) -> None:
+        self.link.gripper(action)
+
+    def _gripper_width_moved(self, _event: Any) -> None:
+        self.link.gripper("move", width=float(self.gripper_width.value))
 
     def set_mode(self, mode: str) -> None:
         """A mode button: the mode, with the panel's DM direction for the DM modes."""
@@ -292,14 +311,19 @@ class Console:
 
     def _update(self, plots: bool) -> None:
         view = self.view
-        st, state = self.link.status(), self.link.state()
+        st, state, truth = self.link.status(), self.link.state(), self.link.truth()
         if view is None:
             return
         with self._lock:
             idle = time.monotonic() - self._moved_at > self.stream_s + 0.5
+        if truth is not None and (truth.instance != getattr(state, "instance", "")
+                                  or not np.all(np.isfinite(truth.ee_true + truth.base_true))):
+            truth = None  # another robot's, or a robot without ground truth: draw odometry and the model
         if state is not None:
-            q_arm, q_base, base_true = np.asarray(state.q_arm), np.asarray(state.q_base), np.asarray(state.base_true)
-            ee_true = np.asarray(state.ee_true)
+            q_arm, q_base = np.asarray(state.q_arm), np.asarray(state.q_base)
+            base_true = np.asarray(truth.base_true) if truth is not None else q_base
+            ee_true = (np.asarray(truth.ee_true) if truth is not None
+                       else np.asarray(st.x if st is not None and st.x else [math.nan] * 3, float))
             moved = view.set_robot(q_arm, base_true, q_base)
             view.set_ee(ee_true, base_true)
             show_arrow = st is not None and st.mode.startswith("dm_")
@@ -316,11 +340,11 @@ class Console:
             if st.quat_d:
                 view.gizmo.wxyz = xyzw_to_wxyz(st.quat_d)
         if st is not None:
-            err = (float(np.linalg.norm(np.asarray(state.ee_true) - np.asarray(st.x_d)))
-                   if state is not None and st.x_d else math.nan)
+            err = (float(np.linalg.norm(np.asarray(truth.ee_true) - np.asarray(st.x_d)))
+                   if truth is not None and st.x_d else math.nan)
             self.series.add(time.monotonic() - self._t0, st.dm, err)
         if plots:
-            text = status_markdown(st, state, self.link.source)
+            text = status_markdown(st, truth, self.link.source)
             if text != self.status_md.content:
                 self.status_md.content = text
             if len(self.series) >= 2:

@@ -22,7 +22,7 @@ from wmm_qp import ConfigError, RobotConfig
 
 from ..client import Client
 from ..config import ServiceConfig
-from ..protocol import InfoMsg, StateMsg, StatusMsg
+from ..protocol import InfoMsg, StateMsg, StatusMsg, TruthMsg
 
 
 class ConsoleError(w.WmmQpError):
@@ -209,6 +209,11 @@ class RobotLink:
         with self._lock:
             return self._client.latest_state() if self._client is not None else None
 
+    def truth(self) -> TruthMsg | None:
+        """The sim's last evaluation data (None: none, e.g. a real robot's driver without one)."""
+        with self._lock:
+            return self._client.latest_truth() if self._client is not None else None
+
     def status(self) -> StatusMsg | None:
         with self._lock:
             return self._client.latest_status() if self._client is not None else None
@@ -226,6 +231,12 @@ class RobotLink:
                 return
             self._client.send_setpoint(x, q=q)
             self.setpoints_sent += 1
+
+    def gripper(self, action: str, width: float = 0.0) -> None:
+        """A gripper command (``open``, ``close``, ``move`` to ``width`` [m]) at 0.05 m/s."""
+        with self._lock:
+            if self._client is not None:
+                self._client.gripper(action, width=width, speed=0.05)
 
     def set_mode(self, mode: str, direction: Sequence[float] | None = None) -> None:
         """hold | track | dm_cartesian | dm_nullspace (direction: DM u, base frame)."""

@@ -2,8 +2,8 @@
 arrow, the force-manipulability ellipsoid, trails, obstacles and the fence.
 
 Frames: the world is the robot's world (the base frame's z = 0, its origin at the base's pose);
-the robot is drawn at its ground-truth pose (``state.base_true``), the odometry pose the
-controller uses (``state.q_base``) as a labelled frame beside it.
+the robot is drawn at its ground-truth pose (``sim/truth``'s ``base_true``; without one at
+odometry), the odometry pose the controller uses (``state.q_base``) as a labelled frame beside it.
 """
 
 from __future__ import annotations

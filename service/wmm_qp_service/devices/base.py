@@ -20,12 +20,14 @@ class DeviceSample:
         hold: the hold button was pressed since the last sample (hold now; latched once).
         quit: the quit button was pressed.
         resume: the resume (track) button was pressed.
+        gripper: a gripper button was pressed: ``open`` or ``close`` ("" = none).
     """
 
     twist: FloatArray = field(default_factory=lambda: np.zeros(6))
     hold: bool = False
     quit: bool = False
     resume: bool = False
+    gripper: str = ""
 
 
 class InputDevice(ABC):

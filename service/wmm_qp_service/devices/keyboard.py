@@ -4,7 +4,7 @@ A terminal reports key presses, not releases: a key held down repeats (typically
 30–50 ms after a first delay of 250–500 ms). So a press drives its axis at full speed for
 ``latch`` [s]; the repeats of a held key keep it moving, and it stops ``latch`` after the key is
 let go. Keys (:data:`KEYMAP`): w/s ±x, a/d ±y, r/f ±z; with the pose task u/o ±yaw, i/k ±pitch,
-j/l ±roll; space holds, t resumes tracking, q quits.
+j/l ±roll; space holds, t resumes tracking, c closes and v opens the gripper, q quits.
 """
 
 from __future__ import annotations
@@ -25,6 +25,8 @@ KEYMAP: dict[str, tuple[int, float]] = {
 HOLD_KEYS = (" ",)
 RESUME_KEYS = ("t",)
 QUIT_KEYS = ("q", "\x1b")  # q or Esc
+GRIPPER_KEYS = {"c": "close", "v": "open"}
+"""key → gripper action."""
 
 
 class KeyboardDevice(InputDevice):
@@ -43,6 +45,7 @@ class KeyboardDevice(InputDevice):
         self._until = np.full(6, -np.inf)
         self._sign = np.zeros(6)
         self._hold = self._quit = self._resume = False
+        self._gripper = ""
 
     def press(self, key: str, now: float) -> bool:
         """One key press at ``now`` [s]; returns whether the key means something."""
@@ -61,6 +64,9 @@ class KeyboardDevice(InputDevice):
         if key in RESUME_KEYS:
             self._resume = True
             return True
+        if key in GRIPPER_KEYS:
+            self._gripper = GRIPPER_KEYS[key]
+            return True
         if key in QUIT_KEYS:
             self._quit = True
             return True
@@ -68,6 +74,7 @@ class KeyboardDevice(InputDevice):
 
     def read(self, now: float) -> DeviceSample:
         twist = np.where(self._until > now, self._sign, 0.0)
-        s = DeviceSample(twist=twist, hold=self._hold, quit=self._quit, resume=self._resume)
+        s = DeviceSample(twist=twist, hold=self._hold, quit=self._quit, resume=self._resume, gripper=self._gripper)
         self._hold = self._quit = self._resume = False
+        self._gripper = ""
         return s

@@ -9,8 +9,9 @@ to its instance, with increasing seq. Between the daemon's commands (500 Hz or 1
 or lost) and the robot, the :class:`~.franka_stream.CommandShaper` makes the continuous,
 jerk-limited stream Franka's controller demands, brakes on stale commands and refuses commands
 past the limits (protective stop). The sim's referee (:mod:`wmm_qp_sim.referee`) judges every
-command as received and the measured joint positions each cycle, so ``violations`` means what
-it means for the sim.
+command as received and the measured joint positions each cycle; its counts go out on
+``sim/truth`` (:class:`~..protocol.TruthMsg`, every ``TRUTH_EVERY`` cycles), so ``violations``
+means what it means for the sim, and nothing on the control path depends on them.
 
 ``v_arm`` is the velocity the robot executes as its motion generator's output: the stream this
 driver writes (libfranka's commanded ``dq_c``), exactly 0 at rest — as the sim's executed rates.
@@ -18,11 +19,16 @@ The daemon takes it as the baseline a new stream starts from and waits for it to
 stale or protective stop; the measured ``dq`` (encoder noise, the joint controllers' tracking
 error) is never exactly 0 and would hold the daemon in that wait for ever.
 
-What a real robot cannot give is filled in as such: ``base_true`` and ``ee_true`` are NaN (no
-ground truth), ``box_position`` NaN, ``stalled_joint`` −1; ``tau`` is the robot's estimate of the
-external joint torques (``tau_ext_hat_filtered``) and ``contact_force`` the external force at
-the EE (``O_F_ext_hat_K``, its first three entries); the base is fixed (``q_base`` zeros, no
-wheels).
+The state is what the robot reports: ``tau`` is the robot's estimate of the external joint
+torques (``tau_ext_hat_filtered``); the base is fixed (``q_base`` zeros, no wheels). In the
+truth, what a real robot cannot give is NaN: ``base_true`` and ``ee_true`` (no motion capture),
+``box_position``; ``stalled_joint`` is −1 and ``contact_force`` the robot's estimate of the
+external force at the EE (``O_F_ext_hat_K``, its first three entries).
+
+The Franka Hand (a robot file with ``[gripper]``, as ``fr3.toml``): ``gripper`` commands
+(:class:`~..protocol.GripperMsg`) are validated and handed to pylibfranka's ``Gripper`` in a
+child process (:mod:`.franka_hand`: it holds the GIL through a whole gripper motion); the
+state's ``gripper_width`` is the width it last measured (nan without a hand).
 
 libfranka's errors: a ``ControlException`` (a reflex of the robot: a limit, a collision, a
 discontinuity) is reported as a protective stop (``protective_reason`` names it); the driver
@@ -52,15 +58,18 @@ import wmm_qp as w
 
 from ..config import ServiceConfig
 from ..keys import Keys
-from ..protocol import CommandMsg, StateMsg, encode
+from ..protocol import CommandMsg, GripperMsg, StateMsg, TruthMsg, encode
 from ..transport import ROLE_SIM, open_session
 from ..validation import Validator
+from .franka_hand import FrankaHand
 from .franka_stream import CommandShaper, StreamLimits
 
 DT = 1e-3
 """[s] Franka's control cycle."""
 
 NAN3 = [math.nan] * 3
+TRUTH_EVERY = 10
+"""The driver publishes its referee's counts on ``sim/truth`` every this many cycles (100 Hz)."""
 
 
 class FrankaDriver:
@@ -94,6 +103,9 @@ class FrankaDriver:
         self.t = 0.0  # [s] the robot's time: the sum of its cycles
         self.seq = 0
         self._stopped = False  # the shaper was in a stale or protective stop at the last cycle
+        self.validate_gripper = Validator(GripperMsg, svc.robot, svc.validation)
+        g = robot.gripper
+        self.hand = FrankaHand(g.width_max, g.speed_max, g.force_max) if g is not None else None
 
     @property
     def holder(self) -> str:
@@ -163,18 +175,29 @@ class FrankaDriver:
         self._stopped = stopped
         return v
 
+    def on_gripper(self, data: bytes) -> bool:
+        """A gripper command: validated, then queued to the hand (False: rejected, or no hand:
+        ``refused.gripper``)."""
+        msg = self.validate_gripper(data)
+        if msg is None:
+            return False
+        if self.hand is None or not self.hand.command(msg.action, msg.width, msg.speed, msg.force):
+            self.refused["gripper"] += 1
+            return False
+        return True
+
     def fault(self, reason: str) -> None:
         """libfranka refused the motion (a reflex): report a protective stop, restart from rest."""
         self.shaper.reset(f"robot: {reason}")
         self.referee.break_stream()
 
-    def state_msg(self, q: np.ndarray, tau: np.ndarray, force: np.ndarray) -> StateMsg:
+    def state_msg(self, q: np.ndarray, tau: np.ndarray, gripper_width: float = math.nan) -> StateMsg:
         """The wire message of this cycle's state (``v_arm``: the stream written, see the module docstring).
 
         Args:
             q: [rad] measured joint positions.
             tau: [N·m] the robot's external joint torque estimate.
-            force: [N] the external force at the EE (base frame).
+            gripper_width: [m] the hand's opening (nan: no hand).
         """
         self.seq += 1
         sh = self.shaper
@@ -182,11 +205,21 @@ class FrankaDriver:
         return StateMsg(
             robot=self.svc.robot, seq=self.seq, stamp=time.time(), t=self.t,
             q_base=[0.0, 0.0, 0.0], q_arm=q.tolist(), v_arm=sh.v.tolist(), wheel_speeds=[],
-            base_true=NAN3, ee_true=NAN3, tau=tau.tolist(), contact_force=force.tolist(),
-            violations={k: n for k, n in self.referee.counts.items() if n}, stale_stop=sh.stale_stop,
+            tau=tau.tolist(), gripper_width=gripper_width, stale_stop=sh.stale_stop,
             cmd_seq=self.cmd_seq, instance=self.instance, lease=self.holder,
             protective_stop=sh.protective_stop, protective_stops=sh.protective_stops,
             protective_reason=sh.reason, refused=refused)
+
+    def truth_msg(self, force: np.ndarray) -> TruthMsg:
+        """The referee's counts as ``sim/truth`` for the last state (no ground truth: NaN).
+
+        Args:
+            force: [N] the robot's estimate of the external force at the EE (base frame).
+        """
+        return TruthMsg(
+            robot=self.svc.robot, seq=self.seq, stamp=time.time(), t=self.t, instance=self.instance,
+            state_seq=self.seq, base_true=NAN3, ee_true=NAN3, contact_force=force.tolist(),
+            violations={k: n for k, n in self.referee.counts.items() if n})
 
     def run(self, robot_ip: str, stop: threading.Event, max_cycles: int | None = None) -> int:
         """Connect to the robot at ``robot_ip`` and drive it until ``stop`` (or ``max_cycles``).
@@ -204,8 +237,10 @@ class FrankaDriver:
         with open_session(self.svc, ROLE_SIM) as session:
             k = self.keys
             sub = session.declare_subscriber(k.cmd, zenoh.handlers.FifoChannel(1024))
+            sub_gripper = session.declare_subscriber(k.gripper, zenoh.handlers.FifoChannel(16))
             pub = session.declare_publisher(k.state, express=True, congestion_control=zenoh.CongestionControl.DROP,
                                             priority=zenoh.Priority.REAL_TIME)
+            pub_truth = session.declare_publisher(k.sim_truth, congestion_control=zenoh.CongestionControl.DROP)
             lease_sub = session.liveliness().declare_subscriber(k.lease_all, zenoh.handlers.FifoChannel(64),
                                                                 history=True)
             token = None
@@ -217,18 +252,25 @@ class FrankaDriver:
                     print(f"wmm-qp driver franka: error: cannot connect to the robot at {robot_ip}: {e}",
                           file=sys.stderr, flush=True)
                     return 1
+                if self.hand is not None:
+                    self.hand.start(robot_ip)
                 token = session.liveliness().declare_token(k.alive("sim"))
                 print(f"wmm-qp driver franka: {k.state.rsplit('/', 1)[0]} driving the robot at {robot_ip} "
                       f"(instance {self.instance})", file=sys.stderr, flush=True)
-                return self._loop(fr, robot, ctl, sub, lease_sub, pub, stop, max_cycles, robot_ip)
+                return self._loop(fr, robot, ctl, (sub, sub_gripper), lease_sub, (pub, pub_truth), stop, max_cycles,
+                                  robot_ip)
             finally:
-                for ent in (token, lease_sub, sub, pub):
+                if self.hand is not None:
+                    self.hand.close()
+                for ent in (token, lease_sub, sub, sub_gripper, pub, pub_truth):
                     if ent is not None:
                         with contextlib.suppress(Exception):
                             ent.undeclare()
 
-    def _loop(self, fr: Any, robot: Any, ctl: Any, sub: Any, lease_sub: Any, pub: Any, stop: threading.Event,
-              max_cycles: int | None, robot_ip: str) -> int:
+    def _loop(self, fr: Any, robot: Any, ctl: Any, subs: tuple[Any, Any], lease_sub: Any, pubs: tuple[Any, Any],
+              stop: threading.Event, max_cycles: int | None, robot_ip: str) -> int:
+        sub, sub_gripper = subs
+        pub, pub_truth = pubs
         n = 0
         finishing = False
         while True:
@@ -256,8 +298,12 @@ class FrankaDriver:
                 if done:
                     cmd.motion_finished = True
                 ctl.writeOnce(cmd)
-                pub.put(encode(self.state_msg(q, np.array(st.tau_ext_hat_filtered, dtype=float),
-                                              np.array(st.O_F_ext_hat_K, dtype=float)[:3])))
+                if (g := sub_gripper.try_recv()) is not None:
+                    self.on_gripper(g.payload.to_bytes())
+                width = self.hand.width if self.hand is not None else math.nan
+                pub.put(encode(self.state_msg(q, np.array(st.tau_ext_hat_filtered, dtype=float), width)))
+                if n % TRUTH_EVERY == 1 or done:
+                    pub_truth.put(encode(self.truth_msg(np.array(st.O_F_ext_hat_K, dtype=float)[:3])))
                 if done:
                     return 0
             except fr.NetworkException as e:

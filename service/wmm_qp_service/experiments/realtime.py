@@ -3,12 +3,13 @@
 ``wmm-qp experiment circle|dm --realtime`` starts ``wmm-qp sim`` and ``wmm-qp serve`` as
 separate processes on loopback (unique key prefix and ports, :class:`~..processes.Stack`),
 drives the daemon with the client API (modes, setpoint stream) and records, from the
-client's side, every state the sim publishes and every tick's telemetry of the daemon.
+client's side, every state the sim publishes, its evaluation data (``sim/truth``: ground truth,
+box, referee, one per state, naming the state's seq) and every tick's telemetry of the daemon.
 
 A log row is one daemon tick: the command and the reference come from the tick's telemetry,
-the state (joint angles, odometry, ground truth, torques) is *the state the daemon used*:
-the telemetry carries that state's ground-truth EE position, which identifies it exactly
-among the recorded states (fallback: the newest state stamped before the tick). The per-tick
+the state (joint angles, odometry, torques) is *the state the daemon used*: the telemetry's
+``state_seq`` identifies it exactly among the recorded states (a predicted tick: the newest
+state stamped before the tick), and the truth of that seq gives its ground truth. The per-tick
 trace has the in-process :class:`~.runner.Trace` layout, so the same metrics and the same CSV
 columns apply. Time ``t`` is the daemon's tick time since the scenario's first tick.
 
@@ -21,7 +22,6 @@ was placed (torques, box position, stalled joint).
 
 from __future__ import annotations
 
-import bisect
 import math
 import tempfile
 import time
@@ -40,7 +40,7 @@ from wmm_qp.manipulability import directional_manipulability
 
 from ..client import Client
 from ..processes import Stack, isolated_config
-from ..protocol import StateMsg, TelemetryMsg
+from ..protocol import StateMsg, TelemetryMsg, TruthMsg
 from . import push
 from .circle import circle
 from .dm import DIRECTIONS, cartesian_end
@@ -62,25 +62,37 @@ class Recorder:
     Attributes:
         client: an open client with ``telemetry=True``.
         states: raw StateMsg payloads, in arrival order (decoded at the end).
+        truths: raw TruthMsg payloads (``sim/truth``), in arrival order.
         telemetry: decoded telemetry messages, in arrival order.
     """
 
     client: Client
     states: list[bytes] = field(default_factory=list)
+    truths: list[bytes] = field(default_factory=list)
     telemetry: list[TelemetryMsg] = field(default_factory=list)
     _sub: Any = None
+    _sub_truth: Any = None
 
     def open(self) -> Recorder:
-        """Subscribe to every state (FIFO: none dropped on the client's side)."""
-        assert self.client.session is not None
-        self._sub = self.client.session.declare_subscriber(self.client.keys.state, zenoh.handlers.FifoChannel(200_000))
+        """Subscribe to every state and truth (FIFO: none dropped on the client's side)."""
+        s = self.client.session
+        assert s is not None
+        self._sub = s.declare_subscriber(self.client.keys.state, zenoh.handlers.FifoChannel(200_000))
+        self._sub_truth = s.declare_subscriber(self.client.keys.sim_truth, zenoh.handlers.FifoChannel(200_000))
         return self
 
     def drain(self) -> None:
         """Move what arrived into the lists (cheap: states stay raw bytes)."""
         while (s := self._sub.try_recv()) is not None:
             self.states.append(s.payload.to_bytes())
+        while (s := self._sub_truth.try_recv()) is not None:
+            self.truths.append(s.payload.to_bytes())
         self.telemetry.extend(self.client.telemetry())
+
+    def truth_by_seq(self) -> dict[int, TruthMsg]:
+        """The recorded truths, decoded, by the seq of their state."""
+        dec = msgspec.msgpack.Decoder(TruthMsg)
+        return {t.state_seq: t for t in (dec.decode(b) for b in self.truths)}
 
     def last_x(self) -> np.ndarray | None:
         """[m] the model EE position of the newest telemetry (None: none yet)."""
@@ -90,6 +102,9 @@ class Recorder:
         if self._sub is not None:
             self._sub.undeclare()
             self._sub = None
+        if self._sub_truth is not None:
+            self._sub_truth.undeclare()
+            self._sub_truth = None
 
 
 @dataclass
@@ -151,10 +166,10 @@ def _pace(
 
 def drive_circle(c: Client, rec: Recorder, duration: float, bar: Progress | None) -> list[str]:
     """The circle: TRACK, the paper's circle from the true EE position at rest, feed-forward."""
-    st = c.wait_state(5.0)
-    if st is None:
-        raise RealtimeError("no state from the sim")
-    x0 = np.array(st.ee_true)
+    tr = c.wait_truth(5.0)
+    if tr is None:
+        raise RealtimeError("no ground truth from the sim")
+    x0 = np.array(tr.ee_true)
     c.set_mode("track")
 
     def send(t: float) -> None:
@@ -358,15 +373,15 @@ def drive_push(c: Client, rec: Recorder, model: Any, scale: float, bar: Progress
     ``PUSH_SPEED / scale`` by gap + target + overshoot, then stays; ends when the box has moved
     ``TARGET`` or after ``SETTLE * scale`` more seconds.
     """
-    st = c.wait_state(5.0)
-    if st is None:
-        raise RealtimeError("no state from the sim")
+    st, tr = c.wait_state(5.0), c.wait_truth(5.0)
+    if st is None or tr is None:
+        raise RealtimeError("no state or no ground truth from the sim")
     x_start = model.ee_position(np.array(st.q_base), np.array(st.q_arm))
-    box = push.box_at(st.ee_true)
+    box = push.box_at(tr.ee_true)
     face_x = box.face_x
     c.place_box(box.mass, box.mu, box.face_x, box.center_y, box.width, box.height)
     end = time.monotonic() + 5.0
-    while not ((s := c.wait_state(0.5)) is not None and math.isfinite(s.box_position)):
+    while not ((s := c.wait_truth(0.5)) is not None and math.isfinite(s.box_position)):
         if time.monotonic() > end:
             raise RealtimeError("the sim did not place the box")
     speed = push.PUSH_SPEED / scale
@@ -379,7 +394,7 @@ def drive_push(c: Client, rec: Recorder, model: Any, scale: float, bar: Progress
         c.send_setpoint(x_start + np.array([speed * s, 0.0, 0.0]), [speed if t < t_move else 0.0, 0.0, 0.0])
 
     def moved() -> bool:
-        s = c.latest_state()
+        s = c.latest_truth()
         return s is not None and s.box_position - face_x >= push.TARGET
 
     _pace(rec, duration, SETPOINT_HZ, bar, 0.0, duration, send, moved)
@@ -389,10 +404,13 @@ def drive_push(c: Client, rec: Recorder, model: Any, scale: float, bar: Progress
 def push_metrics_realtime(setup: Setup, rec: Recorder, start: PushStart) -> dict[str, Any]:
     """The in-process push metrics (:func:`.push.push_metrics` keys) from the sim's states."""
     dec = msgspec.msgpack.Decoder(StateMsg)
-    states = [s for s in (dec.decode(b) for b in rec.states) if math.isfinite(s.box_position)]
-    if not states:
+    truth = rec.truth_by_seq()
+    pairs = [(s, t) for s in (dec.decode(b) for b in rec.states)
+             if (t := truth.get(s.seq)) is not None and math.isfinite(t.box_position)]
+    if not pairs:
         raise RealtimeError("no state with the box arrived")
-    tau = np.array([s.tau for s in states])
+    states = [t for _, t in pairs]
+    tau = np.array([s.tau for s, _ in pairs])
     W = np.asarray(setup.W, dtype=float)
     stalled = np.array([s.stalled_joint for s in states])
     first = np.flatnonzero(stalled >= 0)
@@ -467,20 +485,12 @@ def run_push_realtime(
 
 def match_states(states: list[StateMsg], tel: list[TelemetryMsg]) -> list[int]:
     """For each telemetry message, the index of the state the daemon used (see module doc)."""
-    by_ee: dict[tuple[float, ...], tuple[list[float], list[int]]] = {}
-    for i, s in enumerate(states):
-        st, ix = by_ee.setdefault(tuple(s.ee_true), ([], []))
-        st.append(s.stamp)
-        ix.append(i)
+    by_seq = {s.seq: i for i, s in enumerate(states)}
     stamps = np.array([s.stamp for s in states])
     out = []
     for m in tel:
-        st, ix = by_ee.get(tuple(m.ee_true), ([], []))
-        k = bisect.bisect_right(st, m.stamp) - 1
-        if k >= 0:
-            out.append(ix[k])
-        else:
-            out.append(max(0, int(np.searchsorted(stamps, m.stamp, side="right")) - 1))
+        i = by_seq.get(m.state_seq) if m.state_seq >= 0 else None
+        out.append(i if i is not None else max(0, int(np.searchsorted(stamps, m.stamp, side="right")) - 1))
     return out
 
 
@@ -506,6 +516,10 @@ def build_trace(
     W = np.asarray(setup.W, dtype=float)
     u = np.asarray(u, dtype=float) / np.linalg.norm(u)
     rows_st = [states[i] for i in idx]
+    truth = rec.truth_by_seq()
+    nan3 = [math.nan] * 3
+    rows_tr = [truth.get(s.seq) for s in rows_st]
+    last_truth = truth[max(truth)] if truth else None
     q = np.array([s.q_arm for s in rows_st])
     wheel = np.array([t.wheel_speeds for t in tel])
     ee_des = np.array([t.x if t.mode == "dm_cartesian" else t.x_d for t in tel])
@@ -525,14 +539,14 @@ def build_trace(
         wheel_cmd=wheel,
         base_twist_cmd=np.array([m.base.body_twist(w) for w in wheel]),
         base_odom=np.array([s.q_base for s in rows_st]),
-        base_true=np.array([s.base_true for s in rows_st]),
+        base_true=np.array([t.base_true if t is not None else nan3 for t in rows_tr]),
         ee_des=ee_des,
-        ee_true=np.array([s.ee_true for s in rows_st]),
+        ee_true=np.array([t.ee_true if t is not None else nan3 for t in rows_tr]),
         dm=dm,
         tau=np.array([s.tau for s in rows_st]),
         box_displacement=np.full(n, math.nan),
         stalled_joint=np.full(n, -1, dtype=int),
-        violations=dict(states[-1].violations),
+        violations=dict(last_truth.violations) if last_truth is not None else {},
         reasons=status_counts,
     )
     t_switch = None
