@@ -52,6 +52,16 @@ def add_scene_argument(parser: argparse.ArgumentParser, default: str | None = No
     )
 
 
+PHYSICS_HELP = ("the plant the simulated robot drives: kinematic (rates executed exactly) or mujoco (rigid-body "
+                "physics, torque-limited servos, traction-limited wheels; pip install 'wmm-qp[physics]')")
+
+
+def add_physics_argument(parser: argparse.ArgumentParser, default: str = "the sim config's [physics] plant") -> None:
+    """``--physics kinematic|mujoco``: the sim's plant (None: the sim config's)."""
+    parser.add_argument("--physics", choices=("kinematic", "mujoco"), default=None,
+                        help=f"{PHYSICS_HELP} (default: {default})")
+
+
 def load_scene_arg(args: argparse.Namespace) -> Scene:
     """The scene of ``--scene`` (a bad file raises :class:`wmm_qp.ConfigError`: one line, exit 2)."""
     return load_scene(getattr(args, "scene", None))

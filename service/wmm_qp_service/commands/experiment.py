@@ -23,7 +23,7 @@ import numpy as np
 
 from wmm_qp.config import TASK_KINDS
 
-from .common import add_config_arguments, add_scene_argument, load_configs, load_scene_arg
+from .common import add_config_arguments, add_physics_argument, add_scene_argument, load_configs, load_scene_arg
 
 HELP = "reproduce one of the paper's experiments (circle, dm, push)"
 
@@ -49,6 +49,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--seed", type=int, default=None, help="slip/drift seed (default: sim.toml)")
     parser.add_argument("--no-slip", action="store_true", help="turn the base slip/drift off")
+    add_physics_argument(parser)
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument(
         "--log",
@@ -117,13 +118,13 @@ def run(args: argparse.Namespace) -> int:
 
     def setup() -> Any:
         return make_setup(args.controller, args.solver, slip=not args.no_slip, seed=args.seed, robot=robot,
-                          ctl_cfg=ctl_cfg, wheel_units=args.wheel_units, scene=scene)
+                          ctl_cfg=ctl_cfg, wheel_units=args.wheel_units, scene=scene, physics=args.physics)
 
     first = setup()  # a config error (a W of another length, a solver missing) before anything runs
     show_progress = True  # progress on stderr, also with --json (stdout stays the JSON alone)
     tag = args.controller
     result: dict[str, Any] = {"experiment": args.name, "robot": robot.name, "task": ctl_cfg.task.kind,
-                              "controller": args.controller}
+                              "controller": args.controller, "physics": first.sim_cfg.physics.plant}
     if args.controller == "qp":
         result["solver"] = args.solver
     if args.controller == "traditional":

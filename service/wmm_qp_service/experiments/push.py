@@ -100,6 +100,7 @@ def _push_phase(setup: Setup, trace0: Trace | None, scale: float, progress: str 
         stop=stop,
         progress=progress,
         sim=sim,
+        previous=trace0.last_command if trace0 is not None else None,
     )
     return tr if trace0 is None else concat(trace0, tr)
 

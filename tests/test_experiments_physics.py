@@ -1,0 +1,45 @@
+"""The paper's experiments on the physics plant (``--physics mujoco``): bounds (13) anchored on
+the last command, and the JSON saying which plant ran."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from wmm_qp_service.cli import main
+from wmm_qp_service.experiments import circle
+from wmm_qp_service.experiments.runner import anchored, make_setup
+
+import wmm_qp as w
+
+pytest.importorskip("mujoco", reason="the physics plant needs mujoco: pip install 'wmm-qp[physics]'")
+
+
+def test_a_short_circle_in_physics_has_no_acceleration_violation() -> None:
+    # the MuJoCo servos lag the command: bounds (13) centred on the measured rates let two
+    # consecutive commands differ by more than A·dt (4 s of the circle: 4 counts without the anchor)
+    tr = circle.run_circle(make_setup("qp", physics="mujoco"), 4.0, progress=False)
+    assert tr.sim is not None and tr.sim.config.physics.plant == "mujoco"
+    assert tr.violations["acceleration"] == 0
+    assert tr.violations["wheel_acceleration"] == 0
+
+
+def test_the_anchor_keeps_the_pose_and_takes_the_rates_of_the_last_command() -> None:
+    st = w.RobotState(q_base=np.array([0.1, 0.2, 0.3]), q_arm=np.ones(2), v_arm=np.full(2, 0.5),
+                      wheel_speeds=np.full(4, 0.25))
+    assert anchored(st, None) is st  # the first tick: the measured rates
+    cmd = w.Command(wheel_speeds=np.arange(4.0), arm_rates=np.array([0.1, -0.2]))
+    a = anchored(st, cmd)
+    np.testing.assert_array_equal(a.q_base, st.q_base)
+    np.testing.assert_array_equal(a.q_arm, st.q_arm)
+    np.testing.assert_array_equal(a.v_arm, cmd.arm_rates)
+    np.testing.assert_array_equal(a.wheel_speeds, cmd.wheel_speeds)
+
+
+@pytest.mark.parametrize("physics", ["kinematic", "mujoco"])
+def test_the_experiment_json_says_which_plant_ran(physics: str, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["experiment", "circle", "--duration", "0.5", "--physics", physics, "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["physics"] == physics
+    assert out["violations"]["acceleration"] == 0
