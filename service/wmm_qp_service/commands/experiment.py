@@ -60,6 +60,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_scene_argument(parser, "none: the paper's setting, no obstacles and no collision rows; "
                                "a scene turns the qp controller's rows on")
     parser.add_argument("--plots", type=Path, default=None, help="folder for PNG plots")
+    parser.add_argument("--max-mass", action="store_true",
+                        help="push: bisect the heaviest box each arm configuration (with and without DM) "
+                             "pushes 0.2 m, beside the ratio the DM values predict (in process; progress on "
+                             "stderr)")
     parser.add_argument(
         "--realtime",
         action="store_true",
@@ -84,6 +88,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.realtime and args.name == "push" and (args.log is not None or args.plots is not None):
         return _fail("push --realtime writes no --log or --plots (the JSON has the metrics)")
+    if args.max_mass and (args.name != "push" or args.realtime or args.log is not None or args.plots is not None):
+        return _fail("--max-mass applies to push in process only, without --log or --plots")
     if args.rate is not None and not args.realtime:
         return _fail("--rate only applies with --realtime")
     if args.rate is not None and not (np.isfinite(args.rate) and 10.0 <= args.rate <= 2000.0):
@@ -191,6 +197,12 @@ def run(args: argparse.Namespace) -> int:
             from ..experiments.plots import plot_dm
 
             plot_dm(tr, args.plots, tag)
+    elif args.max_mass:
+        from ..experiments.max_mass import max_mass
+
+        result |= max_mass(setup, args.duration or push.DEFAULT_DM_DURATION, progress=show_progress)
+        result["box"] = {"mu": push.MU, "target": push.TARGET}
+        traces = {}
     else:
         runs = push.run_push(setup, args.duration or push.DEFAULT_DM_DURATION, progress=show_progress)
         for name, (s, tr, i0) in runs.items():
