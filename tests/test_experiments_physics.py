@@ -4,6 +4,8 @@ the last command, and the JSON saying which plant ran."""
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -43,3 +45,25 @@ def test_the_experiment_json_says_which_plant_ran(physics: str, capsys: pytest.C
     out = json.loads(capsys.readouterr().out)
     assert out["physics"] == physics
     assert out["violations"]["acceleration"] == 0
+
+
+@pytest.mark.parametrize("argv", [["demo"], ["soak"], ["experiment", "circle", "--duration", "0.5"],
+                                  ["bench", "--only", "sim", "--ticks", "5"]])
+def test_an_uninstalled_plant_is_one_line_and_exit_2(argv: list[str], monkeypatch: pytest.MonkeyPatch,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    import wmm_qp_sim.plants as plants
+
+    monkeypatch.setattr(plants, "available_plants", lambda: ["kinematic"])
+    assert main([*argv, "--physics", "mujoco"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "plant 'mujoco' is not available" in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.integration
+@pytest.mark.slow
+def test_the_demo_in_physics_has_no_violation() -> None:
+    out = subprocess.run([sys.executable, "-m", "wmm_qp_service.cli", "demo", "--duration", "6", "--physics",
+                          "mujoco", "--json"], capture_output=True, text=True, timeout=180, check=False)
+    assert out.returncode == 0, out.stderr[-2000:]
+    d = json.loads(out.stdout)
+    assert d["physics"] == "mujoco" and d["violations_total"] == 0 and d["verdict"] == "PASS"

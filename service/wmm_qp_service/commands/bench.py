@@ -16,7 +16,7 @@ from typing import Any
 
 from wmm_qp.config import TASK_KINDS
 
-from .common import add_config_arguments, add_physics_argument, load_configs
+from .common import add_config_arguments, add_physics_argument, load_configs, physics_plant
 
 HELP = "measure per-tick controller time and the loop over Zenoh"
 
@@ -168,6 +168,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"wmm-qp bench: error: solver {s!r} is not installed", file=sys.stderr)
             return 2
     robot, cfg = load_configs(args)
+    if args.physics is not None:
+        physics_plant(args)  # not installed: one line, exit 2, before anything runs
     if args.task is not None:
         cfg = cfg.with_(task={"kind": args.task})
     cfg.weights_for(robot)  # a W of another length than the robot's: one line, exit 2
