@@ -60,6 +60,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_scene_argument(parser, "none: the paper's setting, no obstacles and no collision rows; "
                                "a scene turns the qp controller's rows on")
     parser.add_argument("--plots", type=Path, default=None, help="folder for PNG plots")
+    parser.add_argument("--frames", type=Path, default=None, metavar="DIR",
+                        help="circle, push with --physics mujoco: a strip of frames rendered offscreen (PNG) "
+                             "in DIR (without a screen: MUJOCO_GL=osmesa)")
     parser.add_argument("--max-mass", action="store_true",
                         help="push: bisect the heaviest box each arm configuration (with and without DM) "
                              "pushes 0.2 m, beside the ratio the DM values predict (in process; progress on "
@@ -90,6 +93,8 @@ def run(args: argparse.Namespace) -> int:
         return _fail("push --realtime writes no --log or --plots (the JSON has the metrics)")
     if args.max_mass and (args.name != "push" or args.realtime or args.log is not None or args.plots is not None):
         return _fail("--max-mass applies to push in process only, without --log or --plots")
+    if args.frames is not None and (args.physics != "mujoco" or args.name == "dm" or args.realtime or args.max_mass):
+        return _fail("--frames applies to circle and push in process with --physics mujoco")
     if args.rate is not None and not args.realtime:
         return _fail("--rate only applies with --realtime")
     if args.rate is not None and not (np.isfinite(args.rate) and 10.0 <= args.rate <= 2000.0):
@@ -176,7 +181,12 @@ def run(args: argparse.Namespace) -> int:
     elif args.name == "circle":
         s = first
         radius = circle.RADIUS if args.radius is None else args.radius
-        tr = circle.run_circle(s, args.duration or circle.DEFAULT_DURATION, progress=show_progress, radius=radius)
+        duration = args.duration or circle.DEFAULT_DURATION
+        strip = _strip(args, duration)
+        tr = circle.run_circle(s, duration, progress=show_progress, radius=radius, observe=strip)
+        if strip is not None:
+            result["frames"] = [str(strip.save(args.frames / f"frames_circle{circle.plot_tag('', radius)}.png",
+                                               f"circle r = {radius:g} m, {robot.name}, MuJoCo"))]
         result |= {"duration": float(tr.t[-1] + s.ctl_cfg.dt), **circle.circle_metrics(tr)}
         traces = {"": tr}
         if args.plots:
@@ -204,7 +214,15 @@ def run(args: argparse.Namespace) -> int:
         result["box"] = {"mu": push.MU, "target": push.TARGET}
         traces = {}
     else:
-        runs = push.run_push(setup, args.duration or push.DEFAULT_DM_DURATION, progress=show_progress)
+        dm_duration = args.duration or push.DEFAULT_DM_DURATION
+        scale = min(1.0, dm_duration / push.DEFAULT_DM_DURATION)
+        span = (push.GAP + push.TARGET) / push.PUSH_SPEED * scale  # [s] the push's frames
+        strips = {n: _strip(args, span) for n in ("with_dm", "without_dm")}
+        runs = push.run_push(setup, dm_duration, progress=show_progress,
+                             observe={n: v for n, v in strips.items() if v is not None})
+        if args.frames is not None:
+            result["frames"] = [str(v.save(args.frames / f"frames_push_{n}.png", f"push {n.replace('_', ' ')}, "
+                                           f"{robot.name}, MuJoCo")) for n, v in strips.items() if v is not None]
         for name, (s, tr, i0) in runs.items():
             result[name] = push.push_metrics(s, tr, i0)
         result["box"] = {"mass": push.MASS, "mu": push.MU, "target": push.TARGET}
@@ -233,6 +251,16 @@ def run(args: argparse.Namespace) -> int:
     else:
         _summary(result)
     return 0
+
+
+def _strip(args: argparse.Namespace, span: float) -> Any:
+    """A frame strip over ``span`` [s] of the run when ``--frames`` asks for one, else None."""
+    if args.frames is None:
+        return None
+    from ..experiments.frames import Strip
+
+    args.frames.mkdir(parents=True, exist_ok=True)
+    return Strip(span)
 
 
 def _realtime(args: argparse.Namespace, s: Any, show_progress: bool) -> Any:

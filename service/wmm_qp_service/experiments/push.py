@@ -29,7 +29,7 @@ from wmm_qp_sim import BoxConfig
 import wmm_qp
 
 from .dm import DIRECTIONS, cartesian_end, dm_reference
-from .runner import Setup, Trace, concat, run
+from .runner import ObserveFn, Setup, Trace, concat, run
 
 MASS = 26.0  # [kg]
 MU = 0.65  # [-]
@@ -65,7 +65,7 @@ def box_at(ee_true: Any, mass: float = MASS) -> BoxConfig:
 
 
 def _push_phase(setup: Setup, trace0: Trace | None, scale: float, progress: str | None,
-                mass: float = MASS) -> Trace:
+                mass: float = MASS, observe: ObserveFn | None = None) -> Trace:
     m = setup.model
     sim = trace0.sim if trace0 is not None else None
     if sim is None:
@@ -117,6 +117,7 @@ def _push_phase(setup: Setup, trace0: Trace | None, scale: float, progress: str 
         progress=progress,
         sim=sim,
         previous=trace0.last_command if trace0 is not None else None,
+        observe=observe,
     )
     return tr if trace0 is None else concat(trace0, tr)
 
@@ -124,6 +125,7 @@ def _push_phase(setup: Setup, trace0: Trace | None, scale: float, progress: str 
 def run_push(
     setup_factory: Any, dm_duration: float = DEFAULT_DM_DURATION, progress: bool = True,
     mass: float = MASS, runs: tuple[str, ...] = ("with_dm", "without_dm"),
+    observe: dict[str, ObserveFn] | None = None,
 ) -> dict[str, tuple[Setup, Trace, int]]:
     """Both runs. Returns {"with_dm": (setup, trace, push_start_index), "without_dm": ...}.
 
@@ -133,6 +135,7 @@ def run_push(
             push up in proportion (quasi-static: the forces do not depend on speed).
         mass: [kg] the box's mass.
         runs: which of the two runs.
+        observe: per run, called with the sim after every tick of its push phase.
     """
     scale = min(1.0, dm_duration / DEFAULT_DM_DURATION)
     out: dict[str, tuple[Setup, Trace, int]] = {}
@@ -146,11 +149,13 @@ def run_push(
             dm_direction=u,
             progress="push: dm" if progress else None,
         )
-        tr = _push_phase(s, pre, scale, "push: with dm" if progress else None, mass)
+        tr = _push_phase(s, pre, scale, "push: with dm" if progress else None, mass,
+                         (observe or {}).get("with_dm"))
         out["with_dm"] = (s, tr, len(pre.t))
     if "without_dm" in runs:
         s = setup_factory()
-        tr = _push_phase(s, None, scale, "push: without dm" if progress else None, mass)
+        tr = _push_phase(s, None, scale, "push: without dm" if progress else None, mass,
+                         (observe or {}).get("without_dm"))
         out["without_dm"] = (s, tr, 0)
     return out
 

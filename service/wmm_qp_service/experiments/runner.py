@@ -30,6 +30,9 @@ ReferenceFn = Callable[[float, SimState, wmm_qp.Command | None], wmm_qp.Referenc
 StopFn = Callable[[float, SimState], bool]
 """(t, state) → True to end the run early."""
 
+ObserveFn = Callable[[SimRobot], None]
+"""Called with the sim after every tick (e.g. to render its plant); must not change it."""
+
 
 @dataclass
 class Trace:
@@ -158,6 +161,7 @@ def run(
     progress: str | None = None,
     sim: SimRobot | None = None,
     previous: wmm_qp.Command | None = None,
+    observe: ObserveFn | None = None,
 ) -> Trace:
     """Run the closed loop for ``duration`` seconds (or until ``stop``).
 
@@ -174,6 +178,7 @@ def run(
         sim: continue with this sim instead of a fresh one (then q_base/q_arm/box are ignored).
         previous: the last command the continued sim received (a run's ``last_command``): bounds
             (13) of the first tick start from it (:func:`anchored`); None: from the measured rates.
+        observe: called with the sim after every tick (None: nothing).
     """
     m = setup.model
     W = np.asarray(setup.W, dtype=float)
@@ -245,6 +250,8 @@ def run(
         st = sim.step(SimCommand(cmd.wheel_speeds, cmd.arm_rates, period=dt, seq=k), sim_dt)
         for _ in range(n_sub - 1):
             st = sim.step(None, sim_dt)
+        if observe is not None:
+            observe(sim)
         if bar is not None and k % 50 == 0:
             bar.update((k + 1) / n_ticks)
         if stop is not None and stop(t, st):

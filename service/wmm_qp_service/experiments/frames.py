@@ -1,0 +1,80 @@
+"""Pictures of a physics run: a strip of frames rendered from the MuJoCo plant offscreen.
+
+``wmm-qp experiment circle|push --physics mujoco --frames DIR`` renders the plant's scene at
+``FRAMES`` evenly spaced moments of the run (push: of each push phase) with MuJoCo's offscreen
+renderer and writes them side by side as one PNG (``frames_circle.png``, ``frames_push_with_dm.png``,
+``frames_push_without_dm.png``). Without a screen set ``MUJOCO_GL=osmesa`` (Debian:
+``apt-get install libosmesa6``, and ``pip install PyOpenGL``) or ``MUJOCO_GL=egl``.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+FRAMES = 5  # frames in a strip
+SIZE = (320, 400)  # [px] height, width of one frame
+
+
+class Strip:
+    """Renders the sim's physics plant at evenly spaced sim times (an ``observe`` callback).
+
+    Args:
+        span: [s] the frames cover this long from the first tick observed.
+        frames: how many frames.
+        distance, azimuth, elevation: the camera [m, deg, deg], looking at the EE.
+    """
+
+    def __init__(self, span: float, frames: int = FRAMES, distance: float = 2.6,
+                 azimuth: float = 120.0, elevation: float = -20.0) -> None:
+        self.offsets = list(np.linspace(0.0, span, frames))
+        self.t0: float | None = None
+        self.images: list[np.ndarray] = []
+        self.labels: list[str] = []
+        self.camera = (distance, azimuth, elevation)
+
+    def __call__(self, sim: Any) -> None:
+        t = sim.state().t
+        if self.t0 is None:
+            self.t0 = t
+        if not self.offsets or t + 1e-9 < self.t0 + self.offsets[0]:
+            return
+        self.offsets.pop(0)
+        self.images.append(self.render(sim))
+        st = sim.state()
+        box = "" if math.isnan(st.box_displacement) else f", box {st.box_displacement * 100:.1f} cm"
+        self.labels.append(f"t = {st.t:.1f} s{box}")
+
+    def render(self, sim: Any) -> np.ndarray:
+        """The plant's scene now, as an RGB image."""
+        import mujoco
+
+        plant = sim.plant
+        model, data = plant.robot.model, plant.data
+        cam = mujoco.MjvCamera()
+        cam.type = mujoco.mjtCamera.mjCAMERA_FREE
+        cam.lookat[:] = sim.state().ee_true * np.array([1.0, 1.0, 0.6])
+        cam.distance, cam.azimuth, cam.elevation = self.camera
+        with mujoco.Renderer(model, *SIZE) as r:
+            r.update_scene(data, camera=cam)
+            return r.render().copy()
+
+    def save(self, path: Path, title: str) -> Path:
+        """The frames side by side, labelled, as one PNG."""
+        from .plots import _plt
+
+        plt = _plt()
+        n = len(self.images)
+        fig, axes = plt.subplots(1, n, figsize=(3.2 * n, 3.0), squeeze=False)
+        for ax, img, label in zip(axes[0], self.images, self.labels, strict=True):
+            ax.imshow(img)
+            ax.set_title(label, fontsize=9)
+            ax.axis("off")
+        fig.suptitle(title, fontsize=10)
+        fig.tight_layout()
+        fig.savefig(path, dpi=80)
+        plt.close(fig)
+        return path
