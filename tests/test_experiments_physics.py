@@ -67,3 +67,26 @@ def test_the_demo_in_physics_has_no_violation() -> None:
     assert out.returncode == 0, out.stderr[-2000:]
     d = json.loads(out.stdout)
     assert d["physics"] == "mujoco" and d["violations_total"] == 0 and d["verdict"] == "PASS"
+
+
+def test_max_mass_bisects_to_the_threshold_of_each_run(monkeypatch: pytest.MonkeyPatch) -> None:
+    from wmm_qp_service.experiments import max_mass
+
+    limit = {"with_dm": 47.3, "without_dm": 31.9}  # [kg] what each configuration pushes, faked
+    dm = {"with_dm": 5.8, "without_dm": 3.8}
+    monkeypatch.setattr(max_mass, "_pushed", lambda _f, run, mass, _d: (mass <= limit[run], dm[run]))
+    out = max_mass.max_mass(lambda: None, progress=False)  # type: ignore[arg-type,return-value]
+    for run, m in limit.items():
+        lo, hi = out["bracket_kg"][run]
+        assert lo <= m < hi and hi - lo <= max_mass.TOLERANCE and out["max_mass_kg"][run] == lo
+    assert out["dm_ratio"] == pytest.approx(5.8 / 3.8)
+    assert out["measured_ratio"] == pytest.approx(out["max_mass_kg"]["with_dm"] / out["max_mass_kg"]["without_dm"])
+
+
+@pytest.mark.parametrize("argv", [["circle", "--max-mass"], ["push", "--max-mass", "--realtime"],
+                                  ["circle", "--frames", "x"], ["push", "--frames", "x", "--physics", "kinematic"]])
+def test_max_mass_and_frames_outside_their_use_are_one_line(argv: list[str],
+                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["experiment", *argv]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1
