@@ -182,7 +182,7 @@ def run(args: argparse.Namespace) -> int:
         s = first
         radius = circle.RADIUS if args.radius is None else args.radius
         duration = args.duration or circle.DEFAULT_DURATION
-        strip = _strip(args, duration)
+        strip = _strip(args, duration, elevation=-50.0)  # from above: the circle shows
         tr = circle.run_circle(s, duration, progress=show_progress, radius=radius, observe=strip)
         if strip is not None:
             result["frames"] = [str(strip.save(args.frames / f"frames_circle{circle.plot_tag('', radius)}.png",
@@ -253,14 +253,15 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _strip(args: argparse.Namespace, span: float) -> Any:
-    """A frame strip over ``span`` [s] of the run when ``--frames`` asks for one, else None."""
+def _strip(args: argparse.Namespace, span: float, elevation: float = -10.0) -> Any:
+    """A frame strip over ``span`` [s] of the run (camera ``elevation`` [deg]) when ``--frames``
+    asks for one, else None."""
     if args.frames is None:
         return None
     from ..experiments.frames import Strip
 
     args.frames.mkdir(parents=True, exist_ok=True)
-    return Strip(span)
+    return Strip(span, elevation=elevation)
 
 
 def _realtime(args: argparse.Namespace, s: Any, show_progress: bool) -> Any:

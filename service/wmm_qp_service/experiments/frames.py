@@ -25,16 +25,19 @@ class Strip:
     Args:
         span: [s] the frames cover this long from the first tick observed.
         frames: how many frames.
-        distance, azimuth, elevation: the camera [m, deg, deg], looking at the EE.
+        distance, azimuth, elevation: the camera [m, deg, deg] (MuJoCo's free camera; 90 deg:
+            from the robot's left side), looking at a point between the base and the EE of the
+            first frame, fixed from then on (the motion shows against it).
     """
 
-    def __init__(self, span: float, frames: int = FRAMES, distance: float = 2.6,
-                 azimuth: float = 120.0, elevation: float = -20.0) -> None:
-        self.offsets = list(np.linspace(0.0, span, frames))
+    def __init__(self, span: float, frames: int = FRAMES, distance: float = 2.8,
+                 azimuth: float = 90.0, elevation: float = -10.0) -> None:
+        self.offsets = list(np.linspace(0.0, 0.999 * span, frames))  # the last within the run
         self.t0: float | None = None
         self.images: list[np.ndarray] = []
         self.labels: list[str] = []
         self.camera = (distance, azimuth, elevation)
+        self.lookat: np.ndarray | None = None
 
     def __call__(self, sim: Any) -> None:
         t = sim.state().t
@@ -49,17 +52,35 @@ class Strip:
         self.labels.append(f"t = {st.t:.1f} s{box}")
 
     def render(self, sim: Any) -> np.ndarray:
-        """The plant's scene now, as an RGB image."""
+        """The plant's scene now, as an RGB image: the robot blue, the box orange and see-through
+        (the arm behind it shows), the floor grey."""
         import mujoco
 
         plant = sim.plant
         model, data = plant.robot.model, plant.data
+        st = sim.state()
+        if self.lookat is None:
+            self.lookat = np.array([0.5 * (st.base_true[0] + st.ee_true[0]), st.ee_true[1], 0.6 * st.ee_true[2]])
         cam = mujoco.MjvCamera()
         cam.type = mujoco.mjtCamera.mjCAMERA_FREE
-        cam.lookat[:] = sim.state().ee_true * np.array([1.0, 1.0, 0.6])
+        cam.lookat[:] = self.lookat
         cam.distance, cam.azimuth, cam.elevation = self.camera
         with mujoco.Renderer(model, *SIZE) as r:
             r.update_scene(data, camera=cam)
+            scene = r.scene
+            for i in range(scene.ngeom):  # colours of this picture only (the model is untouched)
+                g = scene.geoms[i]
+                if g.objtype != mujoco.mjtObj.mjOBJ_GEOM:
+                    continue
+                if g.objid == plant.robot.box_geom:
+                    g.rgba[:] = (0.9, 0.5, 0.1, 0.55)
+                elif model.geom_bodyid[g.objid] == 0:
+                    g.rgba[:] = (0.55, 0.6, 0.65, 1.0)
+                else:
+                    g.rgba[:] = (0.25, 0.45, 0.8, 1.0)
+            for j in range(scene.nlight):  # brighter than the default headlight
+                scene.lights[j].ambient[:] = (0.45, 0.45, 0.45)
+                scene.lights[j].diffuse[:] = (0.7, 0.7, 0.7)
             return r.render().copy()
 
     def save(self, path: Path, title: str) -> Path:
