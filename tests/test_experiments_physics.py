@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -90,3 +91,15 @@ def test_max_mass_and_frames_outside_their_use_are_one_line(argv: list[str],
     assert main(["experiment", *argv]) == 2
     err = capsys.readouterr().err
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.integration
+@pytest.mark.slow
+def test_the_realtime_circle_starts_its_sim_on_the_physics_plant(capsys: pytest.CaptureFixture[str],
+                                                                 tmp_path: Path) -> None:
+    logs = tmp_path / "logs"
+    assert main(["experiment", "circle", "--realtime", "--physics", "mujoco", "--duration", "3",
+                 "--process-logs", str(logs), "--json"]) == 0
+    r = json.loads(capsys.readouterr().out)
+    assert r["physics"] == "mujoco" and sum(r["violations"].values()) == 0
+    assert "mujoco plant" in (logs / "sim.log").read_text()
