@@ -9,6 +9,10 @@ PNG figures.
 Any robot: ``--robot-config FILE`` (default: the Gen3 on its Mecanum base, whose runs are the
 paper's tables in docs/results.md); every experiment starts at the robot's ``arm.start``.
 ``--task pose`` overrides the controller config's task kind (in-process only).
+
+``--physics kinematic|mujoco``: the sim's plant, in process and ``--realtime`` (the JSON's
+``physics``); with ``mujoco``, ``push --max-mass`` bisects the heaviest box each arm
+configuration pushes and ``--frames DIR`` renders a strip of frames (docs/results.md §6).
 """
 
 from __future__ import annotations
