@@ -103,3 +103,22 @@ def test_the_realtime_circle_starts_its_sim_on_the_physics_plant(capsys: pytest.
     r = json.loads(capsys.readouterr().out)
     assert r["physics"] == "mujoco" and sum(r["violations"].values()) == 0
     assert "mujoco plant" in (logs / "sim.log").read_text()
+
+
+def test_the_referee_sees_the_physics_box_where_it_is_tipped() -> None:
+    from wmm_qp_sim import BoxConfig, SimCommand, SimRobot
+
+    s = make_setup("qp", physics="mujoco")
+    sim = SimRobot(s.model, s.sim_cfg)
+    sim.place_box(BoxConfig(mass=10.0, mu=0.5, face_x=2.0, width=0.4, height=0.6))
+    p = sim.plant
+    adr = int(p.robot.model.jnt_qposadr[p.robot.model.body_jntadr[p.robot.box_body]])
+    pitch = 0.3  # [rad] leaning away from the robot, about y
+    p.data.qpos[adr + 3: adr + 7] = [np.cos(pitch / 2), 0.0, np.sin(pitch / 2), 0.0]
+    p.data.qpos[adr + 2] += 0.05  # clear of the floor
+    sim.step(SimCommand(np.zeros(s.model.n_wheels), np.zeros(s.model.n_arm), period=1e-3, seq=0), 1e-3)
+    box = sim.box_obstacle()
+    assert box is not None
+    assert box.rpy[1] == pytest.approx(pitch, abs=1e-2) and sim.box is not None and sim.box.tilt > 0.29
+    np.testing.assert_allclose(box.xyz, p.data.xpos[p.robot.box_body], atol=1e-12)
+    assert sim.box.face_x == pytest.approx(box.xyz[0] - 0.2 * np.cos(box.rpy[1]), abs=1e-6)
