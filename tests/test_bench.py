@@ -262,3 +262,27 @@ def test_the_sections_but_collision_default_time_the_controller_without_rows(
                  "--only", "controller"]) == 0
     assert seen == [False] and w.load_controller_config().collision.enabled
     capsys.readouterr()
+
+
+def test_sim_section_times_every_shipped_robot_on_both_plants(capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("mujoco", reason="the physics plant needs mujoco: pip install 'wmm-qp[physics]'")
+    from wmm_qp_service.bench.runner import shipped_robots
+
+    assert main(["bench", "--json", "--only", "sim", "--ticks", "20"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["physics"] == ["kinematic", "mujoco"]
+    names = {w.load_robot_config(f).name for f in shipped_robots()}
+    assert set(out["sim"]) == names
+    for row in out["sim"].values():
+        for plant in ("kinematic", "mujoco"):
+            r = row[plant]
+            assert r["step_us"]["n"] == 20 and 0.0 < r["step_us"]["p50"] <= r["step_us"]["p99"]
+            assert r["realtime_factor"] > 0.0
+            assert r["violations"]["velocity"] == 0 and r["violations"]["acceleration"] == 0
+
+
+def test_sim_section_on_one_plant(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["bench", "--json", "--only", "sim", "--ticks", "5", "--physics", "kinematic"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["physics"] == ["kinematic"]
+    assert all(set(row) == {"file", "available", "kinematic"} for row in out["sim"].values())

@@ -53,11 +53,25 @@ class Box:
 
     Args:
         config: mass, friction and geometry.
+
+    Attributes:
+        face_x: [m] world x of the pushed face now.
+        rpy: [rad] the box's roll, pitch, yaw (world); zeros while it stands upright (the
+            quasi-static box always does; a physics box may tip).
+        center: [m] the box's centre (world) where a plant measures it, else None (upright, its
+            face at ``face_x``).
     """
 
     def __init__(self, config: BoxConfig) -> None:
         self.config = config
         self.face_x = config.face_x
+        self.rpy = np.zeros(3)
+        self.center: FloatArray | None = None
+
+    @property
+    def tilt(self) -> float:
+        """[rad] how far the box leans from upright (roll and pitch)."""
+        return float(np.hypot(self.rpy[0], self.rpy[1]))
 
     @property
     def displacement(self) -> float:

@@ -28,6 +28,7 @@ The model is built from the robot description (:mod:`.mujoco_model`). Each step:
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import mujoco
@@ -150,7 +151,11 @@ class MujocoPlant:
         lag = np.flatnonzero(np.abs(d.qvel[r.arm_dof] - self.cmd_arm) > self.physics.tracking_error)
         self.lagging_joint = int(lag[0]) if lag.size else None
         if self.box is not None and r.box_body >= 0:
-            self.box.face_x = float(d.xpos[r.box_body][0]) - 0.5 * self.box.config.width
+            R = d.xmat[r.box_body].reshape(3, 3)
+            # the face's centre (the body's centre less half its depth along the box's own x)
+            self.box.face_x = float(d.xpos[r.box_body][0] - 0.5 * self.box.config.width * R[0, 0])
+            self.box.rpy = _rpy(R)
+            self.box.center = d.xpos[r.box_body].copy()
 
     def _traction(self, qpos: FloatArray, qvel: FloatArray, dt: float) -> FloatArray:
         """[N, N, N·m] the wheels' force on the base at pose qpos, velocity qvel, traction-limited
@@ -216,3 +221,9 @@ class MujocoPlant:
                           wheel_speeds=self.wheel_speeds(), base_true=self.base_pose(), tau=self.tau.copy(),
                           contact_force=self.contact_force(), stalled_joint=self.stalled_joint,
                           lagging_joint=self.lagging_joint)
+
+
+def _rpy(R: FloatArray) -> FloatArray:
+    """[rad] roll, pitch, yaw of the rotation matrix R (R = Rz(yaw)·Ry(pitch)·Rx(roll))."""
+    return np.array([math.atan2(R[2, 1], R[2, 2]), math.asin(max(-1.0, min(1.0, -R[2, 0]))),
+                     math.atan2(R[1, 0], R[0, 0])])

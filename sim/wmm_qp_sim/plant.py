@@ -54,7 +54,8 @@ class Plant(Protocol):
     """The hardware a :class:`~.robot.SimRobot` drives.
 
     Attributes:
-        box: the push box (its face's world x, its config), or None.
+        box: the push box (its face's world x, its config; a physics plant also its centre and
+            orientation, which it may tip to), or None.
     """
 
     box: Box | None

@@ -130,15 +130,18 @@ class SimRobot:
     def box_obstacle(self) -> wmm_qp.config.ShapeConfig | None:
         """The pushed box as an obstacle for every body but the EE's (``exempt = ["ee"]``): from
         the floor to its height, its depth along x its width (the contact model knows only the
-        face), None without a box."""
+        face), in the pose the plant measured (a physics box may slide and tip), None without a
+        box."""
         if self.box is None:
             return None
         c = self.box.config
         z0 = self.model.config.base.floor_z
+        centre = self.box.center  # a physics box: where it is, tipped or not
         return wmm_qp.config.ShapeConfig(
             name="box", link="", kind="box", size=np.array([c.width, c.width, c.height - z0]),
-            xyz=np.array([self.box.face_x + 0.5 * c.width, c.center_y, 0.5 * (c.height + z0)]),
-            rpy=np.zeros(3), exempt=("ee",))
+            xyz=np.array([self.box.face_x + 0.5 * c.width, c.center_y, 0.5 * (c.height + z0)])
+            if centre is None else np.array(centre, dtype=float),
+            rpy=self.box.rpy.copy(), exempt=("ee",))
 
     def _update_obstacles(self) -> None:
         if self.collision is not None:
@@ -170,6 +173,7 @@ class SimRobot:
         self.plant.reset(self.base_odom.copy(), np.array(start, dtype=float).reshape(self.n_arm), box_cfg)
         self._ps = self.plant.read()
         self._box_x = self.box.face_x if self.box is not None else math.nan
+        self._box_tilt = self.box.tilt if self.box is not None else 0.0
         self._update_obstacles()
         self.t_last_command = 0.0
         self.stale = False
@@ -196,6 +200,7 @@ class SimRobot:
         """Put a box in the scene now (or remove it with None), keeping the robot's state."""
         self.plant.place_box(box)
         self._box_x = self.box.face_x if self.box is not None else math.nan
+        self._box_tilt = self.box.tilt if self.box is not None else 0.0
         self._update_obstacles()
 
     # ------------------------------------------------------------------ stepping
@@ -239,8 +244,9 @@ class SimRobot:
         self.t += dt
         self.referee.check_positions(self.q_arm)
         if self.collision is not None:
-            if self.box is not None and abs(self.box.face_x - self._box_x) > 1e-4:  # the box moved
-                self._box_x = self.box.face_x
+            if self.box is not None and (abs(self.box.face_x - self._box_x) > 1e-4
+                                         or abs(self.box.tilt - self._box_tilt) > 1e-4):  # the box moved
+                self._box_x, self._box_tilt = self.box.face_x, self.box.tilt
                 self._update_obstacles()
             hits = self.collision.check(self.base_true, self.q_arm)
             if hits:

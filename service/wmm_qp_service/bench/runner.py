@@ -11,12 +11,12 @@ from wmm_qp.config import TASK_KINDS
 from wmm_qp.solvers import available_solvers
 
 from ..progress import ProgressLine
-from . import collision, controller, daemon, e2e, jitter, oneshot, pink_race, scaling
+from . import collision, controller, daemon, e2e, jitter, oneshot, pink_race, scaling, sim
 from .machine import machine_info
 from .stats import now_ns
 
 SECTIONS: tuple[str, ...] = ("controller", "oneshot", "pink", "scaling", "robots", "e2e", "daemon", "collisions",
-                             "collision_default", "jitter")
+                             "collision_default", "jitter", "sim")
 
 
 def shipped_robots() -> list[Path]:
@@ -88,6 +88,7 @@ def run_bench(
     robot: w.RobotConfig | None = None,
     cfg: w.ControllerConfig | None = None,
     controller_file: Path | None = None,
+    physics: list[str] | None = None,
 ) -> dict[str, Any]:
     """Every section (or ``only`` one); progress goes to stderr.
 
@@ -104,10 +105,12 @@ def run_bench(
         cfg: the controller config (None: the default one); "robots" times each of its task
             kinds, the other sections use its own (but "e2e": its daemon loads ``controller_file``).
         controller_file: the daemon's controller config in "e2e" (None: its default).
+        physics: the plants of the "sim" section (None: every available one, side by side).
 
     Returns:
         {"machine", "robot", "task", "ticks", "tick_us" {solver: {p50, p99, max}} (track mode),
         "controller", "oneshot", "pink", "pink_tick_us" {p50, p99}, "scaling", "robots", "e2e",
+        "sim" {robot: {plant: {"step_us", "realtime_factor", ...}}}, "physics" (the sim's plants),
         "targets"}.
     """
     robot = w.load_robot_config() if robot is None else robot
@@ -173,6 +176,14 @@ def run_bench(
         say("jitter: the daemon's fixed-rate loop with no work (the machine's floor), then ctl.step after idling")
         out["jitter"] = jitter.run(ticks)
         out["step_after_idle"] = jitter.step_after_idle(min(ticks, 5000))
+        done += 1
+    if "sim" in sections:
+        from wmm_qp_sim.plants import available_plants
+
+        plants = physics or available_plants()
+        say(f"sim: the sim's step of every shipped robot on {', '.join(plants)}")
+        out["physics"] = plants
+        out["sim"] = sim.run(shipped_robots(), plants, min(ticks, 5000), max_seconds)
         done += 1
     bar.done(f"done, {done}/{len(sections)} sections")
     out["targets"] = targets(out)

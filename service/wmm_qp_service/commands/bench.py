@@ -16,12 +16,12 @@ from typing import Any
 
 from wmm_qp.config import TASK_KINDS
 
-from .common import add_config_arguments, load_configs
+from .common import add_config_arguments, add_physics_argument, load_configs, physics_plant
 
 HELP = "measure per-tick controller time and the loop over Zenoh"
 
 _SECTIONS = ("controller", "oneshot", "pink", "scaling", "robots", "e2e", "daemon", "collisions", "collision_default",
-             "jitter")
+             "jitter", "sim")
 _MODES = ("hold", "track", "dm_cartesian", "dm_nullspace")
 
 
@@ -48,6 +48,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="a controller mode (repeatable; default: all four)",
     )
     parser.add_argument("--no-breakdown", action="store_true", help="skip the instrumented pass")
+    add_physics_argument(parser, "sim: every installed plant side by side")
     parser.add_argument(
         "--max-seconds",
         type=float,
@@ -147,6 +148,11 @@ def _print_report(r: dict[str, Any]) -> None:
         print(f"step idle  ctl.step p50/p99 µs: back to back {a['none']['p50']}/{a['none']['p99']}, after a "
               f"{a['idle_us']:g} µs sleep {a['sleep']['p50']}/{a['sleep']['p99']} (×{a['sleep_over_none_p50']}), "
               f"after a spin {a['spin']['p50']}/{a['spin']['p99']} (×{a['spin_over_none_p50']})")
+    for name, row in r.get("sim", {}).items():
+        for plant in r.get("physics", []):
+            if plant in row:
+                c = row[plant]
+                print(f"sim {name:16s} {plant:9s} step {_fmt(c['step_us'])}  realtime x{c['realtime_factor']}")
     print(f"targets    {r['targets']}")
 
 
@@ -170,6 +176,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"wmm-qp bench: error: solver {s!r} is not installed", file=sys.stderr)
             return 2
     robot, cfg = load_configs(args)
+    if args.physics is not None:
+        physics_plant(args)  # not installed: one line, exit 2, before anything runs
     if args.task is not None:
         cfg = cfg.with_(task={"kind": args.task})
     cfg.weights_for(robot)  # a W of another length than the robot's: one line, exit 2
@@ -186,6 +194,7 @@ def run(args: argparse.Namespace) -> int:
         robot=robot,
         cfg=cfg,
         controller_file=args.controller_config,
+        physics=None if args.physics is None else [args.physics],
     )
     if args.json:
         json.dump(_clean(result), sys.stdout, indent=1)

@@ -73,6 +73,28 @@ def collision_config(args: argparse.Namespace, cfg: ControllerConfig) -> Control
     return cfg
 
 
+PHYSICS_HELP = ("the plant the simulated robot drives: kinematic (rates executed exactly) or mujoco (rigid-body "
+                "physics, torque-limited servos, traction-limited wheels; pip install 'wmm-qp[physics]')")
+
+
+def add_physics_argument(parser: argparse.ArgumentParser, default: str = "the sim config's [physics] plant") -> None:
+    """``--physics kinematic|mujoco``: the sim's plant (None: the sim config's)."""
+    parser.add_argument("--physics", choices=("kinematic", "mujoco"), default=None,
+                        help=f"{PHYSICS_HELP} (default: {default})")
+
+
+def physics_plant(args: argparse.Namespace) -> str:
+    """The plant ``--physics`` names, else the default sim config's; one that is not installed
+    raises :class:`wmm_qp_sim.plants.PlantNotAvailable` (one line, exit 2) before anything starts."""
+    from wmm_qp_sim import load_sim_config
+    from wmm_qp_sim.plants import HINTS, PlantNotAvailable, available_plants
+
+    name = getattr(args, "physics", None) or load_sim_config().physics.plant
+    if name not in available_plants():
+        raise PlantNotAvailable(name, available_plants(), HINTS.get(name, "unknown plant"))
+    return name
+
+
 def load_scene_arg(args: argparse.Namespace) -> Scene:
     """The scene of ``--scene`` (a bad file raises :class:`wmm_qp.ConfigError`: one line, exit 2)."""
     return load_scene(getattr(args, "scene", None))

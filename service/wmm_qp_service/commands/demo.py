@@ -28,7 +28,15 @@ from typing import Any
 
 from ..progress import ProgressLine
 from ..verdict import EXIT_CODES_HELP, Verdict, judge
-from .common import add_collision_argument, add_robot_argument, add_scene_argument, load_robot, load_scene_arg
+from .common import (
+    add_collision_argument,
+    add_physics_argument,
+    add_robot_argument,
+    add_scene_argument,
+    load_robot,
+    load_scene_arg,
+    physics_plant,
+)
 
 HELP = "start sim and daemon on loopback, drive every mode, print a summary"
 
@@ -54,6 +62,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_robot_argument(parser)
     add_scene_argument(parser)
     add_collision_argument(parser)
+    add_physics_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -73,6 +82,7 @@ def run(args: argparse.Namespace) -> int:
 
     robot = load_robot(args)  # a bad file: one line, exit 2, before anything starts
     scene = load_scene_arg(args)
+    plant = physics_plant(args)
     ctl = w.load_controller_config(args.controller_config)
     ctl.weights_for(robot)
     svc = isolated_config(robot=robot)
@@ -82,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
     daemon_args += ["--no-collision"] if args.no_collision else []  # else the rows are the daemon's default: on
     stack = Stack(svc, rate_hz=args.rate, log_dir=log_dir, robot_file=robot.path,
                   scene_file=scene.path if args.scene is not None else None,
-                  extra_daemon_args=daemon_args)
+                  extra_daemon_args=daemon_args, extra_sim_args=["--physics", plant])
     from ..bench.machine import CPU_HOW, CpuMeter
 
     meters: list[CpuMeter] = []  # started when the stack is up (start-up is not the loop's CPU)
@@ -116,6 +126,7 @@ def run(args: argparse.Namespace) -> int:
     summary["exit_codes"] = codes
     summary["cpu_pct"], summary["cpu_how"] = cpu, CPU_HOW
     summary["logs"] = str(log_dir)
+    summary["physics"] = plant
     summary["robot"] = {"name": robot.name, "file": str(robot.path), "n_arm": robot.n_arm,
                         "n_wheels": robot.n_wheels, "base_kind": robot.base.kind, "task": ctl.task.kind}
     summary |= verdict.json_fields()

@@ -9,6 +9,10 @@ PNG figures.
 Any robot: ``--robot-config FILE`` (default: the Gen3 on its Mecanum base, whose runs are the
 paper's tables in docs/results.md); every experiment starts at the robot's ``arm.start``.
 ``--task pose`` overrides the controller config's task kind (in-process only).
+
+``--physics kinematic|mujoco``: the sim's plant, in process and ``--realtime`` (the JSON's
+``physics``); with ``mujoco``, ``push --max-mass`` bisects the heaviest box each arm
+configuration pushes and ``--frames DIR`` renders a strip of frames (docs/results.md §7).
 """
 
 from __future__ import annotations
@@ -23,7 +27,7 @@ import numpy as np
 
 from wmm_qp.config import TASK_KINDS
 
-from .common import add_config_arguments, add_scene_argument, load_configs, load_scene_arg
+from .common import add_config_arguments, add_physics_argument, add_scene_argument, load_configs, load_scene_arg
 
 HELP = "reproduce one of the paper's experiments (circle, dm, push)"
 
@@ -49,6 +53,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--seed", type=int, default=None, help="slip/drift seed (default: sim.toml)")
     parser.add_argument("--no-slip", action="store_true", help="turn the base slip/drift off")
+    add_physics_argument(parser)
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument(
         "--log",
@@ -59,6 +64,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_scene_argument(parser, "none: the paper's setting, no obstacles and no collision rows; "
                                "a scene turns the qp controller's rows on")
     parser.add_argument("--plots", type=Path, default=None, help="folder for PNG plots")
+    parser.add_argument("--frames", type=Path, default=None, metavar="DIR",
+                        help="circle, push with --physics mujoco: a strip of frames rendered offscreen (PNG) "
+                             "in DIR (without a screen: MUJOCO_GL=osmesa)")
+    parser.add_argument("--max-mass", action="store_true",
+                        help="push: bisect the heaviest box each arm configuration (with and without DM) "
+                             "pushes 0.2 m, beside the ratio the DM values predict (in process; progress on "
+                             "stderr)")
     parser.add_argument(
         "--realtime",
         action="store_true",
@@ -83,6 +95,10 @@ def run(args: argparse.Namespace) -> int:
 
     if args.realtime and args.name == "push" and (args.log is not None or args.plots is not None):
         return _fail("push --realtime writes no --log or --plots (the JSON has the metrics)")
+    if args.max_mass and (args.name != "push" or args.realtime or args.log is not None or args.plots is not None):
+        return _fail("--max-mass applies to push in process only, without --log or --plots")
+    if args.frames is not None and (args.physics != "mujoco" or args.name == "dm" or args.realtime or args.max_mass):
+        return _fail("--frames applies to circle and push in process with --physics mujoco")
     if args.rate is not None and not args.realtime:
         return _fail("--rate only applies with --realtime")
     if args.rate is not None and not (np.isfinite(args.rate) and 10.0 <= args.rate <= 2000.0):
@@ -117,13 +133,13 @@ def run(args: argparse.Namespace) -> int:
 
     def setup() -> Any:
         return make_setup(args.controller, args.solver, slip=not args.no_slip, seed=args.seed, robot=robot,
-                          ctl_cfg=ctl_cfg, wheel_units=args.wheel_units, scene=scene)
+                          ctl_cfg=ctl_cfg, wheel_units=args.wheel_units, scene=scene, physics=args.physics)
 
     first = setup()  # a config error (a W of another length, a solver missing) before anything runs
     show_progress = True  # progress on stderr, also with --json (stdout stays the JSON alone)
     tag = args.controller
     result: dict[str, Any] = {"experiment": args.name, "robot": robot.name, "task": ctl_cfg.task.kind,
-                              "controller": args.controller}
+                              "controller": args.controller, "physics": first.sim_cfg.physics.plant}
     if args.controller == "qp":
         result["solver"] = args.solver
     # the controller's collision rows: the qp controller's with --scene only (the baselines have none)
@@ -171,7 +187,12 @@ def run(args: argparse.Namespace) -> int:
     elif args.name == "circle":
         s = first
         radius = circle.RADIUS if args.radius is None else args.radius
-        tr = circle.run_circle(s, args.duration or circle.DEFAULT_DURATION, progress=show_progress, radius=radius)
+        duration = args.duration or circle.DEFAULT_DURATION
+        strip = _strip(args, duration, elevation=-50.0)  # from above: the circle shows
+        tr = circle.run_circle(s, duration, progress=show_progress, radius=radius, observe=strip)
+        if strip is not None:
+            result["frames"] = [str(strip.save(args.frames / f"frames_circle{circle.plot_tag('', radius)}.png",
+                                               f"circle r = {radius:g} m, {robot.name}, MuJoCo"))]
         result |= {"duration": float(tr.t[-1] + s.ctl_cfg.dt), **circle.circle_metrics(tr)}
         traces = {"": tr}
         if args.plots:
@@ -192,8 +213,22 @@ def run(args: argparse.Namespace) -> int:
             from ..experiments.plots import plot_dm
 
             plot_dm(tr, args.plots, tag)
+    elif args.max_mass:
+        from ..experiments.max_mass import max_mass
+
+        result |= max_mass(setup, args.duration or push.DEFAULT_DM_DURATION, progress=show_progress)
+        result["box"] = {"mu": push.MU, "target": push.TARGET}
+        traces = {}
     else:
-        runs = push.run_push(setup, args.duration or push.DEFAULT_DM_DURATION, progress=show_progress)
+        dm_duration = args.duration or push.DEFAULT_DM_DURATION
+        scale = min(1.0, dm_duration / push.DEFAULT_DM_DURATION)
+        span = (push.GAP + push.TARGET) / push.PUSH_SPEED * scale  # [s] the push's frames
+        strips = {n: _strip(args, span) for n in ("with_dm", "without_dm")}
+        runs = push.run_push(setup, dm_duration, progress=show_progress,
+                             observe={n: v for n, v in strips.items() if v is not None})
+        if args.frames is not None:
+            result["frames"] = [str(v.save(args.frames / f"frames_push_{n}.png", f"push {n.replace('_', ' ')}, "
+                                           f"{robot.name}, MuJoCo")) for n, v in strips.items() if v is not None]
         for name, (s, tr, i0) in runs.items():
             result[name] = push.push_metrics(s, tr, i0)
         result["box"] = {"mass": push.MASS, "mu": push.MU, "target": push.TARGET}
@@ -222,6 +257,17 @@ def run(args: argparse.Namespace) -> int:
     else:
         _summary(result)
     return 0
+
+
+def _strip(args: argparse.Namespace, span: float, elevation: float = -10.0) -> Any:
+    """A frame strip over ``span`` [s] of the run (camera ``elevation`` [deg]) when ``--frames``
+    asks for one, else None."""
+    if args.frames is None:
+        return None
+    from ..experiments.frames import Strip
+
+    args.frames.mkdir(parents=True, exist_ok=True)
+    return Strip(span, elevation=elevation)
 
 
 def _realtime(args: argparse.Namespace, s: Any, show_progress: bool) -> Any:

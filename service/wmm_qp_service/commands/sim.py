@@ -10,7 +10,7 @@ HELP = "run the simulated robot (Zenoh)"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from ..cli_common import add_service_arguments
-    from .common import add_robot_argument, add_scene_argument
+    from .common import add_physics_argument, add_robot_argument, add_scene_argument
 
     add_service_arguments(parser)
     add_robot_argument(parser)
@@ -22,10 +22,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="SCHED_FIFO priority of the step loop, 0 = normal scheduling (default: "
                              "the sim config's rt_priority, 50; without root or CAP_SYS_NICE the sim "
                              "says so and runs normally)")
-    parser.add_argument("--physics", choices=("kinematic", "mujoco"), default=None,
-                        help="the plant the simulated robot drives: kinematic (rates executed exactly) or "
-                             "mujoco (rigid-body physics, torque-limited servos, traction-limited wheels; "
-                             "pip install 'wmm-qp[physics]') (default: the sim config's [physics] plant)")
+    add_physics_argument(parser)
     parser.add_argument("--no-ramp", action="store_true",
                         help="apply each command at once (no drive acceleration ramp)")
     parser.add_argument("--no-truth", action="store_true",

@@ -12,7 +12,7 @@ from typing import Any
 
 from ..progress import ProgressLine
 from ..verdict import EXIT_CODES_HELP, judge
-from .common import add_collision_argument, add_robot_argument, load_robot
+from .common import add_collision_argument, add_physics_argument, add_robot_argument, load_robot, physics_plant
 
 HELP = "run sim + daemon + client for a long time and report drift in time and memory"
 
@@ -29,6 +29,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the daemon's loop.trigger (default: the service config's)")
     add_robot_argument(parser)
     add_collision_argument(parser)
+    add_physics_argument(parser)
 
 
 def rss_kib(pid: int) -> int | None:
@@ -57,12 +58,14 @@ def run(args: argparse.Namespace) -> int:
     from ..teleop import stream_circle, stream_haptic
 
     robot = load_robot(args)  # a bad file: one line, exit 2, before anything starts
+    plant = physics_plant(args)
     svc = isolated_config(robot=robot)
     log_dir = log_folder(args.logs, "soak")
     daemon_args = [] if args.trigger is None else ["--trigger", args.trigger]
     daemon_args += ["--no-collision"] if args.no_collision else []  # else the daemon's default: rows on
-    stack = Stack(svc, rate_hz=args.rate, log_dir=log_dir, robot_file=robot.path, extra_daemon_args=daemon_args)
-    out: dict[str, Any] = {}
+    stack = Stack(svc, rate_hz=args.rate, log_dir=log_dir, robot_file=robot.path, extra_daemon_args=daemon_args,
+                  extra_sim_args=["--physics", plant])
+    out: dict[str, Any] = {"physics": plant}
     bar = ProgressLine("soak")
     up = False
     try:
@@ -118,7 +121,8 @@ def run(args: argparse.Namespace) -> int:
         n = lp.ticks - loop0.ticks
         misses = lp.deadline_misses - loop0.deadline_misses
         loads = [x["load1"] for x in samples]
-        out = {"robot": robot.name, "duration_s": args.duration, "rate_hz": args.rate, "trigger": lp.trigger,
+        out = {"robot": robot.name, "physics": plant, "duration_s": args.duration, "rate_hz": args.rate,
+               "trigger": lp.trigger,
                "collision": final.status.collision, "collision_summary": final.status.collision_summary,
                "window_ticks": n, "window_misses": misses,
                "misses_per_10k": round(1e4 * misses / n, 2) if n else None,

@@ -17,7 +17,7 @@ import wmm_qp
 from wmm_qp.config import FloatArray
 from wmm_qp.tasks import rotation_to_quat
 
-from .runner import Setup, Trace, rms, run
+from .runner import ObserveFn, Setup, Trace, rms, run
 
 RADIUS = 0.25  # [m] the paper's
 LARGE_RADIUS = 1.7  # [m] the large circle: ~2.27x the arm-alone largest (the paper: 0.25 vs 0.11 m); results.md §1
@@ -43,9 +43,11 @@ def plot_tag(tag: str, radius: float, wheel_units: str = "rad") -> str:
 
 
 def run_circle(
-    setup: Setup, duration: float = DEFAULT_DURATION, progress: bool = True, radius: float = RADIUS
+    setup: Setup, duration: float = DEFAULT_DURATION, progress: bool = True, radius: float = RADIUS,
+    observe: ObserveFn | None = None,
 ) -> Trace:
-    """Run the circle of ``radius`` [m] and return its trace."""
+    """Run the circle of ``radius`` [m] and return its trace (``observe``: called with the sim
+    after every tick)."""
     q_arm = np.array(setup.robot.arm.start)
     x0 = setup.model.ee_position(np.zeros(3), q_arm)
     quat_d = rotation_to_quat(setup.model.ee_pose(np.zeros(3), q_arm)[1]) if setup.controller.pose else None
@@ -60,6 +62,7 @@ def run_circle(
         duration,
         dm_direction=np.asarray(setup.ctl_cfg.direction),
         progress="circle" if progress else None,
+        observe=observe,
     )
 
 

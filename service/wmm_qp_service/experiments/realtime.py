@@ -217,6 +217,7 @@ class StackOptions:
         controller_file: the daemon's controller config (None: its default).
         scene_file: the scene both processes load (``--scene``: the daemon's collision rows on;
             None: their default scene and, the paper's setting, no collision rows).
+        physics: the sim's plant (``wmm-qp sim --physics``), "kinematic" or "mujoco".
     """
 
     controller: str
@@ -228,6 +229,7 @@ class StackOptions:
     robot: RobotConfig | None = None
     controller_file: Path | None = None
     scene_file: Path | None = None
+    physics: str = "kinematic"
 
 
 def _on_stack(opts: StackOptions, drive: Callable[[Client, Recorder], Any]) -> tuple[Any, Recorder, dict[str, Any]]:
@@ -240,7 +242,8 @@ def _on_stack(opts: StackOptions, drive: Callable[[Client, Recorder], Any]) -> t
     daemon_args = ["--controller", opts.controller, *(["--solver", opts.solver] if opts.solver else []),
                    *([] if opts.controller_file is None else ["--controller-config", str(opts.controller_file)]),
                    *(["--no-collision"] if opts.scene_file is None else [])]  # the paper's setting: no rows
-    sim_args = _sim_config_file(opts.slip, opts.log_dir) + ([] if opts.seed is None else ["--seed", str(opts.seed)])
+    sim_args = (_sim_config_file(opts.slip, opts.log_dir) + ([] if opts.seed is None else ["--seed", str(opts.seed)])
+                + ["--physics", opts.physics])
     stack = Stack(svc, rate_hz=opts.rate_hz, log_dir=opts.log_dir, extra_daemon_args=daemon_args,
                   extra_sim_args=sim_args, robot_file=None if opts.robot is None else opts.robot.path,
                   scene_file=opts.scene_file)  # fmt: skip
@@ -293,7 +296,8 @@ def _options(name: str, setup: Setup, controller: str, solver: str | None, slip:
     log_dir = log_dir or Path(tempfile.mkdtemp(prefix=f"wmm-qp-rt-{name}-"))
     log_dir.mkdir(parents=True, exist_ok=True)
     return StackOptions(controller, solver, float(rate_hz or setup.ctl_cfg.rate_hz), slip, seed, log_dir,
-                        setup.robot, controller_file, setup.scene.path if setup.scene is not None else None)
+                        setup.robot, controller_file, setup.scene.path if setup.scene is not None else None,
+                        setup.sim_cfg.physics.plant)
 
 
 def run_realtime(

@@ -30,6 +30,9 @@ ReferenceFn = Callable[[float, SimState, wmm_qp.Command | None], wmm_qp.Referenc
 StopFn = Callable[[float, SimState], bool]
 """(t, state) → True to end the run early."""
 
+ObserveFn = Callable[[SimRobot], None]
+"""Called with the sim after every tick (e.g. to render its plant); must not change it."""
+
 
 @dataclass
 class Trace:
@@ -73,6 +76,7 @@ class Trace:
     reasons: dict[str, int] = field(default_factory=dict)
     wall_time: float = 0.0
     sim: SimRobot | None = None
+    last_command: wmm_qp.Command | None = None
 
     def at(self, t: float) -> int:
         """Index of the last tick at or before time t [s]."""
@@ -156,6 +160,8 @@ def run(
     stop: StopFn | None = None,
     progress: str | None = None,
     sim: SimRobot | None = None,
+    previous: wmm_qp.Command | None = None,
+    observe: ObserveFn | None = None,
 ) -> Trace:
     """Run the closed loop for ``duration`` seconds (or until ``stop``).
 
@@ -170,6 +176,9 @@ def run(
         stop: optional early end.
         progress: label of the progress bar (None = no bar).
         sim: continue with this sim instead of a fresh one (then q_base/q_arm/box are ignored).
+        previous: the last command the continued sim received (a run's ``last_command``): bounds
+            (13) of the first tick start from it (:func:`anchored`); None: from the measured rates.
+        observe: called with the sim after every tick (None: nothing).
     """
     m = setup.model
     W = np.asarray(setup.W, dtype=float)
@@ -212,10 +221,12 @@ def run(
     cmd: wmm_qp.Command | None = None
     wall = time.perf_counter()
     st = sim.state()
+    last = previous
     for k in range(n_ticks):
         t = k * dt
         ref = reference(t, st, cmd)
-        cmd = setup.controller.step(sim.robot_state(), ref)
+        cmd = setup.controller.step(anchored(sim.robot_state(), last), ref)
+        last = cmd
         if cmd.reason:
             key = re.sub(r"[-+]?\d[\d.e-]*", "#", cmd.reason)  # group by kind, not value
             reasons[key] = reasons.get(key, 0) + 1
@@ -239,6 +250,8 @@ def run(
         st = sim.step(SimCommand(cmd.wheel_speeds, cmd.arm_rates, period=dt, seq=k), sim_dt)
         for _ in range(n_sub - 1):
             st = sim.step(None, sim_dt)
+        if observe is not None:
+            observe(sim)
         if bar is not None and k % 50 == 0:
             bar.update((k + 1) / n_ticks)
         if stop is not None and stop(t, st):
@@ -267,8 +280,30 @@ def run(
         reasons=reasons,
         wall_time=time.perf_counter() - wall,
         sim=sim,
+        last_command=last,
     )
     return trace
+
+
+def anchored(state: wmm_qp.RobotState, last: wmm_qp.Command | None) -> wmm_qp.RobotState:
+    """The state handed to the controller: its rates replaced by the last command, once there is one.
+
+    The acceleration bounds of (13) are q̇_prev ± A·Δt around what the robot executes next: the
+    last command (the referee judges each command against the previous one). A physics plant's
+    measured rates lag the command (its servos have an error, its wheels slip), so bounds
+    centred on them let two consecutive commands differ by more than A·Δt. The kinematic plant
+    executes each command exactly, so there the two are the same numbers. The daemon does the
+    same while the robot follows its stream (``ControlCore._anchored``); in process the firmware
+    is off and the robot always follows.
+
+    Args:
+        state: what the sim measured (its pose is kept).
+        last: the previous command sent to the sim, or None (the first tick: the measured rates).
+    """
+    if last is None:
+        return state
+    return wmm_qp.RobotState(q_base=state.q_base, q_arm=state.q_arm, v_arm=last.arm_rates.copy(),
+                             wheel_speeds=last.wheel_speeds.copy())
 
 
 def concat(a: Trace, b: Trace) -> Trace:
@@ -296,6 +331,7 @@ def concat(a: Trace, b: Trace) -> Trace:
         reasons=reasons,
         wall_time=a.wall_time + b.wall_time,
         sim=b.sim,
+        last_command=b.last_command,
     )
     return out
 
@@ -310,6 +346,7 @@ def make_setup(
     ctl_cfg: wmm_qp.ControllerConfig | None = None,
     wheel_units: str = "rad",
     scene: Scene | None = None,
+    physics: str | None = None,
 ) -> Setup:
     """Load the configs and build the model, the controller and the sim config.
 
@@ -323,6 +360,7 @@ def make_setup(
         wheel_units: the traditional controller's J⁺ units, "rad" or "rim" (controllers/traditional.py).
         scene: obstacles and fence (``--scene``), given to the controller (its collision rows, when
             its config has them on) and to the sim's referee; None: none.
+        physics: the sim's plant, "kinematic" or "mujoco"; None: the sim config's ``[physics] plant``.
     """
     from wmm_qp_sim import load_sim_config
 
@@ -343,6 +381,8 @@ def make_setup(
     sim_cfg = load_sim_config().with_(firmware=False)
     if not slip:
         sim_cfg = sim_cfg.with_(slip={"enabled": False})
+    if physics is not None:
+        sim_cfg = sim_cfg.with_(physics={"plant": physics})
     set_scene = getattr(ctl, "set_scene", None)
     if set_scene is not None and scene is not None:
         set_scene(scene)
