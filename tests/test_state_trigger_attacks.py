@@ -22,7 +22,7 @@ from wmm_qp_service.protocol import encode
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
-RATE = 500.0
+RATE = 1000.0  # the state trigger's rate is the robot's cycle: the sim's 1 kHz (configs/sim.toml)
 
 
 @pytest.fixture(scope="module")
