@@ -235,9 +235,9 @@ def test_collision_default_times_every_robot_with_and_without_its_default_rows(t
     bad.write_text('name = "broken"\n')
     files = [*shipped_robots(), bad]
     r = collision.run_default(w.load_controller_config().with_(qp={"solver": "daqp"}), 150, 60.0, files=files)
-    assert set(r) == {"wmm", "panda_diffdrive", "ur5_omni", "tiago", "broken"}
+    assert set(r) == {"wmm", "panda_diffdrive", "ur5_omni", "tiago", "fr3", "broken"}
     assert r["broken"]["available"] is False
-    for name in ("wmm", "panda_diffdrive", "ur5_omni", "tiago"):
+    for name in ("wmm", "panda_diffdrive", "ur5_omni", "tiago"):  # (the FR3 file declares no collision shapes)
         c = r[name]
         assert c["with_rows"]["n"] == c["without_rows"]["n"] > 0 and c["solver"] == "daqp"
         assert c["monitored"]["obstacles"] == 0 and c["monitored"]["self_pairs"] > 0

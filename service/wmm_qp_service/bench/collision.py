@@ -49,8 +49,9 @@ def run(robot: w.RobotConfig, cfg: w.ControllerConfig, ticks: int, max_seconds: 
     bot = IdealRobot.at_start(model)
     scene = bench_scene(model.ee_position(bot.q_base, bot.q_arm))
     out = _on_off(model, cfg, scene, ticks, max_seconds)
+    judged = referee(model, scene, out.pop("_cmds"), out.pop("_dt"))  # before the spread: no commands in the JSON
     return {"robot": robot.name, "scene": "configs/scenes/cluttered.toml + a ball beside the circle", **out,
-            "referee": referee(model, scene, out.pop("_cmds"), out.pop("_dt"))}
+            "referee": judged}
 
 
 def run_default(cfg: w.ControllerConfig, ticks: int, max_seconds: float = 30.0,
