@@ -39,11 +39,10 @@ from __future__ import annotations
 
 import contextlib
 import math
-import secrets
 import sys
 import threading
 import time
-from collections import Counter, deque
+from collections import deque
 from collections.abc import Callable
 
 import numpy as np
@@ -59,6 +58,7 @@ import wmm_qp as w
 from wmm_qp.scene import Scene, load_scene
 
 from .config import BoxConfig, SimConfig
+from .lease_gate import LeaseGate
 from .robot import SimCommand, SimRobot, SimState
 
 COMMAND_QUEUE = 1024
@@ -106,7 +106,7 @@ class CommandInbox:
         return out
 
 
-class SimNode:
+class SimNode(LeaseGate):
     """The simulated robot as a Zenoh node.
 
     Args:
@@ -147,8 +147,8 @@ class SimNode:
         self.sim = sim
         self.model = sim.model
         self.keys = Keys.of(svc.prefix, svc.robot)
-        self.validate = Validator(CommandMsg, svc.robot, svc.validation, n_arm=robot.n_arm,
-                                  n_wheels=robot.n_wheels)
+        LeaseGate.__init__(self, Validator(CommandMsg, svc.robot, svc.validation, n_arm=robot.n_arm,
+                                           n_wheels=robot.n_wheels))
         self.validate_box = Validator(BoxMsg, svc.robot, svc.validation)
         self.validate_obstacles = Validator(ObstaclesMsg, svc.robot, svc.validation)
         self.validate_gripper = Validator(GripperMsg, svc.robot, svc.validation)
@@ -158,11 +158,6 @@ class SimNode:
         self.publications = 0  # states published (their seq)
         self.caught_up = 0  # steps run to catch up with the wall clock (beyond one per wake-up)
         self.cmd_seq = -1
-        self.instance = secrets.token_hex(8)
-        self.leases: dict[str, None] = {}  # alive lease holders, in the order they appeared
-        self._holder = ""  # the holder whose commands were applied last
-        self._holder_seq = -1  # the last seq applied from it
-        self.refused: Counter[str] = Counter()
         if not (0.0 <= state_loss < 1.0 and 0.0 <= state_delay < 10.0):
             raise ValueError("state_loss must be in [0, 1) and state_delay in [0, 10) s")
         self.state_loss = state_loss
@@ -174,18 +169,6 @@ class SimNode:
         self.truth = truth
         self.scheduling = "not started"  # set by run(): the step loop's scheduling policy
 
-    @property
-    def holder(self) -> str:
-        """The control lease holder whose commands are applied ("" = none)."""
-        return next(iter(self.leases), "")
-
-    def on_lease(self, holder: str, alive: bool) -> None:
-        """A lease token appeared (alive) or vanished."""
-        if alive:
-            self.leases.setdefault(holder, None)
-        else:
-            self.leases.pop(holder, None)
-
     def accept(self, data: bytes, received: float | None = None) -> SimCommand | None:
         """Validate a command and check that it comes from the lease holder for this instance.
 
@@ -195,23 +178,9 @@ class SimNode:
 
         Returns the command for the pure model, or None (rejected or refused, counted).
         """
-        msg = self.validate(data)
+        msg = self.admit(data, self.sim.referee)
         if msg is None:
-            self.refused["invalid"] += 1
             return None
-        if msg.lease != self.holder:
-            self.refused["lease"] += 1
-            return None
-        if msg.instance != self.instance:
-            self.refused["instance"] += 1
-            return None
-        if msg.lease != self._holder:  # a new holder: its stream starts from the robot's rates
-            self._holder, self._holder_seq = msg.lease, -1
-            self.sim.referee.break_stream()
-        elif msg.seq <= self._holder_seq:
-            self.refused["seq"] += 1  # old or replayed: the holder's seq only increases
-            return None
-        self._holder_seq = msg.seq
         self.cmd_seq = msg.seq
         return SimCommand(wheel_speeds=np.array(msg.wheel_speeds), arm_rates=np.array(msg.arm_rates),
                           period=msg.period, seq=msg.seq,

@@ -42,16 +42,15 @@ from __future__ import annotations
 
 import contextlib
 import math
-import secrets
 import sys
 import threading
 import time
-from collections import Counter
 from typing import Any
 
 import numpy as np
 import zenoh
 from wmm_qp_sim.config import RefereeConfig
+from wmm_qp_sim.lease_gate import LeaseGate
 from wmm_qp_sim.referee import Referee
 
 import wmm_qp as w
@@ -72,7 +71,7 @@ TRUTH_EVERY = 10
 """The driver publishes its referee's counts on ``sim/truth`` every this many cycles (100 Hz)."""
 
 
-class FrankaDriver:
+class FrankaDriver(LeaseGate):
     """The protocol side of the driver: commands in, the shaper, the referee, states out.
 
     Pure of libfranka: :meth:`cycle` takes one robot state's measurements and returns the
@@ -91,33 +90,17 @@ class FrankaDriver:
         self.svc = svc
         self.robot = robot
         self.keys = Keys.of(svc.prefix, svc.robot)
-        self.validate = Validator(CommandMsg, svc.robot, svc.validation, n_arm=robot.n_arm, n_wheels=robot.n_wheels)
+        LeaseGate.__init__(self, Validator(CommandMsg, svc.robot, svc.validation, n_arm=robot.n_arm,
+                                           n_wheels=robot.n_wheels))
         self.shaper = CommandShaper(StreamLimits.of(robot.arm), DT, stale_timeout)
         self.referee = Referee(robot, referee if referee is not None else RefereeConfig(), period_max=stale_timeout)
-        self.instance = secrets.token_hex(8)
-        self.leases: dict[str, None] = {}
-        self._holder = ""
-        self._holder_seq = -1
         self.cmd_seq = -1
-        self.refused: Counter[str] = Counter()
         self.t = 0.0  # [s] the robot's time: the sum of its cycles
         self.seq = 0
         self._stopped = False  # the shaper was in a stale or protective stop at the last cycle
         self.validate_gripper = Validator(GripperMsg, svc.robot, svc.validation)
         g = robot.gripper
         self.hand = FrankaHand(g.width_max, g.speed_max, g.force_max) if g is not None else None
-
-    @property
-    def holder(self) -> str:
-        """The control lease holder whose commands are followed ("" = none)."""
-        return next(iter(self.leases), "")
-
-    def on_lease(self, holder: str, alive: bool) -> None:
-        """A lease token appeared (alive) or vanished."""
-        if alive:
-            self.leases.setdefault(holder, None)
-        else:
-            self.leases.pop(holder, None)
 
     def on_command(self, data: bytes, q: np.ndarray, received: float) -> bool:
         """Validate a command, check its sender and hand it to the referee and the shaper.
@@ -130,23 +113,9 @@ class FrankaDriver:
         Returns:
             True when the shaper took it as its target.
         """
-        msg = self.validate(data)
+        msg = self.admit(data, self.referee)
         if msg is None:
-            self.refused["invalid"] += 1
             return False
-        if msg.lease != self.holder:
-            self.refused["lease"] += 1
-            return False
-        if msg.instance != self.instance:
-            self.refused["instance"] += 1
-            return False
-        if msg.lease != self._holder:  # a new holder: its stream starts from the robot's rates
-            self._holder, self._holder_seq = msg.lease, -1
-            self.referee.break_stream()
-        elif msg.seq <= self._holder_seq:
-            self.refused["seq"] += 1
-            return False
-        self._holder_seq = msg.seq
         rates = np.array(msg.arm_rates, dtype=float)
         self.referee.on_command(self.t, rates, np.zeros(0), self.shaper.v, np.zeros(0), period=msg.period,
                                 seq=msg.seq, received=received, step=DT, stream=msg.stream, sent=msg.stamp)
