@@ -25,7 +25,7 @@ def h2(q: np.ndarray, u: np.ndarray) -> float:
 
 
 def test_paper_values_at_start_configuration() -> None:
-    # shared/reference: H2 = 3.8239 along x, 1.1242 along z; the paper: 3.825 (x) and 1.125 (z)
+    # configs/robots/gen3_7dof.urdf: H2 = 3.8239 along x, 1.1242 along z; the paper: 3.825 (x) and 1.125 (z)
     assert h2(Q0, X) == pytest.approx(3.8239, abs=1e-3)
     assert h2(Q0, Z) == pytest.approx(1.1242, abs=1e-3)
 

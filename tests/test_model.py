@@ -19,7 +19,7 @@ def test_paper_start_configuration_ee_matches_paper() -> None:
 
 
 def test_zero_configuration_matches_reference_fk() -> None:
-    # shared/reference/gen3_kinematics.yaml: q = 0 → end_effector_link at (0, -0.024860, 1.187385),
+    # Kinova's kinematics (the URDF's sources): q = 0 → end_effector_link at (0, -0.024860, 1.187385),
     # computed with the rounded rpy 3.1416 / 1.5708; our URDF uses pi and pi/2 exactly, which moves
     # y by 1e-5 m (the offsets add up to 0.02485 exactly).
     x = model().arm.position(np.zeros(7))

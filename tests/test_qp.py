@@ -1,4 +1,4 @@
-"""The QP controller (DESIGN.md §2): the six properties of issue 3, for every solver."""
+"""The QP controller (docs/model.md "The QP"): its properties, for every solver."""
 
 from __future__ import annotations
 

@@ -153,7 +153,7 @@ def test_a_fixed_base_robot_is_the_arm_alone(tmp_path: Path) -> None:
 
 
 def test_the_mount_composes_as_p_mount_plus_R_mount_p_arm(tmp_path: Path) -> None:
-    """DESIGN.md §7: x = Rz(ψ)(p_mount + R_mount p_m(q_m)), J_m = Rz(ψ) R_mount J_arm."""
+    """docs/model.md "Any robot": x = Rz(ψ)(p_mount + R_mount p_m(q_m)), J_m = Rz(ψ) R_mount J_arm."""
     src = (ROBOTS / "gen3_mecanum.toml").read_text().replace(
         'urdf = "gen3_7dof.urdf"', f'urdf = "{ROBOTS / "gen3_7dof.urdf"}"'
     )

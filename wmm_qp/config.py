@@ -118,7 +118,7 @@ class ArmConfig:
         joint_types: "revolute", "continuous" or "prismatic", per joint.
         locked: every other joint of the URDF and the value it is locked at [rad or m].
         mount_xyz: [m] the arm's URDF root in the base frame (eq. (2): p_mount).
-        mount_rpy: [rad] its orientation (roll, pitch, yaw; R_mount of DESIGN.md §7).
+        mount_rpy: [rad] its orientation (roll, pitch, yaw; R_mount of docs/model.md "Any robot").
         position_lower, position_upper: [rad or m] position limits, ±inf for continuous joints.
         velocity_max: [rad/s or m/s] symmetric velocity limits.
         acceleration_max: [rad/s² or m/s²] symmetric acceleration limits.
@@ -167,7 +167,7 @@ class ArmConfig:
 
 @dataclass(frozen=True)
 class BaseConfig:
-    """The mobile base (DESIGN.md §7; docs/robots.md for the wheel order of each kind).
+    """The mobile base (docs/model.md "Any robot"; docs/robots.md for the wheel order of each kind).
 
     Attributes:
         kind: "mecanum" (wheels FL, FR, RL, RR), "omni" (three omni wheels at 90°, 210°, 330°),
@@ -234,7 +234,7 @@ class RobotConfig:
 
 @dataclass(frozen=True)
 class TaskConfig:
-    """The task of eq. (5) (DESIGN.md §7).
+    """The task of eq. (5) (docs/model.md "Any robot").
 
     Attributes:
         kind: "position" (r = 3, the paper's) or "pose" (r = 6: position and orientation of the
@@ -262,7 +262,7 @@ class TaskConfig:
 
 @dataclass(frozen=True)
 class QpConfig:
-    """Settings of the QP controller (DESIGN.md §2).
+    """Settings of the QP controller (docs/model.md "The QP").
 
     Attributes:
         solver: backend name from :func:`wmm_qp.solvers.available_solvers`.
@@ -313,7 +313,7 @@ class QpConfig:
 
 @dataclass(frozen=True)
 class CollisionParams:
-    """The velocity dampers (DESIGN.md §7, docs/model.md): ḋ ≥ −ξ (d − d_s)/(d_i − d_s) for every
+    """The velocity dampers (docs/model.md "Any robot", docs/model.md): ḋ ≥ −ξ (d − d_s)/(d_i − d_s) for every
     monitored pair closer than d_i.
 
     Attributes:

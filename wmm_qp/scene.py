@@ -1,4 +1,4 @@
-"""The robot's surroundings: static obstacles and the workspace fence (a scene file, DESIGN.md §7).
+"""The robot's surroundings: static obstacles and the workspace fence (a scene file, docs/model.md "Any robot").
 
 A scene file (``configs/scenes/default.toml`` is the default; ``--scene FILE`` on the commands):
 

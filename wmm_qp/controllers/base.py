@@ -142,7 +142,7 @@ class Controller(ABC):
             if not (all_finite(cmd.wheel_speeds) and all_finite(cmd.arm_rates)):
                 return self.safe_stop(state, f"{self.name}: non-finite command")
             return cmd
-        except Exception as e:  # the control loop must never raise (DESIGN.md §2, item 5)
+        except Exception as e:  # the control loop must never raise (docs/model.md "The QP")
             return self.safe_stop(state, f"{self.name}: {type(e).__name__}: {e}")
 
     def warm_up(self, q_arm: FloatArray | None = None) -> None:
@@ -272,7 +272,7 @@ class Controller(ABC):
         return reference.xd_d + self.config.K_x * (reference.x_d - ctx.kin.x)  # eq. (18)
 
     def angular_velocity(self, ctx: TickContext, reference: Reference) -> FloatArray:
-        """The pose task's angular part [rad/s], unweighted: ω_d + K_R log(R_d Rᵀ) (DESIGN.md §7),
+        """The pose task's angular part [rad/s], unweighted: ω_d + K_R log(R_d Rᵀ) (docs/model.md "Any robot"),
         ω_d alone without an orientation target."""
         if reference.quat_d is None or ctx.kin.R_ee is None:
             return reference.omega_d.copy()

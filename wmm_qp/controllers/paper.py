@@ -9,7 +9,7 @@ command to (13); that is what the QP controller adds.
 
 Modes: TRACK / HOLD, eq. (15) with v_0 = 0 and ẋ_d + K_x(x_d − x); DM_CARTESIAN, eqs.
 (16)–(17); DM_NULLSPACE, eqs. (18)–(19) with the configured α (0.2) — the paper's
-null-space experiments use a moving base (DESIGN.md §1). Below σ_min(J_m) = threshold,
+null-space experiments use a moving base (docs/model.md). Below σ_min(J_m) = threshold,
 damped least squares replaces J#.
 """
 

@@ -368,7 +368,7 @@ def _saturated(v: FloatArray, feedforward: FloatArray, limit: float) -> FloatArr
 
 
 class QpController(Controller):
-    """QP controller (DESIGN.md §2).
+    """QP controller (docs/model.md "The QP").
 
     Args:
         model: the robot.

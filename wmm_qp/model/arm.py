@@ -5,7 +5,7 @@ The "EE frame" is the task point: the ``ee_frame`` link moved by the tool offset
 kinematics, Jacobians, Hessians (the DM's gradient) and the collision rows all use it.
 
 Built once from the robot description: Pinocchio's reduced model of the chosen joints (every
-other joint of the URDF locked), its root placed at the mount (DESIGN.md §7: p_mount + R_mount
+other joint of the URDF locked), its root placed at the mount (docs/model.md "Any robot": p_mount + R_mount
 p_m(q_m), R_mount J_arm), so every quantity here is already expressed in the base frame. The
 per-tick code only indexes. Continuous joints are stored by Pinocchio as (cos, sin) pairs;
 :meth:`ArmModel.pin_q` maps the n joint values to Pinocchio's configuration vector.
@@ -133,7 +133,7 @@ class ArmModel:
         Analytic, from Pinocchio's kinematic Hessian. Must follow :meth:`position_jacobian` or
         :meth:`pose_jacobian` at the same q (it reuses the joint Jacobians computed there). With
         pin ≥ 4.1 the returned tensor must be read as ``H.reshape(nv, nv, 6)[k, i, :] = ∂J_i/∂q_k``
-        (DESIGN.md §1; checked against finite differences in the tests).
+        (docs/model.md; checked against finite differences in the tests).
         """
         pin.computeJointKinematicHessians(self.model, self.data)
         H = pin.getFrameKinematicHessian(self.model, self.data, self.frame_id, _LWA)

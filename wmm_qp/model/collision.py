@@ -1,4 +1,4 @@
-"""The robot's collision geometry and the pairs to monitor, built once at start-up (DESIGN.md §7).
+"""The robot's collision geometry and the pairs to monitor, built once at start-up (docs/model.md "Any robot").
 
 Bodies come from the URDF's collision elements (``[collision] from_urdf``; meshes as their convex
 hulls, so distances and closest points come from coal's GJK), from primitives in the robot file

@@ -1,7 +1,7 @@
 """The whole WMM: forward kinematics (2) and the Jacobians of eq. (5), for any arm and base.
 
 Frames: world w, base b (at (x_b, y_b) on the ground, heading ψ), arm root m at the mount in b
-(folded into the arm's model: p_m and J_arm are base-frame quantities, DESIGN.md §7). The EE
+(folded into the arm's model: p_m and J_arm are base-frame quantities, docs/model.md "Any robot"). The EE
 position in w is eq. (2):
 
     x = [x_b, y_b, 0] + Rz(ψ)·p_m(q_m).
@@ -11,7 +11,7 @@ Velocities, eq. (5): ẋ = J_b q̇_b + J_m v_m = J v with v = [v_b; v_m] ∈ R^(
     J_b = [[1, 0, −p_y], [0, 1, p_x], [0, 0, 0]],  p = Rz(ψ) p_m,
     J_m = Rz(ψ)·J_arm,   J = [J_b P(ψ), J_m]          (P of eq. (3), the base kind's).
 
-Pose task (r = 6, DESIGN.md §7): three angular rows follow, [0, 0, P₃(ψ)] for the wheels (the
+Pose task (r = 6, docs/model.md "Any robot"): three angular rows follow, [0, 0, P₃(ψ)] for the wheels (the
 base's yaw rate turns the EE about z) and Rz(ψ)·J_ω,arm for the arm.
 """
 

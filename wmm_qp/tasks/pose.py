@@ -1,4 +1,4 @@
-"""The pose task (r = 6): position and orientation of the EE frame (DESIGN.md §7).
+"""The pose task (r = 6): position and orientation of the EE frame (docs/model.md "Any robot").
 
 The task reads J v = [ẋ_d + K_x e_p; ω_d + K_R e_R] with J's angular rows those of the
 LOCAL_WORLD_ALIGNED frame Jacobian (the base's yaw adds ω_z) and the orientation error the log

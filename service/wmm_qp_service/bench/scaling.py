@@ -4,7 +4,7 @@
 A synthetic benchmark: it builds the controller's whole-robot QP itself, with ``wmm_qp``'s pieces,
 on Pinocchio models of its own (one or two arms, any number of joints), so it does not go
 through ``QpController``: per tick, kinematics of every EE (``computeJointJacobians``), the bounds
-(13) (``joint_motion_bounds``) and the wheel bounds, the QP of DESIGN.md §2 with a task slack
+(13) (``joint_motion_bounds``) and the wheel bounds, the QP of docs/model.md "The QP" with a task slack
 (z = [v_b; v_m; s], H = blkdiag(W_x⁻¹, ρI), A = [J_b P, J_m, I], one 3-row task per arm;
 always feasible, as the controller's slack stage) and a persistent ``wmm_qp.solvers``
 backend. The n-joint row is the robot's own arm through this same path, so the rows compare

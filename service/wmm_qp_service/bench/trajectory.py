@@ -1,6 +1,6 @@
 """The moving reference every section follows, and the ideal robot that executes commands.
 
-The paper's circle experiment (DESIGN.md §1): x_d(t) = x0 + [0.25(cos ωt − 1), 0.25 sin ωt, 0],
+The paper's circle experiment (docs/model.md): x_d(t) = x0 + [0.25(cos ωt − 1), 0.25 sin ωt, 0],
 ω = π/20 rad/s, from q_b = 0 and the robot's start configuration (``arm.start``; the Gen3's is
 the paper's). The state fed back to the
 controller is its own command integrated over one period (joint rates and wheel speeds are

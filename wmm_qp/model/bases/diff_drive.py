@@ -1,4 +1,4 @@
-"""The differential-drive base (DESIGN.md §7): two wheels, nonholonomic.
+"""The differential-drive base (docs/model.md "Any robot"): two wheels, nonholonomic.
 
 Wheels (left, right) on one axle through the base's origin, ``track_width`` b apart, radius R:
 

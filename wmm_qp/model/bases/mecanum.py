@@ -1,6 +1,6 @@
 """The four-wheel Mecanum base, eqs. (3) and (20).
 
-Convention (DESIGN.md §1). Wheels are ordered front-left, front-right, rear-left,
+Convention (docs/model.md). Wheels are ordered front-left, front-right, rear-left,
 rear-right; a positive wheel speed drives its wheel forward. With rollers at 45° in the
 usual X arrangement, the base twist in the base frame is
 

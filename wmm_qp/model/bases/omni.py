@@ -1,4 +1,4 @@
-"""The three-wheel omni base (DESIGN.md §7).
+"""The three-wheel omni base (docs/model.md "Any robot").
 
 Three omni wheels at θ_i = 90°, 210°, 330° (counter-clockwise from the base's x axis), at
 distance L = ``base_radius`` from the centre, each driving tangentially (a positive speed pushes
