@@ -26,6 +26,7 @@ import wmm_qp as w
 from wmm_qp.config import ShapeConfig, default_config_dir
 from wmm_qp.scene import load_scene
 
+from .robot_files import loaded, shipped_robots
 from .stats import now_ns, summarize_ns
 from .trajectory import IdealRobot, circle
 
@@ -65,16 +66,9 @@ def run_default(cfg: w.ControllerConfig, ticks: int, max_seconds: float = 30.0,
         "without_rows" {…}, "ratio_p50", "rows" {p50, max, mean}, "monitored"}} (a robot file that
         does not load: {"file", "available": False, "reason"}).
     """
-    from .runner import shipped_robots
-
     scene = load_scene()  # configs/scenes/default.toml: the fence, no obstacles
     out: dict[str, Any] = {}
-    for f in files if files is not None else shipped_robots():
-        try:
-            robot = w.load_robot_config(f)
-        except w.ConfigError as e:
-            out[f.stem] = {"file": str(f), "available": False, "reason": str(e)}
-            continue
+    for f, robot in loaded(files if files is not None else shipped_robots(), out):
         res = _on_off(w.WmmModel(robot), cfg, scene, ticks, max_seconds)
         res.pop("_cmds"), res.pop("_dt")
         out[robot.name] = {"file": str(f), "available": True, "scene": "configs/scenes/default.toml",

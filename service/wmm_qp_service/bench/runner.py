@@ -13,17 +13,11 @@ from wmm_qp.solvers import available_solvers
 from ..progress import ProgressLine
 from . import collision, controller, daemon, e2e, jitter, oneshot, pink_race, scaling, sim
 from .machine import machine_info
+from .robot_files import loaded, shipped_robots
 from .stats import now_ns
 
 SECTIONS: tuple[str, ...] = ("controller", "oneshot", "pink", "scaling", "robots", "e2e", "daemon", "collisions",
                              "collision_default", "jitter", "sim")
-
-
-def shipped_robots() -> list[Path]:
-    """The robot files shipped in ``configs/robots/``, the default robot first."""
-    default = w.default_robot_file()
-    files = sorted(default.parent.glob("*.toml"))
-    return sorted(files, key=lambda f: f.name != default.name)
 
 
 def run_robots(
@@ -48,12 +42,7 @@ def run_robots(
     """
     out: dict[str, Any] = {}
     cases: list[tuple[dict[str, Any], controller.CleanCase]] = []
-    for f in files if files is not None else shipped_robots():
-        try:
-            robot = w.load_robot_config(f)
-        except w.ConfigError as e:
-            out[f.stem] = {"file": str(f), "available": False, "reason": str(e)}
-            continue
+    for f, robot in loaded(files if files is not None else shipped_robots(), out):
         row: dict[str, Any] = {"file": str(f), "available": True, "n_arm": robot.n_arm,
                                "n_wheels": robot.n_wheels, "base": robot.base.kind}  # fmt: skip
         for kind in TASK_KINDS:

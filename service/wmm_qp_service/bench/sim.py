@@ -18,6 +18,7 @@ import numpy as np
 
 import wmm_qp as w
 
+from .robot_files import loaded
 from .stats import now_ns, summarize_ns
 
 AMPLITUDE = 0.2  # [-] the command's share of each joint's and wheel's rate limit
@@ -59,12 +60,7 @@ def run(files: list[Path], plants: list[str], steps: int, max_seconds: float) ->
     """Every robot file on every plant: {robot name: {plant: :func:`run_plant`'s result}}; a robot
     file that does not load gives {"file", "available": False, "reason"}."""
     out: dict[str, Any] = {}
-    for f in files:
-        try:
-            robot = w.load_robot_config(f)
-        except w.ConfigError as e:
-            out[f.stem] = {"file": str(f), "available": False, "reason": str(e)}
-            continue
+    for f, robot in loaded(files, out):
         row: dict[str, Any] = {"file": str(f), "available": True}
         for plant in plants:
             row[plant] = run_plant(robot, plant, steps, max_seconds)
