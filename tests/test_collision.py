@@ -307,7 +307,7 @@ def test_no_pair_inside_its_safety_distance_is_left_out_of_the_rows(tmp_path: Pa
     ctl.set_scene(scene)  # type: ignore[attr-defined]
     m = model()
     ctl.step(w.RobotState(q_base=np.zeros(3), q_arm=m.config.arm.start), w.Reference("hold"))
-    rows = ctl.last_rows  # type: ignore[attr-defined]
+    rows = ctl.last_collision_rows()
     inside = [n for n in rows.names if n.split("/")[1].startswith("box")]
     assert len(inside) == 6 * len(ctl.collision.geo.bodies) > MAX_ROWS, (len(inside), rows.names)  # type: ignore[attr-defined]
 

@@ -247,3 +247,20 @@ def test_a_malformed_reference_gives_a_safe_stop_not_a_broadcast(kind: str, fiel
         cmd = ctl.step(moving_state(), ref)
         assert "reference arrays have the wrong shapes" in cmd.reason
         assert_safe_stop_of_the_robot_s_sizes(cmd, moving_state(), "", how)
+
+
+@pytest.mark.parametrize("kind", ["traditional", "paper", "qp"])
+def test_every_controller_declares_the_host_capabilities(kind: str) -> None:
+    """A host calls set_scene / set_obstacles / set_latency / the collision reports on any
+    controller without probing it: the baselines answer 'no rows', the QP controller its own."""
+    from wmm_qp.scene import Scene
+
+    ctl = w.make_controller(kind, model(), config().with_(collision={"enabled": True}))
+    ctl.set_scene(Scene())
+    ctl.set_obstacles(())
+    ctl.set_latency(0.004)
+    assert ctl.bounds.latency == 0.004
+    has_rows = kind == "qp"
+    assert ctl.collision_on is has_rows
+    assert ctl.collision_summary().startswith("collision rows on" if has_rows else "no collision rows")
+    assert ctl.last_collision_rows() is None  # no tick yet

@@ -176,9 +176,7 @@ class ControlCore:
         # the scene: its obstacles and fence are rows of the QP controller's stages (the baselines
         # have none); every controller's setpoints are clamped into the fence (on_setpoint)
         self.scene = scene if scene is not None else load_scene()
-        set_scene = getattr(self.ctl, "set_scene", None)
-        if set_scene is not None:
-            set_scene(self.scene)
+        self.ctl.set_scene(self.scene)
         self.live_obstacles: tuple[ShapeConfig, ...] = ()
         self.obstacles_time = -math.inf  # [s] the last live obstacles message (-inf: none yet)
         self.obstacles_stale = False
@@ -339,12 +337,7 @@ class ControlCore:
         """Bounds (13)'s latency margin [s] (and the collision rows', which share it): the
         state's age when the command acts, plus the robot's own command timeout."""
         self.latency = latency
-        bounds = getattr(self.ctl, "bounds", None)
-        if bounds is not None:
-            bounds.latency = latency
-        rows = getattr(self.ctl, "collision", None)
-        if rows is not None:
-            rows.latency = latency
+        self.ctl.set_latency(latency)
 
     def _reset_age(self) -> None:
         """Empty the state-age window (a new robot, or a new stream); bounds (13) go back to the
@@ -473,9 +466,7 @@ class ControlCore:
         if self.obstacles_stale:
             self.say(f"wmm-qp serve: live obstacles fresh again ({len(shapes)})")
         self.obstacles_stale = False
-        set_obstacles = getattr(self.ctl, "set_obstacles", None)
-        if set_obstacles is not None:
-            set_obstacles(self.scene.obstacles + shapes)
+        self.ctl.set_obstacles(self.scene.obstacles + shapes)
 
     def check_obstacles(self, now: float) -> None:
         """The live set goes stale after ``watchdog.obstacles_timeout`` without a message: it is
@@ -488,18 +479,11 @@ class ControlCore:
 
     def collision_on(self) -> bool:
         """The controller has collision rows (the status's and the info's ``collision``)."""
-        return getattr(self.ctl, "collision", None) is not None
+        return self.ctl.collision_on
 
     def collision_summary(self) -> str:
         """One line: whether the controller has collision rows, and what they keep apart."""
-        rows = getattr(self.ctl, "collision", None)
-        if rows is None:
-            return "no collision rows"
-        geo = rows.geo
-        fence = "fence" if rows.fence.base.shape[0] >= 3 or np.isfinite(rows.fence.ee_lower).any() or np.isfinite(
-            rows.fence.ee_upper).any() else "no fence"
-        return (f"collision rows on ({len(geo.self_pairs)} self pairs, {len(geo.floor_bodies)} bodies vs the floor, "
-                f"{len(rows.obstacles)} obstacles, {fence})")
+        return self.ctl.collision_summary()
 
     def on_sim_alive(self, alive: bool) -> None:
         """The sim's liveliness token appeared or vanished."""
@@ -731,7 +715,7 @@ class ControlCore:
     def status(self, loop: LoopTiming, rejected: Counter[str], accepted: dict[str, int]) -> StatusMsg:
         """The status message."""
         cmd = self.cmd
-        rows = getattr(self.ctl, "last_rows", None)
+        rows = self.ctl.last_collision_rows()
         return StatusMsg(
             robot=self.svc.robot, stamp=time.time(), mode=self.mode.value,
             state_ok=self.state is not None and not self.safe, safe_stop=self.safe,

@@ -9,16 +9,19 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from .._jit import all_finite, jit
-from ..config import ControllerConfig, FloatArray, RobotConfig
+from ..config import ControllerConfig, FloatArray, RobotConfig, ShapeConfig
 from ..limits import MotionBounds, braking_command, wheel_braking_command
+from ..limits.collision import Rows
 from ..manipulability import directional_manipulability, dm_cartesian_gradient, dm_gradient
 from ..model.wmm import Kinematics, WmmModel
 from ..pseudoinverse import damping_factor, sigma_min
+from ..scene import Scene
 from ..tasks import orientation_error, quat_to_matrix
 from ..types import AT_REST, Command, Mode, Reference, RobotState, Status
 
@@ -173,6 +176,33 @@ class Controller(ABC):
 
     def clear_statistics(self) -> None:  # noqa: B027 (optional hook, no-op by default)
         """Zero the controller's diagnostic counters (after :meth:`warm_up`)."""
+
+    # ------------------------------------------------------------------ declared capabilities
+    # What a host (the daemon, the experiments) may ask of any controller. The baselines have no
+    # collision rows: the defaults are no-ops, so a host never probes a controller's attributes.
+    def set_scene(self, scene: Scene) -> None:  # noqa: B027 (optional hook, no-op by default)
+        """The obstacles and the fence the collision rows keep the robot away from / inside."""
+
+    def set_obstacles(self, obstacles: Sequence[ShapeConfig]) -> None:  # noqa: B027 (no-op by default)
+        """Replace the obstacle set (live obstacles; the scene's fence stays)."""
+
+    def set_latency(self, latency: float) -> None:
+        """[s] the margin of bounds (13) (and of any rows that share it): the state's age when the
+        command acts, plus the robot's own command timeout."""
+        self.bounds.latency = latency
+
+    @property
+    def collision_on(self) -> bool:
+        """The controller has collision rows (the status's and the info's ``collision``)."""
+        return False
+
+    def collision_summary(self) -> str:
+        """One line: whether the controller has collision rows, and what they keep apart."""
+        return "no collision rows"
+
+    def last_collision_rows(self) -> Rows | None:
+        """The collision rows of the last tick (None: none, or no collision checking)."""
+        return None
 
     @abstractmethod
     def _step(self, state: RobotState, reference: Reference) -> Command:

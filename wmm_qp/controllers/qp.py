@@ -77,12 +77,13 @@ bounds (``_hold_ee_box``; status SATURATED with the reason).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
 
 from .._jit import jit
-from ..config import ControllerConfig, FloatArray
+from ..config import ControllerConfig, FloatArray, ShapeConfig
 from ..limits.collision import CollisionRows, Rows, warm_up_obstacles
 from ..limits.singularity_floor import FloorRow, floor_row
 from ..linalg3 import solve_spd, solve_sym3
@@ -616,10 +617,32 @@ class QpController(Controller):
         if self.collision is not None:
             self.collision.set_scene(scene)
 
-    def set_obstacles(self, obstacles: list) -> None:
+    def set_obstacles(self, obstacles: Sequence[ShapeConfig]) -> None:
         """Replace the obstacle set (live obstacles; the fence stays)."""
         if self.collision is not None:
-            self.collision.set_obstacles(obstacles)
+            self.collision.set_obstacles(list(obstacles))
+
+    def set_latency(self, latency: float) -> None:
+        """[s] the margin of bounds (13) and of the collision rows, which share it."""
+        super().set_latency(latency)
+        if self.collision is not None:
+            self.collision.latency = latency
+
+    @property
+    def collision_on(self) -> bool:
+        return self.collision is not None
+
+    def collision_summary(self) -> str:
+        rows = self.collision
+        if rows is None:
+            return "no collision rows"
+        geo, fence = rows.geo, rows.fence
+        fenced = fence.base.shape[0] >= 3 or np.isfinite(fence.ee_lower).any() or np.isfinite(fence.ee_upper).any()
+        return (f"collision rows on ({len(geo.self_pairs)} self pairs, {len(geo.floor_bodies)} bodies vs the floor, "
+                f"{len(rows.obstacles)} obstacles, {'fence' if fenced else 'no fence'})")
+
+    def last_collision_rows(self) -> Rows | None:
+        return self.last_rows
 
     def collision_rows(self, ctx: TickContext, state: RobotState) -> Rows | None:
         """The dampers' and the fence's rows this tick (None without collision checking)."""

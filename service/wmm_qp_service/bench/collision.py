@@ -87,7 +87,7 @@ def _on_off(model: w.WmmModel, cfg: w.ControllerConfig, scene: w.scene.Scene, ti
         c.warm_up()
     bot = IdealRobot.at_start(model)
     x0 = model.ee_position(bot.q_base, bot.q_arm)
-    on.set_scene(scene)  # type: ignore[attr-defined]
+    on.set_scene(scene)
     t_on: list[int] = []
     t_off: list[int] = []
     rows: list[int] = []
@@ -106,7 +106,7 @@ def _on_off(model: w.WmmModel, cfg: w.ControllerConfig, scene: w.scene.Scene, ti
         cmd_on = a if first is on else b
         (t_on if first is on else t_off).append(t1 - t0)
         (t_off if first is on else t_on).append(t2 - t1)
-        lr = on.last_rows  # type: ignore[attr-defined]
+        lr = on.last_collision_rows()
         rows.append(0 if lr is None else len(lr.names))
         cmds.append(cmd_on)
         bot.apply(cmd_on, on.dt)

@@ -110,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
                     "scene": None if scene is None else str(scene.path),
                     **verdict.json_fields(),
                     "collision": scene is not None,
-                    "collision_rows": getattr(ctl, "collision", None) is not None,
+                    "collision_rows": ctl.collision_on,
                 }
             )
         )

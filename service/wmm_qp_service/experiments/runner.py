@@ -383,9 +383,8 @@ def make_setup(
         sim_cfg = sim_cfg.with_(slip={"enabled": False})
     if physics is not None:
         sim_cfg = sim_cfg.with_(physics={"plant": physics})
-    set_scene = getattr(ctl, "set_scene", None)
-    if set_scene is not None and scene is not None:
-        set_scene(scene)
+    if scene is not None:
+        ctl.set_scene(scene)
     return Setup(model=model, controller=ctl, ctl_cfg=cfg, sim_cfg=sim_cfg, seed=seed, scene=scene)
 
 
