@@ -30,9 +30,9 @@ def test_a_burst_of_commands_after_a_sim_stall_is_judged_command_by_command(keep
     judged as received, against the one before it (SimNode.take). Judging only the burst's last
     against the one before the stall (a ring of one, before) counted a legal ramp (the TIAGo and
     UR5 demos at 1 kHz: "changed by 1.17 A·Δt over Δt = 27.33 ms")."""
+    from wmm_qp_service.drivers.sim_node import SimNode
     from wmm_qp_service.protocol import CommandMsg, encode
     from wmm_qp_sim import load_sim_config
-    from wmm_qp_sim.zenoh_adapter import SimNode
 
     robot = w.load_robot_config()
     node = SimNode(ServiceConfig(), load_sim_config().with_(firmware=False), robot)

@@ -10,9 +10,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from wmm_qp_service.config import ServiceConfig
+from wmm_qp_service.drivers.sim_node import SimNode
 from wmm_qp_service.protocol import CommandMsg, encode
 from wmm_qp_sim import SimCommand, SimConfig, SimRobot
-from wmm_qp_sim.zenoh_adapter import SimNode
 
 import wmm_qp
 

@@ -224,7 +224,7 @@ def test_step_time_at_1khz_is_reported(name: str) -> None:
 def test_wmm_qp_sim_physics_flag_chooses_the_plant(monkeypatch: pytest.MonkeyPatch) -> None:
     from types import SimpleNamespace
 
-    import wmm_qp_sim.zenoh_adapter as adapter
+    import wmm_qp_service.drivers.sim_node as adapter
     from wmm_qp_service.cli import main
 
     plants: list[str] = []
@@ -247,7 +247,7 @@ def test_wmm_qp_sim_physics_flag_chooses_the_plant(monkeypatch: pytest.MonkeyPat
 
 def test_the_zenoh_node_drives_the_robot_it_is_given() -> None:
     from wmm_qp_service.config import ServiceConfig
-    from wmm_qp_sim.zenoh_adapter import SimNode
+    from wmm_qp_service.drivers.sim_node import SimNode
 
     m = model("ur5_omni.toml")
     sim = SimRobot(m, PHYSICS, collisions=False)

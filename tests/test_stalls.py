@@ -15,10 +15,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from wmm_qp_service.config import ServiceConfig
+from wmm_qp_service.drivers.sim_node import CommandInbox, SimNode
 from wmm_qp_service.protocol import CommandMsg, encode
 from wmm_qp_sim import load_sim_config
 from wmm_qp_sim.robot import SimCommand, SimRobot
-from wmm_qp_sim.zenoh_adapter import CommandInbox, SimNode
 
 import wmm_qp as w
 

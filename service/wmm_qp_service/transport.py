@@ -1,6 +1,6 @@
 """Zenoh sessions: peer mode, no multicast scouting, explicit loopback endpoints.
 
-The only module (with the sim's adapter) that opens Zenoh sessions. Always use the
+The only module that opens Zenoh sessions. Always use the
 session as a context manager (or close it): an open session with a subscriber hangs the
 process at exit.
 """

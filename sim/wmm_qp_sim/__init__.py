@@ -1,10 +1,13 @@
-"""The simulated wheeled mobile manipulator: a pure model (this package) and its Zenoh adapter.
+"""The simulated wheeled mobile manipulator: a pure model, no transport.
 
 The pure model is plain objects, no I/O: :class:`SimRobot` (the robot's firmware, referees and
 odometry) is stepped by commands, drives a :class:`Plant` (the hardware: write the rates,
 advance, read the measurements; :class:`KinematicPlant` by default) and reports a
 :class:`SimState` (odometry and ground truth, torques, the referee's violation counts). The
 physics plant, ``wmm_qp_sim.mujoco_plant.MujocoPlant``, needs ``mujoco`` (:func:`make_plant`).
+
+This package imports only ``wmm_qp`` and third-party packages (``tools/check_layers.py``); its
+Zenoh node, ``wmm-qp sim``, is a driver of the service layer (``wmm_qp_service.drivers.sim_node``).
 """
 
 from .config import BoxConfig, PhysicsConfig, RefereeConfig, SimConfig, SlipConfig, load_sim_config

@@ -124,7 +124,7 @@ class SimConfig:
     """The simulated robot.
 
     Attributes:
-        rate_hz: [Hz] the sim loop's integration rate (the Zenoh adapter's tick).
+        rate_hz: [Hz] the sim loop's integration rate (the tick of its Zenoh node, ``wmm-qp sim``).
         seed: seed of the slip/drift noise.
         stale_timeout: [s] without a new command the sim brakes the robot to rest itself.
         firmware: model the robot's own protections: refuse commands beyond the rate limits

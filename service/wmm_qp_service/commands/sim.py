@@ -37,9 +37,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from wmm_qp_sim import load_sim_config
-    from wmm_qp_sim.zenoh_adapter import SimNode
 
     from ..cli_common import stop_on_signals
+    from ..drivers.sim_node import SimNode
     from .common import load_scene_arg, robot_service_config
 
     robot, svc = robot_service_config(args)

@@ -2,7 +2,7 @@
 
 One process, one loop: libfranka's joint velocity control (``readOnce`` / ``writeOnce``, the
 robot's 1 kHz cycle is the clock) and the wmm-qp protocol as the simulated robot speaks it
-(``sim/wmm_qp_sim/zenoh_adapter.py``, docs/protocol.md): it publishes ``state`` every cycle with
+(``service/wmm_qp_service/drivers/sim_node.py``, docs/protocol.md): it publishes ``state`` every cycle with
 its ``instance``, a consecutive ``seq``, the ``lease`` holder and the ``cmd_seq`` it follows,
 holds the liveliness token ``alive/sim``, and obeys ``cmd`` from the lease holder only, addressed
 to its instance, with increasing seq. Between the daemon's commands (500 Hz or 1 kHz, some late

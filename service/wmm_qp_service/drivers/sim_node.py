@@ -1,4 +1,9 @@
-"""The sim process (``wmm-qp sim``): the pure :class:`SimRobot` behind Zenoh.
+"""The sim process (``wmm-qp sim``): the pure :class:`~wmm_qp_sim.robot.SimRobot` behind Zenoh.
+
+The simulated robot's driver: like :mod:`.franka` for a real robot, it lives in the service layer
+(it speaks the daemon's protocol over Zenoh), while the robot it drives (``wmm_qp_sim``) imports
+nothing of the service.
+
 
 Runs the sim at its own rate (1 kHz) on the wall clock: step k is the robot at ``t0 + k·dt``, and
 a wake-up that finds the process behind (a loaded host, or the process frozen) runs every step it
@@ -28,7 +33,7 @@ One robot, one controller:
 Drive model: like a real joint or wheel drive, the pure model ramps the executed rate towards
 the commanded one at the acceleration limit (``ramp``, on by default here); the referee judges
 every command as it was received, before the ramp and before the firmware's protective stop
-(:mod:`.robot`, :mod:`.referee`). ``ramp=False`` executes each command at once.
+(:mod:`wmm_qp_sim.robot`, :mod:`wmm_qp_sim.referee`). ``ramp=False`` executes each command at once.
 
 Fault injection (reliability tests, docs/reliability.md): ``state_loss`` drops each state
 publication with that probability (seeded), ``state_delay`` holds every state back for a
@@ -47,19 +52,19 @@ from collections.abc import Callable
 
 import numpy as np
 import zenoh
-from wmm_qp_service.config import ServiceConfig
-from wmm_qp_service.keys import Keys
-from wmm_qp_service.protocol import BoxMsg, CommandMsg, GripperMsg, ObstaclesMsg, StateMsg, TruthMsg, encode
-from wmm_qp_service.rate_loop import RateLoop, realtime_priority
-from wmm_qp_service.transport import ROLE_SIM, open_session
-from wmm_qp_service.validation import Validator
+from wmm_qp_sim.config import BoxConfig, SimConfig
+from wmm_qp_sim.lease_gate import LeaseGate
+from wmm_qp_sim.robot import SimCommand, SimRobot, SimState
 
 import wmm_qp as w
 from wmm_qp.scene import Scene, load_scene
 
-from .config import BoxConfig, SimConfig
-from .lease_gate import LeaseGate
-from .robot import SimCommand, SimRobot, SimState
+from ..config import ServiceConfig
+from ..keys import Keys
+from ..protocol import BoxMsg, CommandMsg, GripperMsg, ObstaclesMsg, StateMsg, TruthMsg, encode
+from ..rate_loop import RateLoop, realtime_priority
+from ..transport import ROLE_SIM, open_session
+from ..validation import Validator
 
 COMMAND_QUEUE = 1024
 """Commands kept between two wake-ups of the step loop (the oldest dropped beyond): every one is
