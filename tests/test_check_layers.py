@@ -1,0 +1,87 @@
+"""The layer check (``tools/check_layers.py``): the real tree passes; a copy of it with one import
+that breaks ``wmm_qp`` ← ``wmm_qp_sim`` ← ``wmm_qp_service`` fails, naming the file, line and import."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+TOOL = ROOT / "tools" / "check_layers.py"
+PACKAGES = ("wmm_qp", "sim/wmm_qp_sim", "service/wmm_qp_service")
+
+
+def check(root: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, str(TOOL), "--root", str(root)], capture_output=True, text=True,
+                          timeout=60, check=False)
+
+
+@pytest.fixture(scope="module")
+def tree(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A copy of the three packages' sources (no caches), as the repository lays them out."""
+    root = tmp_path_factory.mktemp("tree")
+    for folder in PACKAGES:
+        shutil.copytree(ROOT / folder, root / folder, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+    return root
+
+
+def test_the_real_tree_keeps_the_layers() -> None:
+    r = check(ROOT)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert r.stdout.startswith("layers: OK")
+
+
+def test_the_untouched_copy_passes(tree: Path) -> None:
+    r = check(tree)
+    assert r.returncode == 0, r.stdout + r.stderr
+
+
+@pytest.mark.parametrize(("file", "code", "at", "named"), [
+    # module level: computation imports the service
+    ("wmm_qp/_probe.py", "from wmm_qp_service.config import ServiceConfig\n", 1,
+     "wmm_qp imports wmm_qp_service ('from wmm_qp_service.config import ServiceConfig')"),
+    # inside a function: the sim imports the service (what its Zenoh adapter did)
+    ("sim/wmm_qp_sim/_probe.py", "def _late():\n    from wmm_qp_service.keys import Keys\n    return Keys\n", 2,
+     "wmm_qp_sim imports wmm_qp_service ('from wmm_qp_service.keys import Keys')"),
+    # only for the type checker: still an upward edge
+    ("wmm_qp/_probe.py", "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    import wmm_qp_sim.robot\n", 3,
+     "wmm_qp imports wmm_qp_sim ('import wmm_qp_sim.robot')"),
+    # by name at run time
+    ("sim/wmm_qp_sim/_probe.py", "import importlib\n_d = importlib.import_module('wmm_qp_service.daemon')\n", 2,
+     "wmm_qp_sim imports wmm_qp_service (\"importlib.import_module('wmm_qp_service.daemon')\")"),
+    # transport below the service layer
+    ("sim/wmm_qp_sim/_probe.py", "def _open():\n    import zenoh\n    return zenoh\n", 2,
+     "wmm_qp_sim imports zenoh ('import zenoh'): transport stays at the edge"),
+])
+def test_an_upward_import_fails_the_check_naming_it(tree: Path, file: str, code: str, at: int, named: str) -> None:
+    """``code`` is a new module ``file`` of the copy; ``at``: its offending line (1-based)."""
+    path = tree / file
+    path.write_text(code)
+    try:
+        r = check(tree)
+    finally:
+        path.unlink()
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert f"{file}:{at}: {named}" in r.stdout, r.stdout
+    assert "layers: FAIL: 1 import(s)" in r.stdout
+
+
+def test_downward_and_own_imports_pass(tree: Path) -> None:
+    path = tree / "service/wmm_qp_service/_probe.py"
+    path.write_text("import zenoh\nimport wmm_qp_sim.robot\n\n\ndef _f():\n    from wmm_qp import scene\n"
+                    "    from . import config\n    return scene, config, zenoh\n")
+    try:
+        r = check(tree)
+    finally:
+        path.unlink()
+    assert r.returncode == 0, r.stdout
+
+
+def test_a_root_without_the_packages_is_bad_usage(tmp_path: Path) -> None:
+    r = check(tmp_path)
+    assert r.returncode == 2 and r.stdout == ""
+    assert r.stderr.count("\n") == 1 and f"--root {tmp_path}" in r.stderr and "sim/wmm_qp_sim" in r.stderr

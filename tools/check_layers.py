@@ -1,0 +1,155 @@
+"""The layer rule of the three packages, checked on their source: ``python tools/check_layers.py``.
+
+The layers, lowest first: ``wmm_qp`` (computation) ← ``wmm_qp_sim`` (the simulated robot) ←
+``wmm_qp_service`` (processes, transport, CLI); an arrow reads "may be imported by". A module
+may import its own package and the packages below it, never one above: so no cycle can close
+between the packages either. Transport stays at the edge: ``zenoh`` is imported by the top
+layer only.
+
+Every import counts wherever it is written: at module level, inside a function or a class,
+under ``if TYPE_CHECKING:``, in a ``try``, and ``importlib.import_module("...")`` or
+``__import__("...")`` with a literal name. Each breach is one line ``path:line: what``; the
+exit code is 0 when there is none, 1 when there is one (or a file does not parse), 2 for bad
+usage.
+
+Usage:
+    python tools/check_layers.py [--root DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import sys
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+LAYERS: tuple[tuple[str, str], ...] = (
+    ("wmm_qp", "wmm_qp"),
+    ("wmm_qp_sim", "sim/wmm_qp_sim"),
+    ("wmm_qp_service", "service/wmm_qp_service"),
+)
+"""(package, its folder under the repository root), lowest layer first."""
+RANK = {name: i for i, (name, _) in enumerate(LAYERS)}
+EDGE_ONLY = {"zenoh": "wmm_qp_service"}
+"""Third-party packages only the named layer (the top one) may import."""
+RULE = " ← ".join(name for name, _ in LAYERS)
+
+
+@dataclass(frozen=True)
+class Import:
+    """One import statement's target.
+
+    Attributes:
+        module: the absolute dotted name imported (``from a.b import c`` → ``a.b``; only its top
+            package counts).
+        node: the statement (or the call).
+    """
+
+    module: str
+    node: ast.stmt | ast.expr
+
+    @property
+    def line(self) -> int:
+        """Its line in the file."""
+        return self.node.lineno
+
+    @property
+    def text(self) -> str:
+        """The statement as the message shows it."""
+        return ast.unparse(self.node)
+
+
+def _module_name(path: Path, pkg_dir: Path, pkg: str) -> tuple[str, bool]:
+    """The dotted module name of ``path`` inside ``pkg`` and whether it is a package's ``__init__``."""
+    rel = path.relative_to(pkg_dir).with_suffix("")
+    parts = [pkg, *rel.parts]
+    if parts[-1] == "__init__":
+        return ".".join(parts[:-1]), True
+    return ".".join(parts), False
+
+
+def _resolve(module: str | None, level: int, here: str, is_pkg: bool) -> str:
+    """The absolute name of a (possibly relative) ``from`` import written in module ``here``."""
+    if level == 0:
+        return module or ""
+    base = here.split(".") if is_pkg else here.split(".")[:-1]
+    base = base[: len(base) - (level - 1)] if level > 1 else base
+    return ".".join([*base, module] if module else base)
+
+
+def imports_of(tree: ast.AST, here: str, is_pkg: bool) -> Iterator[Import]:
+    """Every import in a parsed module, at any depth (functions, classes, conditionals)."""
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                yield Import(alias.name, node)
+        elif isinstance(node, ast.ImportFrom):
+            yield Import(_resolve(node.module, node.level, here, is_pkg), node)
+        elif isinstance(node, ast.Call) and node.args:
+            f = node.func
+            name = f.attr if isinstance(f, ast.Attribute) else f.id if isinstance(f, ast.Name) else ""
+            arg = node.args[0]
+            if (name in ("import_module", "__import__") and isinstance(arg, ast.Constant)
+                    and isinstance(arg.value, str) and not arg.value.startswith(".")):
+                yield Import(arg.value, node)
+
+
+def breaches(root: Path) -> tuple[list[str], int, int]:
+    """Check every module of the three packages under ``root``.
+
+    Returns:
+        the breaches (one line each, ``path:line: what``), the files read and the imports
+        between the packages seen.
+    """
+    out: list[str] = []
+    files = between = 0
+    for pkg, folder in LAYERS:
+        pkg_dir = root / folder
+        for path in sorted(pkg_dir.rglob("*.py")):
+            files += 1
+            rel = path.relative_to(root)
+            source = path.read_text(encoding="utf-8")
+            try:
+                tree = ast.parse(source, filename=str(path))
+            except SyntaxError as e:
+                out.append(f"{rel}:{e.lineno}: does not parse ({e.msg}): its imports cannot be checked")
+                continue
+            here, is_pkg = _module_name(path, pkg_dir, pkg)
+            for imp in imports_of(tree, here, is_pkg):
+                top = imp.module.split(".")[0]
+                if top in RANK and top != pkg:
+                    between += 1
+                    if RANK[top] > RANK[pkg]:
+                        out.append(f"{rel}:{imp.line}: {pkg} imports {top} ({imp.text!r}): a layer may import "
+                                   f"only the ones below it ({RULE}; an arrow: may be imported by)")
+                elif top in EDGE_ONLY and pkg != EDGE_ONLY[top]:
+                    out.append(f"{rel}:{imp.line}: {pkg} imports {top} ({imp.text!r}): transport stays at the "
+                               f"edge, only {EDGE_ONLY[top]} may import {top}")
+    return out, files, between
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Print each breach of the layer rule; 0: none, 1: some, 2: bad usage."""
+    p = argparse.ArgumentParser(prog="check_layers.py", description=__doc__.split("\n")[0])
+    p.add_argument("--root", type=Path, default=Path(__file__).resolve().parent.parent,
+                   help="the repository root (default: this script's repository)")
+    args = p.parse_args(argv)
+    missing = [folder for _, folder in LAYERS if not (args.root / folder).is_dir()]
+    if missing:
+        print(f"check_layers.py: error: --root {args.root}: no folder {', '.join(missing)} "
+              f"(give the repository root, which holds {', '.join(f for _, f in LAYERS)})", file=sys.stderr)
+        return 2
+    found, files, between = breaches(args.root)
+    for line in found:
+        print(line)
+    if found:
+        print(f"layers: FAIL: {len(found)} import(s) break {RULE} ({files} files)")
+        return 1
+    print(f"layers: OK: {files} files, {between} imports between the packages, each one downward ({RULE})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
