@@ -23,6 +23,8 @@ STAGES: tuple[str, ...] = (
 setpoints, liveliness), validation and acceptance (``on_state`` …), the watchdogs and the
 stream's bookkeeping (hazards, latch, prediction), Ruckig (smoother and reference),
 ``ctl.step``, command encode + publish, telemetry, status (its message, 10 Hz), queries."""
+POLL, VALIDATION, WATCHDOGS, RUCKIG, STEP, PUBLISH, TELEMETRY, STATUS, QUERIES = range(len(STAGES))
+"""Each stage's index in :data:`STAGES` (:meth:`TickStages.lap`'s argument)."""
 
 
 class TickStages:

@@ -1,0 +1,401 @@
+"""The control core: the daemon's logic without transport — one robot's cycle.
+
+:meth:`ControlCore.on_state` takes a validated state in, :meth:`ControlCore.tick` computes the
+command to send; between them the service side hands it the operator's inputs (:mod:`.inputs`:
+modes, setpoints, obstacles, the sim's truth and liveliness). Its concerns live beside it:
+the instance latch and seq (:mod:`.state_gate`), the command stream (:mod:`.command_stream`),
+the setpoint stream (:mod:`.setpoints`), live obstacles (:mod:`.obstacles`), the watchdogs and
+faults (:mod:`.watchdog`), the reports (:mod:`.reports`). Nothing here raises in the loop:
+failures become a safe stop and a reason in the status. Tests drive it with a fake clock.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import Counter
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+import wmm_qp as w
+from wmm_qp.scene import Scene, load_scene
+from wmm_qp.tasks import rotation_to_quat
+
+from ..config import ServiceConfig
+from ..protocol import InfoMsg, StateMsg, StatusMsg, TruthMsg
+from ..rate_loop import LoopTiming
+from ..smoother import OrientationTarget, SetpointSmoother, VelocityEstimator
+from ..tick_stages import RUCKIG, STEP, WATCHDOGS, TickStages
+from . import reports
+from .command_stream import CommandStream, predicted
+from .forward import Forward
+from .inputs import CoreInputs
+from .obstacles import LiveObstacles
+from .setpoints import Setpoints
+from .state_gate import Latch, StateGate
+from .watchdog import FaultRecord, hazard, say
+
+
+class ControlCore(CoreInputs):
+    """The daemon's logic without transport: modes, watchdogs, smoothing, the controller.
+
+    The :class:`~.loop.Daemon` feeds it validated messages and sends what it returns; tests
+    can drive it directly with a fake clock.
+
+    With the pose task (``ctl_cfg.task.kind = "pose"``) the reference carries an orientation
+    target too (:class:`~wmm_qp_service.smoother.OrientationTarget`): latched from the EE's
+    orientation wherever the position target is latched (a mode change, hold, after a safe
+    stop), and set by the setpoints' ``q`` and ``w`` in the modes that follow setpoints. With
+    the position task a setpoint's orientation is ignored and counted (``orientation_ignored``).
+
+    Args:
+        svc: service config (an open robot id is the robot's name).
+        ctl_cfg: controller config (its rate is replaced by ``svc.loop.rate_hz``).
+        robot: robot config.
+        kind: controller kind (qp, paper, traditional); None = ``ctl_cfg.kind``.
+        scene: obstacles and the workspace fence (None: ``configs/scenes/default.toml``).
+    """
+
+    def __init__(self, svc: ServiceConfig, ctl_cfg: w.ControllerConfig, robot: w.RobotConfig,
+                 kind: str | None = None, scene: Scene | None = None) -> None:
+        svc = svc.with_robot(robot)
+        self.svc = svc
+        wd = svc.watchdog
+        # Bounds (13) brake from where the joints can be when the next command (or the robot's
+        # own command timeout) takes over: over a transport that is longer than in-process.
+        hold = max(ctl_cfg.state_latency, wd.command_hold)
+        self.cfg = ctl_cfg.with_(rate_hz=svc.loop.rate_hz, state_latency=hold)
+        self.robot = robot
+        self.model = w.WmmModel(robot)
+        self.kind = kind or self.cfg.kind
+        self.ctl = w.make_controller(self.kind, self.model, self.cfg)
+        # the scene: its obstacles and fence are rows of the QP controller's stages (the baselines
+        # have none); every controller's setpoints are clamped into the fence (on_setpoint)
+        self.scene = scene if scene is not None else load_scene()
+        self.ctl.set_scene(self.scene)
+        self.obstacles = LiveObstacles(wd.obstacles_timeout)
+        self.ctl.warm_up()  # the compiled kernels are loaded before the loop, not in its first tick
+        self.dt = self.cfg.dt
+        if 2.0 * self.dt > wd.state_age_max:
+            raise w.ConfigError("<service config>", "loop.rate_hz",
+                                f"{svc.loop.rate_hz:g} Hz is too slow for watchdog.state_age_max "
+                                f"({wd.state_age_max * 1e3:g} ms): a state is up to two periods "
+                                f"old when it is used; raise the rate or state_age_max (and command_hold)")
+        sm = svc.smoothing
+        self.smoother = SetpointSmoother(self.dt, sm.v_max, sm.a_max, sm.j_max)
+        self.estimator = VelocityEstimator(v_max=sm.v_max)
+        self.pose = self.cfg.task.kind == "pose"
+        self.orient = OrientationTarget(self.dt)  # the pose task's orientation target
+        self.mode = w.Mode.HOLD
+        self.direction: np.ndarray | None = None
+        self.state: w.RobotState | None = None
+        self.state_msg: StateMsg | None = None
+        self.state_time = -math.inf
+        self.state_fresh = False
+        self.need_latch = True
+        self.safe = False
+        self.resume_needed = False
+        self.sim_alive = False
+        self.cmd: w.Command | None = None
+        self.ref = w.Reference(mode=w.Mode.HOLD)
+        self._ref = w.Reference(mode=w.Mode.HOLD)  # the one tick() refills
+        self.ref_valid = False  # self.ref was computed from the current latch
+        self.ee_error = math.nan
+        self.now = 0.0
+        self.t0 = 0.0  # [s] clock value at the loop's start (fault messages say time since)
+        self.say: Callable[[str], None] = say  # where fault lines go (the Daemon hands them to a FaultLog)
+        self.refused: Counter[str] = Counter()  # setpoints and states refused after validation
+        self.fault_record = FaultRecord()
+        self.gate = StateGate(wd.state_timeout, self.refused)  # one robot, its states in order
+        self.stream = CommandStream(wd, self.cfg.state_latency, self.ctl.set_latency)
+        self.setpoints = Setpoints(wd, self.scene, robot.base.floor_z + self.cfg.collision.floor_margin,
+                                   self.pose, self.refused, self._fault)
+        self.lease = "core"  # this daemon's control lease id (the Daemon sets its Zenoh id)
+        self.lease_lost = False  # the sim applies another holder's commands
+        self.lease_holder = ""  # the holder the sim reports
+        # the robot's own firmware and the sim's referee
+        self.firmware_seen = -1  # protective stops + firmware refusals of the latched instance (-1: no state yet)
+        self.protective = ""
+        self.truth: TruthMsg | None = None  # the latched instance's last evaluation data (optional)
+        self.stages: TickStages | None = None  # the breakdown's stopwatch (None: off)
+        self.step_ns = 0  # [ns] the last ctl.step
+
+    # ------------------------------------------------------------------ the state
+    def on_state(self, msg: StateMsg, now: float) -> bool:
+        """A validated state arrived at ``now`` [s]; False: refused (another source, old seq).
+
+        The first state latches the robot's instance (:class:`~.state_gate.StateGate`); a
+        restarted robot is latched as a new one (a fault), with its rates and ages anew.
+        """
+        latch = self.gate.latch(msg.instance, now, self.state_time)
+        if latch is Latch.REFUSED:
+            return False
+        if latch is Latch.NEW:
+            if self.gate.previous:
+                self._fault(f"sim instance changed ({self.gate.previous} -> {msg.instance}: a restarted sim)")
+            self.stream.new_robot(msg.cmd_seq)  # its last command is another daemon's (or none, -1)
+            self.cmd = None  # and the last command was another robot's
+            self.firmware_seen = -1
+            self.truth = None
+        if not self.gate.next_seq(msg.seq):
+            return False
+        self.stream.applied(msg)
+        self.state_msg = msg
+        self.state = w.RobotState(q_base=msg.q_base, q_arm=msg.q_arm,  # type: ignore[arg-type]
+                                  v_arm=msg.v_arm, wheel_speeds=msg.wheel_speeds)  # type: ignore[arg-type]
+        self.state_time = now
+        self.state_fresh = True
+        self.lease_holder = msg.lease
+        total = msg.protective_stops + msg.refused.get("firmware", 0)
+        if 0 <= self.firmware_seen < total:  # the robot's own reports, not an evaluation's
+            self._event(f"robot firmware reported {total - self.firmware_seen} new protective stop(s) or "
+                        f"refused command(s) ({msg.protective_reason or 'no reason given'})", "robot firmware", now)
+        self.firmware_seen = total
+        self.protective = msg.protective_reason if msg.protective_stop else ""
+        self.stream.observe(msg, now)
+        return True
+
+    # ------------------------------------------------------------------ faults
+    def _fault(self, what: str, kind: str | None = None) -> None:
+        """Record a fault (and say it once on stderr when it is new).
+
+        Args:
+            what: the fault, as the status shows it.
+            kind: its key in ``status.faults`` (default: ``what`` up to its first " (").
+        """
+        if what != self.fault_record.last:
+            st = self.state
+            where = (f" [t={self.now - self.t0:.3f} s, mode {self.mode.value}, q_base "
+                     f"{np.round(st.q_base, 4).tolist()}, q_arm {np.round(st.q_arm, 4).tolist()}]"
+                     if st is not None else "")
+            self.say(f"wmm-qp serve: fault: {what}{where}")
+        self.fault_record.record(what, kind, self.now)
+
+    def _event(self, what: str, kind: str, now: float) -> None:
+        """A fault that happened once: a safe stop for ``state_timeout``, then (manual) a hold."""
+        self._fault(what, kind)
+        self.fault_record.hold(what, now + self.svc.watchdog.state_timeout)
+
+    def hazard(self, now: float) -> str | None:
+        """The fault that forces a safe stop now, or None (:func:`~.watchdog.hazard`)."""
+        return hazard(self.svc.watchdog, now, self.state_time, self.gate, self.protective,
+                      self.stream.round_trip, self.fault_record)
+
+    def break_stream(self, why: str) -> None:
+        """The robot no longer follows this daemon's commands: this daemon stalled past the
+        robot's command timeout, the robot stopped itself (its timeout, a protective stop),
+        or another daemon holds the lease.
+
+        The robot is braking by itself, at rates the daemon does not know: a command now would
+        jump from them. Until a state shows the robot at rest in its own stop, :meth:`tick` sends
+        nothing; then the stream starts again from the measured rates, in hold until a mode
+        message resumes (``resume = "manual"``).
+        """
+        self._fault(why)
+        self.safe = True
+        self.stream.break_off()
+
+    @property
+    def lease_taken(self) -> bool:
+        """The sim applies the commands of another lease holder."""
+        return bool(self.lease_holder) and self.lease_holder != self.lease
+
+    @property
+    def fault_active(self) -> bool:
+        """A fault holds the robot now (a safe stop, a broken stream, a lost lease), or the
+        daemon holds in ``hold`` until a mode message resumes (``resume_needed``)."""
+        return self.safe or self.stream.broken or self.lease_lost or self.resume_needed
+
+    # ------------------------------------------------------------------ one tick
+    def tick(self, now: float) -> w.Command | None:
+        """One control tick at ``now`` [s]; returns the command to send (None: nothing)."""
+        self.now = now
+        if self.state is None or not self._may_send(now):
+            return None
+        stream = self.stream
+        if not stream.anchor_on_command:  # this tick's command starts a stream (the referee's baseline)
+            stream.start = stream.seq + 1  # the seq the sender gives it
+        if (why := self.hazard(now)) is not None:
+            cmd = self._safe_stop(why)
+            if self.stages is not None:
+                self.stages.lap(WATCHDOGS)
+            return cmd
+        self._after_fault()
+        stream.cmd_state_seq = self.gate.last_seq if self.state_fresh else -1
+        if not self.state_fresh and self.cmd is not None:
+            self.state = predicted(self.model, self.dt, self.state, self.cmd)
+        self.state_fresh = False
+        if self.need_latch:
+            self._latch()
+        self._settle(now)
+        # ground-truth error of the state (the previous tick's command) against its target
+        if self.ref_valid and self.truth is not None and self.mode != w.Mode.DM_CARTESIAN:
+            x_prev = self.ref.x_d
+            self.ee_error = math.dist(self.truth.ee_true, x_prev.tolist()) if x_prev is not None else math.nan
+        else:
+            self.ee_error = math.nan
+        stages = self.stages
+        if stages is not None:
+            stages.lap(WATCHDOGS)
+        x_d, xd_d = self.smoother.step()
+        # one Reference, refilled (a new one re-validates its arrays: ~4 µs); the smoother and the
+        # orientation target return fresh float arrays of the right sizes
+        ref = self.ref = self._ref
+        ref.mode, ref.x_d, ref.xd_d, ref.direction = self.mode, x_d, xd_d, self.direction
+        if self.pose:
+            ref.quat_d, ref.omega_d = self.orient.step()
+        self.ref_valid = True
+        state = stream.anchored(self.state, self.cmd, self.state_msg)
+        if stages is not None:
+            stages.lap(RUCKIG)
+        t = time.perf_counter_ns()
+        cmd = self.ctl.step(state, self.ref)
+        self.step_ns = time.perf_counter_ns() - t
+        if stages is not None:
+            stages.lap(STEP)
+        stream.anchor_on_command = True
+        if cmd.status == w.Status.SAFE_STOP:
+            self._fault(f"controller: {cmd.reason}")
+            self.smoother.reset(cmd.x if np.isfinite(cmd.x).all() else x_d)
+            if self.pose:
+                self._latch_orientation()
+        self.cmd = cmd
+        return cmd
+
+    def _may_send(self, now: float) -> bool:
+        """Whether this tick may send at all: not while the robot stopped following the stream
+        (until a state shows it at rest in its own stop), nor while another daemon holds the lease."""
+        stream, msg = self.stream, self.state_msg
+        if not stream.broken and stream.late(now):
+            self.break_stream(f"command stream broken ({(now - stream.last_sent_t) * 1e3:.0f} ms without a "
+                              f"command: the robot stops itself)")
+        if not stream.broken and self.state_fresh and msg is not None and stream.left(msg):
+            cause = f"protective stop: {msg.protective_reason}" if msg.protective_stop else "its command timeout"
+            self.break_stream(f"the robot stopped following the commands ({cause})")
+        if self.lease_taken:
+            if not self.lease_lost:
+                self.break_stream(f"lease lost (the sim applies the commands of daemon {self.lease_holder})")
+                self.lease_lost = True
+            return False  # another daemon commands the robot: send nothing
+        self.lease_lost = False
+        if stream.broken:  # wait for a state of the robot at rest in its own stop
+            if not (self.state_fresh and msg is not None and (msg.stale_stop or msg.protective_stop)
+                    and not any(msg.v_arm) and not any(msg.wheel_speeds)):
+                return False
+            stream.broken = False
+            stream.anchor_on_command = False
+        return True
+
+    def _after_fault(self) -> None:
+        """The fault cleared: re-latch from the measured state, and hold where the robot is until
+        a mode message resumes a task; a daemon that was holding has no task to resume (an idle
+        robot's faults need no operator)."""
+        if self.safe:
+            self.safe = False
+            self.need_latch = True
+            if self.svc.watchdog.resume == "manual" and self.mode != w.Mode.HOLD:
+                self.mode, self.direction = w.Mode.HOLD, None
+                self.resume_needed = True
+
+    def _settle(self, now: float) -> None:
+        """Bring the targets to rest in hold, and when the setpoints stopped for ``setpoint_timeout``."""
+        following = self.mode in (w.Mode.TRACK, w.Mode.DM_NULLSPACE)
+        quiet = now - self.setpoints.time > self.svc.watchdog.setpoint_timeout
+        if not self.smoother.resting and following and quiet:
+            self.smoother.bring_to_rest()
+        if self.mode == w.Mode.HOLD and not self.smoother.resting:
+            self.smoother.bring_to_rest()
+        if self.pose and not self.orient.resting and (not following or quiet):
+            self.orient.bring_to_rest()
+
+    def _latch(self) -> None:
+        """Re-latch: the smoother restarts from the current EE position and velocity (and,
+        with the pose task, the orientation target from the EE's orientation)."""
+        assert self.state is not None
+        st = self.state
+        kin = self.model.kinematics(st.q_base, st.q_arm)
+        xdot = kin.J @ np.concatenate([st.wheel_speeds, st.v_arm])
+        self.smoother.reset(kin.x, xdot)
+        if self.pose:
+            self._latch_orientation()
+        self.estimator.reset()
+        self.ctl.reset()
+        self.need_latch = False
+        self.ref_valid = False
+
+    def _latch_orientation(self) -> None:
+        """The orientation target := the EE's orientation now (``model.ee_pose``), at rest."""
+        assert self.state is not None
+        _, R = self.model.ee_pose(self.state.q_base, self.state.q_arm)
+        self.orient.reset(rotation_to_quat(R))
+
+    def _safe_stop(self, why: str) -> w.Command:
+        """Brake at the acceleration limits from the last command while the robot follows the
+        stream (the state is not trusted), else from the measured rates."""
+        if not self.safe:
+            if why != self.fault_record.last:  # an event fault is recorded where it happened
+                self._fault(why)
+            self.safe = True
+        assert self.state is not None
+        last = self.cmd if self.stream.anchor_on_command else None  # else the robot does not execute it
+        base = w.RobotState(
+            q_base=self.state.q_base, q_arm=self.state.q_arm,
+            v_arm=last.arm_rates if last is not None else self.state.v_arm,
+            wheel_speeds=last.wheel_speeds if last is not None else self.state.wheel_speeds)
+        cmd = self.ctl.safe_stop(base, why)
+        self.cmd = cmd
+        self.stream.anchor_on_command = True
+        return cmd
+
+    # ------------------------------------------------------------------ reports
+    def collision_on(self) -> bool:
+        """The controller has collision rows (the status's and the info's ``collision``)."""
+        return self.ctl.collision_on
+
+    def collision_summary(self) -> str:
+        """One line: whether the controller has collision rows, and what they keep apart."""
+        return self.ctl.collision_summary()
+
+    def orientation_error(self) -> float:
+        """[rad] the EE's orientation error to its target (:func:`~.reports.orientation_error`)."""
+        return reports.orientation_error(self)
+
+    def status(self, loop: LoopTiming, rejected: Counter[str], accepted: dict[str, int]) -> StatusMsg:
+        """The status message (:func:`~.reports.status`)."""
+        return reports.status(self, loop, rejected, accepted)
+
+    def info(self, loop: LoopTiming, rejected: Counter[str], accepted: dict[str, int]) -> InfoMsg:
+        """The ``info`` reply (:func:`~.reports.info`)."""
+        return reports.info(self, loop, rejected, accepted)
+
+    def config_dict(self) -> dict[str, Any]:
+        """The running configuration as plain data (:func:`~.reports.config_dict`)."""
+        return reports.config_dict(self)
+
+    # ------------------------------------------------------------------ the parts, by their old names
+    instance = Forward[str]("gate", "instance")  # the latched robot instance ("" before the first state)
+    last_fault = Forward[str]("fault_record", "last")
+    faults = Forward[Counter[str]]("fault_record", "counts")  # by kind (the status's faults)
+    seq = Forward[int]("stream", "seq", writable=True)  # the last command's; the sender numbers the next seq + 1
+    stream_start = Forward[int]("stream", "start")
+    stream_broken = Forward[bool]("stream", "broken")
+    cmd_state_seq = Forward[int]("stream", "cmd_state_seq")
+    round_trip = Forward[float]("stream", "round_trip")  # [s]
+    latency = Forward[float]("stream", "latency")  # [s] bounds (13)'s margin now
+    follow_state_age = Forward[bool]("stream", "follow_state_age", writable=True)
+    operator = Forward[str]("setpoints", "operator")
+    operator_conflicts = Forward[int]("setpoints", "operator_conflicts")
+    orientation_ignored = Forward[int]("setpoints", "orientation_ignored")
+
+    def sent(self, seq: int, now: float) -> None:
+        """Command ``seq`` was published at ``now`` [s] (:meth:`.CommandStream.sent`)."""
+        self.stream.sent(seq, now)
+
+    def late(self, now: float) -> bool:
+        """More than the robot's command timeout since the last command was published."""
+        return self.stream.late(now)
+
+    def _reset_age(self) -> None:
+        self.stream.reset_age()
