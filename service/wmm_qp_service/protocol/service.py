@@ -1,196 +1,16 @@
-"""Typed, versioned wire messages (msgspec Structs, msgpack-encoded).
-
-Every message is a msgpack map with ``type`` (the schema's tag), ``v`` (protocol version),
-``robot`` (the robot id), ``seq`` (sender's counter) and ``stamp`` ([s], sender's
-``time.time()``), plus its own fields. On receipt all five are required (a message that lacks
-one is rejected, ``schema``), although the Python constructors fill ``type`` and ``v``.
-Vectors are lists of floats whose lengths are the robot's (its description's joints and wheels,
-or 3 for task-space vectors), checked on receipt by :mod:`wmm_qp_service.validation`. Joint
-vectors are in the robot description's joint order (``RobotConfig.arm.joints``), wheel vectors
-in its base kind's wheel order (``WmmModel.base.wheel_names``); the daemon's ``info`` reply names
-both. Units are SI, angles rad (a prismatic joint's values are m, m/s). See docs/protocol.md.
-"""
+"""The daemon's service messages: what clients send it (``setpoint``, ``obstacles``, ``mode``) and
+what it tells them (``status``, ``telemetry``, the ``info`` reply)."""
 
 from __future__ import annotations
 
-from typing import Any, TypeVar
+from typing import Any
 
 import msgspec
 
-PROTOCOL_VERSION = 3
-"""Bumped on any incompatible change of a schema below (2: the sim instance, the control lease,
-the setpoint's source and the command's period and state seq are required fields; 3: the state
-holds only what a real robot reports, the sim's evaluation data moved to :class:`TruthMsg`). Optional
-fields with a default may be added within a version (2 gained the setpoint's ``q`` and ``w``,
-the status's ``quat_d``, ``orientation_ignored``, ``fault_active``, ``last_fault_age`` and
-``orientation_error``, and the info reply's robot description)."""
+from .wire import Msg
 
 
-class _Msg(msgspec.Struct, kw_only=True, forbid_unknown_fields=True, tag_field="type"):
-    v: int = PROTOCOL_VERSION
-    robot: str
-    seq: int = 0
-    stamp: float = 0.0
-
-
-class Header(msgspec.Struct, forbid_unknown_fields=False):
-    """The fields every message has (checked for presence on receipt, and used to explain a
-    rejected message)."""
-
-    type: str | None = None
-    v: int | None = None
-    robot: str | None = None
-    seq: int | None = None
-    stamp: float | None = None
-
-
-class StateMsg(_Msg, tag="state", kw_only=True):
-    """robot → daemon: what the robot measures and its firmware reports (at the robot's rate).
-
-    Only what a real robot reports: the sim's evaluation data (ground truth, the box, the
-    referee) is in :class:`TruthMsg`, which nothing on the control path needs.
-
-    Attributes:
-        t: [s] robot time.
-        q_base: [m, m, rad] base pose from odometry (what a controller may use).
-        q_arm: [rad or m] n_arm joint values (the robot description's joint order).
-        v_arm: [rad/s or m/s] n_arm executed joint rates.
-        wheel_speeds: [rad/s] n_wheels executed wheel speeds (the base kind's wheel order).
-        tau: [N·m or N] n_arm measured joint torques (the sim: from its contact model).
-        gripper_width: [m] the gripper's opening (nan: no gripper).
-        stale_stop: the firmware is braking because commands went stale.
-        cmd_seq: seq of the last command the robot applied (-1: none).
-        instance: this robot process's identity (random, fixed for its life): the daemon
-            latches it and treats states of another instance as a second source (a fault).
-        lease: the control lease holder whose commands the robot applies ("" = none).
-        protective_stop: the robot's firmware is braking (a refused command or a motion that
-            could not stop before a limit), or holds it at rest until a new command stream.
-        protective_stops: protective stops since the robot process started.
-        protective_reason: why the last one started.
-        refused: commands not applied, by reason (``lease``, ``instance``, ``firmware``,
-            and the validation reasons).
-
-    ``seq`` is the robot's step counter: consecutive states of one instance have consecutive seq.
-    """
-
-    t: float
-    q_base: list[float]
-    q_arm: list[float]
-    v_arm: list[float]
-    wheel_speeds: list[float]
-    tau: list[float]
-    gripper_width: float = float("nan")
-    stale_stop: bool = False
-    cmd_seq: int = -1
-    instance: str
-    lease: str = ""
-    protective_stop: bool = False
-    protective_stops: int = 0
-    protective_reason: str = ""
-    refused: dict[str, int] = msgspec.field(default_factory=dict)
-
-
-class TruthMsg(_Msg, tag="truth", kw_only=True):
-    """sim (or a driver's referee) → observers: evaluation data no controller may use.
-
-    Published on ``<robot>/sim/truth`` with each state; the daemon runs the same without it
-    (its telemetry's ``ee_error`` is then nan and its status's ``sim_violations`` empty).
-
-    Attributes:
-        t: [s] robot time of the state this truth belongs to.
-        instance: the publishing robot process's instance (as its states').
-        state_seq: seq of the state published with it.
-        base_true: [m, m, rad] ground-truth base pose (nan: unknown, e.g. a real robot).
-        ee_true: [m] ground-truth EE position ("motion capture"; nan: unknown).
-        contact_force: [N] 3 EE contact force of the sim's contact model (nan: unknown).
-        box_position: [m] box position along the push axis (nan: no box).
-        stalled_joint: the joint (0-based) that stalled the push this step (-1: none).
-        violations: limit-referee counts by kind.
-    """
-
-    t: float
-    instance: str
-    state_seq: int
-    base_true: list[float]
-    ee_true: list[float]
-    contact_force: list[float]
-    box_position: float = float("nan")
-    stalled_joint: int = -1
-    violations: dict[str, int] = msgspec.field(default_factory=dict)
-
-
-class CommandMsg(_Msg, tag="cmd", kw_only=True):
-    """daemon → sim: one tick's command, held by the sim until the next.
-
-    Attributes:
-        wheel_speeds: [rad/s] n_wheels wheel speeds (the base kind's wheel order).
-        arm_rates: [rad/s or m/s] n_arm joint rates (the robot description's joint order).
-        status: controller status (ok, saturated, damped, safe_stop).
-        lease: the sender's control lease id (the sim applies commands of the holder only).
-        instance: the sim instance the command is for (the daemon's latched one).
-        period: [s] the control period Δt the command's bounds (13) assume; the sim's referee
-            judges the change from the previous command over it.
-        state_seq: seq of the state the command was computed from (-1: a predicted state).
-        stream: the seq of the first command of the stream this one continues: a new value
-            says the sender started again from the robot's measured rates (the referee then
-            judges it against what the robot executes, else against the previous command).
-    """
-
-    wheel_speeds: list[float]
-    arm_rates: list[float]
-    status: str = "ok"
-    lease: str
-    instance: str
-    period: float
-    state_seq: int = -1
-    stream: int
-
-
-class BoxMsg(_Msg, tag="box"):
-    """client → sim: place a box in the scene now (between two sim steps), pushed along +x.
-
-    Attributes:
-        mass: [kg] box mass.
-        mu: [-] Coulomb friction coefficient box/floor.
-        face_x: [m] world x of the face the EE pushes on.
-        center_y: [m] world y of the face's centre.
-        width: [m] face extent along y.
-        height: [m] face extent along z (from the floor).
-    """
-
-    mass: float
-    mu: float
-    face_x: float
-    center_y: float
-    width: float = 0.4
-    height: float = 0.6
-
-
-GRIPPER_ACTIONS = ("open", "close", "move", "grasp")
-"""The gripper commands: ``open`` and ``close`` (to the gripper's full and zero width at
-``speed``), ``move`` (to ``width`` at ``speed``), ``grasp`` (close to ``width`` at ``speed``,
-holding with ``force``)."""
-
-
-class GripperMsg(_Msg, tag="gripper", kw_only=True):
-    """client → robot: one gripper command, applied at once (a new one replaces a running one).
-
-    Attributes:
-        action: one of :data:`GRIPPER_ACTIONS`.
-        width: [m] the target opening (``move``, ``grasp``; ignored by ``open``/``close``).
-        speed: [m/s] the fingers' speed (the robot clamps it to its ``[gripper] speed_max``).
-        force: [N] the grasp force (``grasp``; clamped to ``[gripper] force_max``).
-        source: the sender's id.
-    """
-
-    action: str
-    width: float = 0.0
-    speed: float = 0.05
-    force: float = 0.0
-    source: str
-
-
-class SetpointMsg(_Msg, tag="setpoint", kw_only=True):
+class SetpointMsg(Msg, tag="setpoint", kw_only=True):
     """client → daemon: an EE target (world frame).
 
     Attributes:
@@ -212,7 +32,7 @@ class SetpointMsg(_Msg, tag="setpoint", kw_only=True):
     w: list[float] | None = None
 
 
-class ObstaclesMsg(_Msg, tag="obstacles", kw_only=True):
+class ObstaclesMsg(Msg, tag="obstacles", kw_only=True):
     """client (perception, an operator) → daemon and sim: the live obstacles, world frame.
 
     Each message replaces the previous live set as a whole (the scene file's obstacles stay); an
@@ -231,7 +51,7 @@ class ObstaclesMsg(_Msg, tag="obstacles", kw_only=True):
     obstacles: list[dict[str, Any]]
 
 
-class ModeMsg(_Msg, tag="mode"):
+class ModeMsg(Msg, tag="mode"):
     """client → daemon: change the mode.
 
     Attributes:
@@ -271,7 +91,7 @@ class LoopStats(msgspec.Struct, kw_only=True):
     overruns: int = 0
 
 
-class StatusMsg(_Msg, tag="status"):
+class StatusMsg(Msg, tag="status"):
     """daemon → all: what the daemon is doing (~10 Hz, and on the ``info`` query).
 
     Attributes:
@@ -360,7 +180,7 @@ class StatusMsg(_Msg, tag="status"):
     collision_summary: str = ""
 
 
-class TelemetryMsg(_Msg, tag="telemetry"):
+class TelemetryMsg(Msg, tag="telemetry"):
     """daemon → all: one tick (every ``loop.telemetry_every`` ticks).
 
     Attributes:
@@ -402,7 +222,7 @@ class TelemetryMsg(_Msg, tag="telemetry"):
     cmd_stamp: float = float("nan")
 
 
-class InfoMsg(_Msg, tag="info"):
+class InfoMsg(Msg, tag="info"):
     """Reply of the ``info`` queryable: status, the robot the daemon drives, the running configuration.
 
     Attributes:
@@ -428,23 +248,3 @@ class InfoMsg(_Msg, tag="info"):
     n_wheels: int = -1
     collision: bool = False
     collision_summary: str = ""
-
-
-_ENC = msgspec.msgpack.Encoder()
-
-T = TypeVar("T", bound=msgspec.Struct)
-
-
-def encode(msg: msgspec.Struct) -> bytes:
-    """msgpack bytes of a message."""
-    return _ENC.encode(msg)
-
-
-def decoder(cls: type[T]) -> msgspec.msgpack.Decoder[T]:
-    """A reusable strict decoder for one message type."""
-    return msgspec.msgpack.Decoder(cls)
-
-
-def decode(cls: type[T], data: bytes) -> T:
-    """Decode one message of a known type (raises :class:`msgspec.DecodeError`)."""
-    return msgspec.msgpack.decode(data, type=cls)
