@@ -4,7 +4,7 @@ The cycle (:class:`~.cycle.Cycle`) reads and writes only through a :class:`Robot
 service's other traffic (setpoints, modes, status, the lease …) never goes through it. Today's
 link is Zenoh (:class:`ZenohRobotLink`: ``<robot>/state`` in, ``<robot>/cmd`` out); a robot
 side that hosts the core in its own process hands the state and takes the command in memory
-through another implementation of the same four members.
+through another implementation of the same protocol.
 """
 
 from __future__ import annotations
