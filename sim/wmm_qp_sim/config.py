@@ -104,6 +104,10 @@ class PhysicsConfig:
         tracking_error: [rad/s or m/s] a joint further than this from its commanded rate could
             not follow (counted in ``SimState.physics["tracking"]``).
         armature: [kg·m²] rotor inertia added to every arm joint (a real drive's gearbox).
+        limit_margin: [rad or m] the drives' own position limits sit this far inside the robot
+            file's: each servo's target rate is capped at the rate that reaches its line in one
+            step, so a joint the controller stops at its limit is held there under loads its
+            servo alone would yield to (a velocity servo's error is load / gain).
         ee_tip_radius: [m] the sphere at the task point that touches the push box.
         g: [m/s²] gravity.
     """
@@ -115,6 +119,7 @@ class PhysicsConfig:
     servo_error: float = 0.05
     tracking_error: float = 0.1
     armature: float = 0.01
+    limit_margin: float = 1e-5
     ee_tip_radius: float = 0.02
     g: float = 9.81
 
@@ -234,7 +239,7 @@ def _physics(path: Path, r: TomlTable) -> PhysicsConfig:
     """The ``[physics]`` table (absent: the defaults)."""
     p = r.table("physics", required=False)
     p.unknown({"plant", "mu_wheel", "base_mass", "base_time_constant", "servo_error", "tracking_error", "armature",
-               "ee_tip_radius", "g"})
+               "limit_margin", "ee_tip_radius", "g"})
     d = PhysicsConfig()
     plant = p.get("plant", d.plant)
     if plant not in PLANTS:
@@ -247,6 +252,7 @@ def _physics(path: Path, r: TomlTable) -> PhysicsConfig:
         servo_error=p.number("servo_error", d.servo_error, positive=True),
         tracking_error=p.number("tracking_error", d.tracking_error, positive=True),
         armature=p.number("armature", d.armature, lo=0.0),
+        limit_margin=p.number("limit_margin", d.limit_margin, lo=0.0),
         ee_tip_radius=p.number("ee_tip_radius", d.ee_tip_radius, positive=True),
         g=p.number("g", d.g, positive=True),
     )

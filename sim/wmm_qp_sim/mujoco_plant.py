@@ -10,6 +10,15 @@ The model is built from the robot description (:mod:`.mujoco_model`). Each step:
   total a joint exerts never exceeds ``torque_limit``. A joint that needs more (a heavy push, a
   load it cannot hold) does not follow: it is reported at its torque limit (``stalled_joint``)
   and, once its rate is ``tracking_error`` off the command, as not following (``lagging_joint``).
+- **The drives' position limits**: a velocity servo's rate is off its target by the load it does
+  not carry over its gain (the arm's other joints accelerating load it through the inertia; a
+  push); commanded 0 at a limit, such a joint drifts on into it, and bounds (13), 0 at a limit,
+  never pull it back. Each drive therefore caps its servo's target rate at
+  (q_max − m − q)/Δt above and (q_min + m − q)/Δt below (m = ``limit_margin``, Δt the step), the
+  rate that reaches its own limit in one step, as a drive's firmware limit does: a joint held at
+  its limit stays within m of the robot file's limit, and one past the drive's line is pulled back.
+  (The cap also holds a joint a command would carry past its limit: the kinematic plant, which
+  executes every command as it is, shows such a controller to the referee.)
 - **Base** (wheel level): the written wheel speeds give the commanded world twist P(ψ)·w
   (eq. (3)), integrated into the pose the wheels roll the base to, p_w. Rolling wheels tie the base
   to p_w: a force servo F = K_p·(p_w − p) + K_v·(P(ψ)·w − ṗ) (K_p = m·ω², K_v = 2·m·ω,
@@ -59,6 +68,9 @@ class MujocoPlant:
         self.physics = physics
         self.n_arm, self.n_wheels = model.n_arm, model.n_wheels
         self.torque_limit = np.array(model.config.arm.torque_limit, dtype=float)
+        arm = model.config.arm
+        self.q_min = np.array(arm.position_lower, dtype=float) + physics.limit_margin  # [rad or m] the drives' limits
+        self.q_max = np.array(arm.position_upper, dtype=float) - physics.limit_margin
         self.robot: MujocoRobot = compile_robot(build_spec(model, physics, dt, None, obstacles), model)
         self.data = mujoco.MjData(self.robot.model)
         self.box: Box | None = None
@@ -130,7 +142,8 @@ class MujocoPlant:
         self.cmd_arm = np.array(arm_rates, dtype=float)
 
     def advance(self, dt: float) -> None:
-        """One physics step of dt [s]: gravity compensation, servos, the wheels' traction."""
+        """One physics step of dt [s]: gravity compensation, servos (capped at the drives' position
+        limits), the wheels' traction."""
         r, d = self.robot, self.data
         m = r.model
         if m.opt.timestep != dt:
@@ -141,7 +154,8 @@ class MujocoPlant:
         d.qfrc_applied[r.arm_dof] = g
         m.actuator_forcerange[:, 0] = -lim - g
         m.actuator_forcerange[:, 1] = lim - g
-        d.ctrl[:] = self.cmd_arm
+        q = d.qpos[r.arm_qpos]  # the drives' limits: the rate that reaches each one in this step, at most
+        d.ctrl[:] = np.minimum(np.maximum(self.cmd_arm, (self.q_min - q) / dt), (self.q_max - q) / dt)
         if r.base_dof.size:
             d.qfrc_applied[r.base_dof] = self._traction(d.qpos[r.base_qpos], d.qvel[r.base_dof], dt)
         mujoco.mj_step2(m, d)
