@@ -21,7 +21,8 @@ pytest.importorskip("mujoco", reason="the physics plant needs mujoco: pip instal
 
 def test_a_short_circle_in_physics_has_no_acceleration_violation() -> None:
     # the MuJoCo servos lag the command: bounds (13) centred on the measured rates let two
-    # consecutive commands differ by more than A·dt (4 s of the circle: 4 counts without the anchor)
+    # consecutive commands differ by more than A·dt (4 s of the circle: 4 counts, when the state
+    # carried the measured rates and the runner did not anchor on the last command)
     tr = circle.run_circle(make_setup("qp", physics="mujoco"), 4.0, progress=False)
     assert tr.sim is not None and tr.sim.config.physics.plant == "mujoco"
     assert tr.violations["acceleration"] == 0

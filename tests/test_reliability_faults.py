@@ -193,3 +193,39 @@ def test_a_hung_peer_is_noticed_and_the_stack_resumes(probe: object, peer: str) 
     assert "liveliness_s" in r and "resume_s" in r  # the lease expired, and it came back
     assert ("safe_s" in r) if peer == "sim" else ("sim_stop_s" in r)
     assert sum(r["violations"].values()) == 0
+
+
+@pytest.mark.integration
+@pytest.mark.slow
+def test_a_daemon_stalled_past_the_command_timeout_resumes_on_the_physics_plant(tmp_path: Path) -> None:
+    """The stall breaks the command stream; the daemon resumes once a state shows the robot at rest
+    in its stale stop, rates exactly 0: the sim reports its executed rates, not the physics' measured
+    ones (never exactly 0: the daemon waited for ever, and `demo` said the stack did not come up)."""
+    pytest.importorskip("mujoco", reason="the physics plant needs mujoco: pip install 'wmm-qp[physics]'")
+    import signal
+    import time
+
+    from wmm_qp_service.faults import Probe
+    from wmm_qp_service.processes import Stack, isolated_config
+
+    stack = Stack(isolated_config(), rate_hz=RATE, log_dir=tmp_path, extra_sim_args=["--physics", "mujoco"])
+    p = None
+    try:
+        stack.start()
+        p = Probe(stack)
+        info = p.ready(timeout=90.0)
+        p.client.set_mode("track")
+        p.move(np.array(info.status.x), 1.0)
+        t0 = time.time()
+        stack.procs["daemon"].send_signal(signal.SIGSTOP)
+        p.until(lambda: p.first_state(lambda s: s.stale_stop, t0), timeout=10.0)  # the robot stopped itself
+        stack.procs["daemon"].send_signal(signal.SIGCONT)
+        i = p.until(lambda: (i := p.client.info()) is not None and i.status.state_ok and i.status.faults.get(
+            "command stream broken", 0) > 0 and i, timeout=20.0)
+        assert not i.status.safe_stop
+        assert sum(p.violations().values()) == 0
+    finally:
+        if p is not None:
+            p.close()
+        codes = stack.stop()
+    assert codes == {"sim": 0, "daemon": 0}

@@ -285,6 +285,32 @@ def test_wmm_qp_sim_physics_flag_chooses_the_plant(monkeypatch: pytest.MonkeyPat
     assert plants == ["mujoco", load_sim_config().physics.plant]
 
 
+def test_the_state_reports_the_executed_rates_exactly_0_at_rest_after_a_stop() -> None:
+    """A daemon whose stream broke waits for a state of the robot at rest in its stop, rates exactly
+    0 (docs/drivers.md); the physics plant's measured rates never are, so the state carries the
+    executed ones, as a real robot's does."""
+    from wmm_qp_service.config import ServiceConfig
+    from wmm_qp_service.drivers.sim_node import SimNode
+
+    m = model("tiago.toml")
+    sim = SimRobot(m, PHYSICS.with_(firmware=True), ramp=True, collisions=False)  # as `wmm-qp sim` runs it
+    node = SimNode(ServiceConfig(), PHYSICS, m.config, sim=sim)
+    moving = SimCommand(m.base.wheel_speeds(np.array([0.1, 0.0, 0.1])), np.full(m.n_arm, 0.05))
+    for _ in range(200):
+        st = sim.step(moving, DT)
+    for _ in range(500):  # no command: the stale stop brakes the robot to rest
+        st = sim.step(None, DT)
+    assert st.stale_stop
+    measured = sim.plant.read()
+    assert np.any(measured.v_arm) and np.any(measured.wheel_speeds)  # the physics never rests exactly
+    msg = node.state_msg(st, 1)
+    assert not np.any(msg.v_arm) and not np.any(msg.wheel_speeds)
+    rs = sim.robot_state()
+    assert not np.any(rs.v_arm) and not np.any(rs.wheel_speeds)
+    st = sim.step(moving, DT)  # a new command: the executed rates are the drives' (ramped) ones
+    np.testing.assert_allclose(st.v_arm, np.minimum(0.05, np.asarray(m.config.arm.acceleration_max) * DT))
+
+
 def test_the_zenoh_node_drives_the_robot_it_is_given() -> None:
     from wmm_qp_service.config import ServiceConfig
     from wmm_qp_service.drivers.sim_node import SimNode

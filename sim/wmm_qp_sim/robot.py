@@ -7,7 +7,10 @@ default, a kinematic robot that executes the rates as they are), advances it, re
 integrates the odometry (the base kind's nominal model, eq. (3), from the measured wheel speeds)
 and counts every limit violation (:mod:`.referee`, :mod:`.collision`): the referee, not the
 plant, judges whether the commands were legal. It never raises from ``step``: a malformed command
-is ignored (counted in ``SimState.rejected_commands``) and the held command goes on.
+is ignored (counted in ``SimState.rejected_commands``) and the held command goes on. Its state
+reports the measured joint positions and the **executed** rates, the ones it wrote to the drives
+(exactly 0 at rest), as a real robot's state does: a controller starts a new stream from them and,
+after a stop, waits for them to be 0; a physics plant's measured rates never are.
 
 Stale commands: when no new command has arrived for ``config.stale_timeout`` seconds, the
 firmware brakes every joint and wheel to rest by itself at its acceleration limit
@@ -337,8 +340,8 @@ class SimRobot:
         return SimState(
             t=self.t,
             q_arm=self.q_arm.copy(),
-            v_arm=self._ps.v_arm.copy(),
-            wheel_speeds=self._ps.wheel_speeds.copy(),
+            v_arm=self.v_arm.copy(),
+            wheel_speeds=self.wheels.copy(),
             base_odom=self.base_odom.copy(),
             base_true=self.base_true.copy(),
             ee_true=self.model.ee_position(self.base_true, self.q_arm),
@@ -360,10 +363,11 @@ class SimRobot:
         )
 
     def robot_state(self) -> wmm_qp.RobotState:
-        """What a controller sees: odometry base pose, measured joint angles and rates."""
+        """What a controller sees: odometry base pose, measured joint angles, executed rates
+        (the state a real robot reports, docs/drivers.md)."""
         return wmm_qp.RobotState(
             q_base=self.base_odom.copy(),
             q_arm=self.q_arm.copy(),
-            v_arm=self._ps.v_arm.copy(),
-            wheel_speeds=self._ps.wheel_speeds.copy(),
+            v_arm=self.v_arm.copy(),
+            wheel_speeds=self.wheels.copy(),
         )

@@ -14,9 +14,12 @@ class SimState:
     Attributes:
         t: [s] sim time since reset.
         q_arm: [rad] measured joint angles.
-        v_arm: [rad/s] measured joint rates (the kinematic plant's: the executed ones).
-        wheel_speeds: [rad/s] measured wheel speeds (the kinematic plant's: the executed ones; a
-            physics plant's: those of the base's achieved twist).
+        v_arm: [rad/s] executed joint rates: what the drives run (the firmware's ramp and stops
+            applied), exactly 0 at rest, as a real robot's state reports them (docs/drivers.md).
+            The kinematic plant measures the same; a physics plant's measured rates lag them
+            and are never exactly 0 (:class:`~.plant.PlantState`).
+        wheel_speeds: [rad/s] executed wheel speeds, the same way (the odometry integrates the
+            measured ones: a physics plant's are those of the base's achieved twist).
         base_odom: [m, m, rad] base pose integrated from the wheel speeds with the nominal model.
         base_true: [m, m, rad] true base pose (with slip and drift).
         ee_true: [m] true EE position (world), the "motion capture".

@@ -291,10 +291,11 @@ def anchored(state: wmm_qp.RobotState, last: wmm_qp.Command | None) -> wmm_qp.Ro
     The acceleration bounds of (13) are q̇_prev ± A·Δt around what the robot executes next: the
     last command (the referee judges each command against the previous one). A physics plant's
     measured rates lag the command (its servos have an error, its wheels slip), so bounds
-    centred on them let two consecutive commands differ by more than A·Δt. The kinematic plant
-    executes each command exactly, so there the two are the same numbers. The daemon does the
-    same while the robot follows its stream (``ControlCore._anchored``); in process the firmware
-    is off and the robot always follows.
+    centred on them let two consecutive commands differ by more than A·Δt. The sim's state
+    reports the executed rates (:meth:`~wmm_qp_sim.SimRobot.robot_state`), which in process
+    (firmware off, no ramp) are the last command itself: the anchor makes that explicit rather
+    than a property of the sim. The daemon does the same while the robot follows its stream
+    (``ControlCore._anchored``); in process the firmware is off and the robot always follows.
 
     Args:
         state: what the sim measured (its pose is kept).
