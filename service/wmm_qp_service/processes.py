@@ -120,6 +120,19 @@ class Stack:
         self.start_daemon()
         return self
 
+    def exited(self) -> str | None:
+        """The first started process that has ended, with its exit status and the last line of its
+        log (None: every one runs)."""
+        for name, p in self.procs.items():
+            if (code := p.poll()) is None:
+                continue
+            last = ""
+            if self.log_dir is not None and (log := self.log_dir / f"{name}.log").is_file():
+                lines = log.read_text(errors="replace").strip().splitlines()
+                last = lines[-1].strip() if lines else ""
+            return f"the {name} exited with status {code}" + (f" ({name}.log: {last})" if last else "")
+        return None
+
     def kill(self, name: str, sig: int = signal.SIGKILL) -> None:
         """Send a signal to one process and, for SIGKILL, reap it."""
         p = self.procs.get(name)

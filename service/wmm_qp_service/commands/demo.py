@@ -94,10 +94,13 @@ def run(args: argparse.Namespace) -> int:
                   scene_file=scene.path if args.scene is not None else None,
                   extra_daemon_args=daemon_args, extra_sim_args=["--physics", plant])
     from ..bench.machine import CPU_HOW, CpuMeter
+    from ..readiness import NotReady
 
     meters: list[CpuMeter] = []  # started when the stack is up (start-up is not the loop's CPU)
     cpu: dict[str, float | None] = {}
     bar = ProgressLine("demo")
+    summary: dict[str, Any] | None = None
+    not_up = ""
     try:
         if args.driver is not None:
             bar.update(f"starting the {args.driver} driver for {args.robot_ip} and the daemon (logs: {log_dir})")
@@ -106,17 +109,21 @@ def run(args: argparse.Namespace) -> int:
         else:
             bar.update(f"starting the sim and the daemon (logs: {log_dir})")
             stack.start()
-        summary = _drive(svc, args.duration, bar,
-                         on_ready=lambda: meters.append(CpuMeter({n: p.pid for n, p in stack.procs.items()})))
+        try:
+            summary = _drive(svc, args.duration, bar, exited=stack.exited,
+                             on_ready=lambda: meters.append(CpuMeter({n: p.pid for n, p in stack.procs.items()})))
+        except NotReady as err:
+            not_up = str(err)
         if meters:
             cpu = meters[0].shares()
     finally:
         bar.update("stopping the sim and the daemon")
         codes = stack.stop()
     bar.close()
-    failures = _process_failures(codes)
+    failures = [f for f in _process_failures(codes) if f not in not_up]  # said once
     if summary is None:
-        verdict = judge({}, failures=["the daemon or the sim did not come up", *failures], logs=log_dir)
+        why = f"the stack did not come up: {not_up}" if not_up else "the daemon stopped answering"
+        verdict = judge({}, failures=[why, *failures], logs=log_dir)
         _say_verdict(verdict, args.json, {"logs": str(log_dir), "exit_codes": codes})
         return verdict.exit_code
     verdict = judge(summary["violations"], failures=failures,
@@ -193,23 +200,23 @@ class _Operator:
     quiet_until = 0.0  # [s, wall] statuses stamped before this predate the last mode message
 
 
-def _drive(svc: Any, duration: float, bar: ProgressLine,
+def _drive(svc: Any, duration: float, bar: ProgressLine, exited: Any = lambda: None,
            on_ready: Any = None) -> dict[str, Any] | None:
+    """The scenario against a started stack (None: the daemon stopped answering at the end).
+
+    Raises:
+        NotReady: the stack did not come up (:func:`~..readiness.wait_ready`; ``exited`` names a
+            started process that ended).
+    """
     import numpy as np
 
     from ..client import Client
+    from ..readiness import wait_ready
     from ..teleop import hold_stream, stream_circle, stream_haptic, wait
 
     scale = duration / sum(d for _, d in PHASES)
     with Client(svc, name="demo", telemetry=True) as c:
-        bar.update("waiting for the daemon (a first start compiles its kernels)")
-        info = c.wait_for_daemon(90.0)  # a fresh install compiles its kernels at first start
-        end = time.monotonic() + 30.0
-        while info is not None and not info.status.state_ok and time.monotonic() < end:
-            time.sleep(0.1)
-            info = c.info()
-        if info is None or not info.status.state_ok:
-            return None
+        info = wait_ready(c, exited, say=bar.update)
         if on_ready is not None:
             on_ready()
         ee_err: list[float] = []

@@ -55,6 +55,7 @@ def run(args: argparse.Namespace) -> int:
     from ..bench.machine import CPU_HOW, CpuMeter
     from ..client import Client
     from ..processes import Stack, isolated_config, log_folder
+    from ..readiness import NotReady, wait_ready
     from ..teleop import stream_circle, stream_haptic
 
     robot = load_robot(args)  # a bad file: one line, exit 2, before anything starts
@@ -72,14 +73,10 @@ def run(args: argparse.Namespace) -> int:
         bar.update(f"starting the sim and the daemon (logs: {log_dir})")
         stack.start()
         with Client(svc, name="soak") as c:
-            bar.update("waiting for the daemon (a first start compiles its kernels)")
-            info = c.wait_for_daemon(90.0)
-            end = time.monotonic() + 30.0
-            while (info is None or not info.status.state_ok) and time.monotonic() < end:
-                time.sleep(0.1)
-                info = c.info()
-            if info is None or not info.status.state_ok:
-                return _no_stack(out, stack, log_dir, args.json)
+            try:
+                info = wait_ready(c, stack.exited, say=bar.update)
+            except NotReady as e:
+                return _no_stack(out, stack, log_dir, args.json, f"the stack did not come up: {e}")
             up = True
 
             def tick() -> None:
