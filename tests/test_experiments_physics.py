@@ -71,6 +71,25 @@ def test_the_demo_in_physics_has_no_violation() -> None:
     assert d["physics"] == "mujoco" and d["violations_total"] == 0 and d["verdict"] == "PASS"
 
 
+@pytest.mark.integration
+@pytest.mark.slow
+def test_the_demo_in_physics_on_a_robot_file_the_suite_writes(tmp_path: Path) -> None:
+    """A robot no file in the repository describes (the Gen3 on a differential drive, written
+    here): its MuJoCo model is built from the file, the demo runs with the collision rows on (the
+    default) and the referee counts nothing."""
+    from service_robots import gen3_file
+
+    robot = gen3_file(tmp_path, base="diff_drive", name="gen3_diff_suite")
+    out = subprocess.run([sys.executable, "-m", "wmm_qp_service.cli", "demo", "--duration", "6", "--physics",
+                          "mujoco", "--robot-config", str(robot), "--json", "--logs", str(tmp_path / "logs")],
+                         capture_output=True, text=True, timeout=180, check=False)
+    assert out.returncode == 0, out.stderr[-2000:]
+    d = json.loads(out.stdout)
+    assert d["physics"] == "mujoco" and d["robot"]["name"] == "gen3_diff_suite" and d["collision"]
+    assert d["violations_total"] == 0 and d["verdict"] == "PASS"
+    assert d["loop"]["ticks"] > 0 and d["ee_error_max"] is not None
+
+
 def test_max_mass_bisects_to_the_threshold_of_each_run(monkeypatch: pytest.MonkeyPatch) -> None:
     from wmm_qp_service.experiments import max_mass
 
