@@ -197,18 +197,15 @@ def _drive(svc: Any, duration: float, bar: ProgressLine,
            on_ready: Any = None) -> dict[str, Any] | None:
     import numpy as np
 
-    from ..client import Client
+    from ..client import Client, NotReady
     from ..teleop import hold_stream, stream_circle, stream_haptic, wait
 
     scale = duration / sum(d for _, d in PHASES)
     with Client(svc, name="demo", telemetry=True) as c:
         bar.update("waiting for the daemon (a first start compiles its kernels)")
-        info = c.wait_for_daemon(90.0)  # a fresh install compiles its kernels at first start
-        end = time.monotonic() + 30.0
-        while info is not None and not info.status.state_ok and time.monotonic() < end:
-            time.sleep(0.1)
-            info = c.info()
-        if info is None or not info.status.state_ok:
+        try:
+            info = c.wait_ready(90.0, state_timeout=30.0)  # a fresh install compiles its kernels at first start
+        except NotReady:
             return None
         if on_ready is not None:
             on_ready()

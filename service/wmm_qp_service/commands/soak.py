@@ -53,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from ..bench.machine import CPU_HOW, CpuMeter
-    from ..client import Client
+    from ..client import Client, NotReady
     from ..processes import Stack, isolated_config, log_folder
     from ..teleop import stream_circle, stream_haptic
 
@@ -73,12 +73,9 @@ def run(args: argparse.Namespace) -> int:
         stack.start()
         with Client(svc, name="soak") as c:
             bar.update("waiting for the daemon (a first start compiles its kernels)")
-            info = c.wait_for_daemon(90.0)
-            end = time.monotonic() + 30.0
-            while (info is None or not info.status.state_ok) and time.monotonic() < end:
-                time.sleep(0.1)
-                info = c.info()
-            if info is None or not info.status.state_ok:
+            try:
+                info = c.wait_ready(90.0, state_timeout=30.0)
+            except NotReady:
                 return _no_stack(out, stack, log_dir, args.json)
             up = True
 
