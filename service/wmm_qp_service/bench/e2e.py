@@ -98,7 +98,7 @@ def run_case(
     Returns:
         The figures of the module docstring, plus the load average, exit codes and faults.
     """
-    from ..client import Client
+    from ..client import Client, NotReady
     from ..processes import Stack, isolated_config
     from ..protocol import StateMsg
     from ..streams import circle
@@ -131,13 +131,12 @@ def run_case(
     try:
         stack.start()
         with Client(svc, name="bench-e2e", telemetry=True) as c:
-            info = c.wait_for_daemon(STARTUP_TIMEOUT)
-            end = time.monotonic() + STARTUP_TIMEOUT
-            while info is not None and not info.status.state_ok and time.monotonic() < end:
-                time.sleep(0.1)
-                info = c.info()
-            st = c.wait_truth(5.0)
-            if info is None or not info.status.state_ok or st is None:
+            try:
+                info = c.wait_ready(STARTUP_TIMEOUT, state_timeout=STARTUP_TIMEOUT)
+            except NotReady:
+                info = None
+            st = c.wait_truth(5.0) if info is not None else None
+            if info is None or st is None:
                 return out | {"available": False, "reason": f"the stack did not come up (logs: {log_dir})"}
             out["controller"] = info.config.get("controller", {}).get("kind")
             out["solver"] = info.config.get("controller", {}).get("solver")
