@@ -140,6 +140,11 @@ class CommandShaper:
         self.halted = True
         self.target = np.zeros_like(self.target)
 
+    def releases(self, stream: Hashable) -> bool:
+        """Whether a command of ``stream`` would end the protective stop: a new stream, the
+        output at rest (False outside a protective stop, and once halted)."""
+        return self.protective_stop and not self.halted and stream != self.stream and self.at_rest
+
     def command(self, t: float, rates: FloatArray, stream: Hashable, q: FloatArray) -> bool:
         """A command of the daemon, received at robot time ``t`` [s].
 
@@ -158,7 +163,7 @@ class CommandShaper:
             self.refused += 1
             return False
         if self.protective_stop:
-            if stream == self.stream or not self.at_rest:
+            if not self.releases(stream):
                 self.refused += 1
                 return False
             self.protective_stop = False  # a new stream, the robot at rest: recover
