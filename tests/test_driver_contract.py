@@ -83,6 +83,11 @@ def test_it_brakes_to_rest_on_stale_commands(controller: Any) -> None:
     assert out["detect_s"] < timeout + contract.SLACK
 
 
+def test_a_stale_stop_ends_the_stream_and_a_new_stream_resumes(controller: Any) -> None:
+    c, _, timeout = controller
+    contract.check_stale_ends_the_stream(c, timeout)
+
+
 def test_it_refuses_a_command_past_the_limits_with_a_protective_stop(controller: Any) -> None:
     c, _, _ = controller
     contract.check_refuses_past_limits(c)
