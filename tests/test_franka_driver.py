@@ -239,14 +239,15 @@ def test_a_libfranka_reflex_is_a_protective_stop_the_arm_brakes_and_a_mode_messa
             # chatters at about ±0.08 rad/s around a still position: rest is judged on positions)
             time.sleep(0.2)
             q_stopped = sim.q()
-            _follow(c, x0, 0.5, k)  # setpoints without a mode message move nothing
-            assert np.max(np.abs(sim.q() - q_stopped)) < 0.005, sim.q() - q_stopped
             st = _wait("the daemon holding, to be resumed", lambda: (s := c.latest_status()) is not None
                        and s.resume_needed and s, 20.0, tmp_path)
             assert st.mode == "hold"
-            # the mode message: the daemon resumes; the robot runs again and follows
+            # the daemon's safe-stop stream has had the robot recover; the daemon holds it still
+            assert sim.shared[RECOVERIES] == 1, "the robot was not recovered"
+            _follow(c, x0, 0.5, k)  # setpoints without a mode message move nothing
+            assert np.max(np.abs(sim.q() - q_stopped)) < 0.005, sim.q() - q_stopped
+            # the mode message: the daemon resumes, the arm follows again
             assert c.resume("track", timeout=20), f"the daemon did not resume: {c.latest_status()}"
-            assert sim.shared[RECOVERIES] >= 1, "the robot was not recovered"
             q_resumed = sim.q()
             _follow(c, x0, 1.5, k)
             assert np.max(np.abs(sim.q() - q_resumed)) > 0.005, "the arm did not move after the mode message"
