@@ -146,12 +146,17 @@ def test_a_command_past_the_limits_is_refused_with_a_protective_stop(rig: Any) -
     assert abs(shared[4] - q0[4]) < 0.005 and shared[16] == 0  # joint 5 never moved off: refused
 
 
-def _follow(c: Any, x0: np.ndarray, seconds: float, k0: int) -> int:
+def _follow(c: Any, x0: np.ndarray, seconds: float, k0: int, resume: bool = True) -> int:
     """Stream setpoints for ``seconds``: 5 cm along y in about 3 s and back (100 Hz); returns the
-    setpoint count to go on from."""
+    setpoint count to go on from. ``resume``: after a fault (a loaded host delays states and
+    commands: the daemon's safe stop) send the mode message again, as an operator would."""
     k = k0
     t_end = time.monotonic() + seconds
     while time.monotonic() < t_end:
+        if resume and c.resume_needed():
+            t0 = time.monotonic()
+            c.resume("track", timeout=20)
+            t_end += time.monotonic() - t0  # the time the resume took is not tracking time
         if c.send_setpoint(x0 + [0.0, 0.05 * np.sin(0.005 * k), 0.0]):
             k += 1
         time.sleep(0.01)
@@ -244,7 +249,7 @@ def test_a_libfranka_reflex_is_a_protective_stop_the_arm_brakes_and_a_mode_messa
             assert st.mode == "hold"
             # the daemon's safe-stop stream has had the robot recover; the daemon holds it still
             assert sim.shared[RECOVERIES] == 1, "the robot was not recovered"
-            _follow(c, x0, 0.5, k)  # setpoints without a mode message move nothing
+            _follow(c, x0, 0.5, k, resume=False)  # setpoints without a mode message move nothing
             assert np.max(np.abs(sim.q() - q_stopped)) < 0.005, sim.q() - q_stopped
             # the mode message: the daemon resumes, the arm follows again
             assert c.resume("track", timeout=20), f"the daemon did not resume: {c.latest_status()}"
