@@ -15,18 +15,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from . import urdf as urdf_io
+from ._typing import FloatArray, readonly
 from .exceptions import ConfigError
-
-FloatArray = NDArray[np.float64]
-
-
-def _ro(a: Any) -> FloatArray:
-    out = np.array(a, dtype=float)
-    out.setflags(write=False)
-    return out
-
+from .solvers import SOLVER_NAMES
 
 BASE_KINDS = ("mecanum", "omni", "diff_drive", "fixed")
 SHAPE_KINDS = ("box", "sphere", "capsule", "cylinder")
@@ -145,8 +138,8 @@ class ArmConfig:
     torque_limit: FloatArray
     torque_weight: FloatArray | None
     start: FloatArray
-    ee_offset_xyz: FloatArray = field(default_factory=lambda: _ro([0.0, 0.0, 0.0]))
-    ee_offset_rpy: FloatArray = field(default_factory=lambda: _ro([0.0, 0.0, 0.0]))
+    ee_offset_xyz: FloatArray = field(default_factory=lambda: readonly([0.0, 0.0, 0.0]))
+    ee_offset_rpy: FloatArray = field(default_factory=lambda: readonly([0.0, 0.0, 0.0]))
     jerk_max: FloatArray | None = None
 
     @property
@@ -162,7 +155,7 @@ class ArmConfig:
             return self.torque_weight
         rotary = [t for t, kind in zip(self.torque_limit, self.joint_types, strict=True) if kind != "prismatic"]
         tau_ref = float(np.max(rotary)) if rotary else float(np.max(self.torque_limit))
-        return _ro(tau_ref / self.torque_limit)
+        return readonly(tau_ref / self.torque_limit)
 
 
 @dataclass(frozen=True)
@@ -189,8 +182,8 @@ class BaseConfig:
     l2: float = 0.0
     base_radius: float = 0.0
     track_width: float = 0.0
-    wheel_speed_max: FloatArray = field(default_factory=lambda: _ro([]))
-    wheel_acceleration_max: FloatArray = field(default_factory=lambda: _ro([]))
+    wheel_speed_max: FloatArray = field(default_factory=lambda: readonly([]))
+    wheel_acceleration_max: FloatArray = field(default_factory=lambda: readonly([]))
     floor_z: float = -math.inf
     body: ShapeConfig | None = None
 
@@ -372,9 +365,9 @@ class ControllerConfig:
     k_C: float = 0.01
     k_N: float = 0.2
     W: FloatArray | None = None
-    direction: FloatArray = field(default_factory=lambda: _ro([1.0, 0.0, 0.0]))
-    ee_box_lower: FloatArray = field(default_factory=lambda: _ro([-np.inf, -np.inf, 0.36]))
-    ee_box_upper: FloatArray = field(default_factory=lambda: _ro([np.inf, np.inf, 0.56]))
+    direction: FloatArray = field(default_factory=lambda: readonly([1.0, 0.0, 0.0]))
+    ee_box_lower: FloatArray = field(default_factory=lambda: readonly([-np.inf, -np.inf, 0.36]))
+    ee_box_upper: FloatArray = field(default_factory=lambda: readonly([np.inf, np.inf, 0.56]))
     sigma_min_floor: float = 0.085
     state_latency: float = 0.0
     sigma_threshold: float = 0.08
@@ -514,7 +507,7 @@ class TomlTable:
             raise ConfigError(self.path, self._key(k), f"must be finite, got {v!r}")
         if positive and (a <= 0).any():
             raise ConfigError(self.path, self._key(k), f"every entry must be > 0, got {v!r}")
-        return _ro(a)
+        return readonly(a)
 
     def per_joint(self, k: str, n: int, default: Any = ..., *, positive: bool = False) -> FloatArray:
         """One number (the same for all n entries) or a list of n numbers."""
@@ -567,8 +560,6 @@ def load_robot_config(path: Path | str | None = None) -> RobotConfig:
     Raises:
         ConfigError: naming the file and key of the first problem found.
     """
-    from .model import urdf as urdf_io
-
     path = Path(path) if path is not None else default_robot_file()
     r = TomlTable(path, read_toml(path))
     r.unknown({"name", "arm", "base", "collision", "gripper"})
@@ -647,9 +638,9 @@ def load_robot_config(path: Path | str | None = None) -> RobotConfig:
         mount_rpy=a.vector("mount_rpy", 3, [0.0, 0.0, 0.0]),
         position_lower=lower,
         position_upper=upper,
-        velocity_max=_ro(vel),
+        velocity_max=readonly(vel),
         acceleration_max=a.per_joint("acceleration_max", n, positive=True),
-        torque_limit=_ro(tau),
+        torque_limit=readonly(tau),
         torque_weight=weight,
         start=start,
         ee_offset_xyz=a.vector("ee_offset_xyz", 3, [0.0, 0.0, 0.0]),
@@ -689,20 +680,20 @@ def load_shape(t: TomlTable, name: str, link: str, kinds: tuple[str, ...] = SHAP
         import pinocchio as pin
 
         rpy = pin.rpy.matrixToRpy(R)
-        return ShapeConfig(name, link, kind, _ro([t.number("radius", positive=True), length, 0.0]),
-                           _ro(0.5 * (p0 + p1)), _ro(rpy))
+        return ShapeConfig(name, link, kind, readonly([t.number("radius", positive=True), length, 0.0]),
+                           readonly(0.5 * (p0 + p1)), readonly(rpy))
     if kind == "box":
         size = t.vector("size", 3, positive=True)
     elif kind == "plane":
         n = t.vector("normal", 3)
         if np.linalg.norm(n) < 1e-9:
             raise ConfigError(t.path, t._key("normal"), "must not be the zero vector")
-        size = _ro([*(n / np.linalg.norm(n))])
-        return ShapeConfig(name, link, kind, size, _ro([0.0, 0.0, t.number("offset")]), _ro([0.0, 0.0, 0.0]))
+        size = readonly([*(n / np.linalg.norm(n))])
+        return ShapeConfig(name, link, kind, size, readonly([0.0, 0.0, t.number("offset")]), readonly([0.0, 0.0, 0.0]))
     else:
         radius = t.number("radius", positive=True)
         length = t.number("length", positive=True) if kind != "sphere" else 0.0
-        size = _ro([radius, length, 0.0])
+        size = readonly([radius, length, 0.0])
     return ShapeConfig(
         name=name,
         link=link,
@@ -714,8 +705,6 @@ def load_shape(t: TomlTable, name: str, link: str, kinds: tuple[str, ...] = SHAP
 
 
 def _load_collision(c: TomlTable, path: Path, full: Any, joints: tuple[str, ...]) -> RobotCollisionConfig:
-    from .model import urdf as urdf_io
-
     c.unknown({"from_urdf", "urdf", "shapes", "exclude", "ignore_links", "influence_distance"})
     other = urdf_io.resolve_urdf(path, c.string("urdf"), "collision.urdf") if c.has("urdf") else None
     shapes = []
@@ -776,8 +765,8 @@ def _load_base(b: TomlTable) -> BaseConfig:
         floor_z=b.number("floor_z", hi=0.0),
         body=body,
         **values,
-        wheel_speed_max=b.per_joint("wheel_speed_max", n, positive=True) if n else _ro([]),
-        wheel_acceleration_max=b.per_joint("wheel_acceleration_max", n, positive=True) if n else _ro([]),
+        wheel_speed_max=b.per_joint("wheel_speed_max", n, positive=True) if n else readonly([]),
+        wheel_acceleration_max=b.per_joint("wheel_acceleration_max", n, positive=True) if n else readonly([]),
     )
 
 
@@ -787,8 +776,6 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
     Raises:
         ConfigError: naming the file and key of the first problem found.
     """
-    from .solvers import SOLVER_NAMES
-
     path = Path(path) if path is not None else default_config_dir() / "controller.toml"
     r = TomlTable(path, read_toml(path))
     r.unknown({"rate_hz", "controller", "state_latency", "gains", "dm", "singularity", "qp", "task", "collision"})
@@ -847,7 +834,7 @@ def load_controller_config(path: Path | str | None = None) -> ControllerConfig:
         k_C=g.number("k_C", d.k_C, lo=0.0),
         k_N=g.number("k_N", d.k_N, lo=0.0),
         W=W,
-        direction=_ro(direction / np.linalg.norm(direction)),
+        direction=readonly(direction / np.linalg.norm(direction)),
         ee_box_lower=lo,
         ee_box_upper=hi,
         sigma_min_floor=dm.number("sigma_min_floor", d.sigma_min_floor, lo=0.0),

@@ -33,7 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import ConfigError, FloatArray, ShapeConfig, TomlTable, _ro, default_config_dir, load_shape, read_toml
+from ._typing import FloatArray, readonly
+from .config import ConfigError, ShapeConfig, TomlTable, default_config_dir, load_shape, read_toml
 
 OBSTACLE_KINDS = ("box", "sphere", "capsule", "cylinder", "plane")
 
@@ -47,9 +48,9 @@ class Fence:
         ee_lower, ee_upper: [m] the box the EE stays inside (±inf: free).
     """
 
-    base: FloatArray = field(default_factory=lambda: _ro(np.zeros((0, 2))))
-    ee_lower: FloatArray = field(default_factory=lambda: _ro([-np.inf] * 3))
-    ee_upper: FloatArray = field(default_factory=lambda: _ro([np.inf] * 3))
+    base: FloatArray = field(default_factory=lambda: readonly(np.zeros((0, 2))))
+    ee_lower: FloatArray = field(default_factory=lambda: readonly([-np.inf] * 3))
+    ee_upper: FloatArray = field(default_factory=lambda: readonly([np.inf] * 3))
 
     def half_planes(self) -> tuple[FloatArray, FloatArray]:
         """(A, c): the polygon as A p ≤ c, one row per edge (outward unit normals)."""
@@ -166,5 +167,5 @@ def load_scene(path: Path | str | None = None) -> Scene:
         hi = f.vector("ee_upper", 3, [np.inf] * 3, finite=False)
         if (lo >= hi).any():
             raise ConfigError(path, "fence.ee_lower", "must be < ee_upper on every axis")
-        fence = Fence(base=_ro(P), ee_lower=lo, ee_upper=hi)
+        fence = Fence(base=readonly(P), ee_lower=lo, ee_upper=hi)
     return Scene(obstacles=tuple(obstacles), fence=fence, path=path)

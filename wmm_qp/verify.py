@@ -37,7 +37,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .config import CollisionParams, FloatArray, RobotConfig
+from ._typing import FloatArray
+from .config import CollisionParams, RobotConfig
 from .model.wmm import WmmModel
 from .scene import Scene
 from .types import AT_REST, Command, Mode, Reference, RobotState

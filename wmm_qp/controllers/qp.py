@@ -83,12 +83,12 @@ from dataclasses import replace
 import numpy as np
 
 from .._jit import jit
-from ..config import ControllerConfig, FloatArray, ShapeConfig
+from .._typing import FloatArray, IntArray
+from ..config import ControllerConfig, ShapeConfig
 from ..limits.collision import CollisionRows, Rows, warm_up_obstacles
 from ..limits.singularity_floor import FloorRow, floor_row
 from ..linalg3 import solve_spd, solve_sym3
 from ..manipulability.preference import dm_preference_gain
-from ..model.arm import IntArray
 from ..model.collision import robot_geometry
 from ..model.wmm import WmmModel
 from ..pseudoinverse import weight_matrix_diag

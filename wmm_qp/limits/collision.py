@@ -49,7 +49,8 @@ import numpy as np
 import pinocchio as pin
 
 from .._jit import jit
-from ..config import CollisionParams, FloatArray, ShapeConfig
+from .._typing import FloatArray
+from ..config import CollisionParams, ShapeConfig
 from ..model.collision import RobotGeometry, bounding_sphere, coal_shape, row_shape, shape_pose, transform
 from ..scene import Fence, Scene
 from ._distance import box_plane, swept_box, swept_plane, swept_swept

@@ -35,7 +35,7 @@ import math
 import numpy as np
 
 from .._jit import jit
-from ..config import FloatArray
+from .._typing import FloatArray
 
 
 def braking_velocity(distance: FloatArray, a_max: FloatArray, dt: float) -> FloatArray:

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._jit import jit
-from ..config import FloatArray
+from .._typing import FloatArray
 from ..linalg3 import gram3
 from ..pseudoinverse import _sigma_min3
 

@@ -28,8 +28,9 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from ..config import FloatArray, RobotConfig, ShapeConfig
-from . import urdf as urdf_io
+from .. import urdf as urdf_io
+from .._typing import FloatArray
+from ..config import RobotConfig, ShapeConfig
 from .arm import ArmModel
 
 
