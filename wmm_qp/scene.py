@@ -35,6 +35,7 @@ import numpy as np
 
 from ._typing import FloatArray, readonly
 from .config import ConfigError, ShapeConfig, TomlTable, default_config_dir, load_shape, read_toml
+from .config.toml import toml_key, toml_keys
 
 OBSTACLE_KINDS = ("box", "sphere", "capsule", "cylinder", "plane")
 
@@ -48,9 +49,9 @@ class Fence:
         ee_lower, ee_upper: [m] the box the EE stays inside (±inf: free).
     """
 
-    base: FloatArray = field(default_factory=lambda: readonly(np.zeros((0, 2))))
-    ee_lower: FloatArray = field(default_factory=lambda: readonly([-np.inf] * 3))
-    ee_upper: FloatArray = field(default_factory=lambda: readonly([np.inf] * 3))
+    base: FloatArray = field(default_factory=lambda: readonly(np.zeros((0, 2))), metadata=toml_key())
+    ee_lower: FloatArray = field(default_factory=lambda: readonly([-np.inf] * 3), metadata=toml_key())
+    ee_upper: FloatArray = field(default_factory=lambda: readonly([np.inf] * 3), metadata=toml_key())
 
     def half_planes(self) -> tuple[FloatArray, FloatArray]:
         """(A, c): the polygon as A p ≤ c, one row per edge (outward unit normals)."""
@@ -81,8 +82,8 @@ class Scene:
         path: the file it was read from, or None.
     """
 
-    obstacles: tuple[ShapeConfig, ...] = ()
-    fence: Fence = field(default_factory=Fence)
+    obstacles: tuple[ShapeConfig, ...] = field(default=(), metadata=toml_key())
+    fence: Fence = field(default_factory=Fence, metadata=toml_key())
     path: Path | None = None
 
     def clamp_target(self, x: FloatArray, z_min: float = -np.inf) -> tuple[FloatArray, str]:
@@ -142,13 +143,13 @@ def load_scene(path: Path | str | None = None) -> Scene:
     """
     path = Path(path) if path is not None else default_scene_file()
     r = TomlTable(path, read_toml(path))
-    r.unknown({"obstacles", "fence"})
+    r.unknown(toml_keys(Scene))
     raw = r.get("obstacles", [])
     if not isinstance(raw, list) or not all(isinstance(o, dict) for o in raw):
         raise ConfigError(path, "obstacles", "must be a list of tables ([[obstacles]])")
     obstacles = obstacles_from_tables(path, raw)
     f = r.table("fence", required=False)
-    f.unknown({"base", "ee_lower", "ee_upper"})
+    f.unknown(toml_keys(Fence))
     fence = Fence()
     if f.data:
         poly = f.get("base", [])

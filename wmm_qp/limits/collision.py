@@ -203,7 +203,7 @@ def _obstacle(s: ShapeConfig, geometry: RobotGeometry) -> _Obstacle:
     mask = exempt_mask(geometry, s.exempt)
     o = _Obstacle(s.name, shape, shape_pose(s), center, radius, plane, mask, np.flatnonzero(mask).astype(np.int64))
     if plane:
-        o.normal_w, o.offset_w = np.asarray(s.size, dtype=float), float(s.xyz[2])
+        o.normal_w, o.offset_w = np.asarray(s.normal, dtype=float), s.offset
     if s.velocity is not None:
         o.velocity_w = np.asarray(s.velocity, dtype=float)
     return o

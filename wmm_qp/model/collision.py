@@ -44,8 +44,8 @@ def coal_shape(shape: ShapeConfig) -> coal.CollisionGeometry:
         return coal.Capsule(shape.radius, shape.length)
     if shape.kind == "cylinder":
         return coal.Cylinder(shape.radius, shape.length)
-    if shape.kind == "plane":  # size = unit normal n, xyz[2] = offset c: n·p ≤ c is free, n·p > c solid
-        return coal.Halfspace(-np.asarray(shape.size, dtype=float), -float(shape.xyz[2]))  # coal: solid where n'·p ≤ d
+    if shape.kind == "plane":  # n·p ≤ c is free, n·p > c solid
+        return coal.Halfspace(-np.asarray(shape.normal, dtype=float), -shape.offset)  # coal: solid where n'·p ≤ d
     raise ValueError(f"unknown shape kind {shape.kind!r}")
 
 
