@@ -145,7 +145,7 @@ class CollisionJudge:
         self.d_s, self.d_floor = safety_distance, floor_margin
         self._coal = coal
         self._floor = coal.Halfspace(np.array([0.0, 0.0, 1.0]), self.geo.floor_z)  # solid: z ≤ floor_z
-        from .limits.collision import exempt_mask
+        from .model.collision import exempt_mask
 
         self.obstacles = []
         for o in scene.obstacles:

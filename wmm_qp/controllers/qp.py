@@ -85,7 +85,8 @@ import numpy as np
 from .._jit import jit
 from .._typing import FloatArray, IntArray
 from ..config import ControllerConfig, ShapeConfig
-from ..limits.collision import CollisionRows, Rows, warm_up_obstacles
+from ..limits.collision import CollisionRows, warm_up_obstacles
+from ..limits.rows import Rows
 from ..limits.singularity_floor import FloorRow, floor_row
 from ..linalg3 import solve_spd, solve_sym3
 from ..manipulability.preference import dm_preference_gain

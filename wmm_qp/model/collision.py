@@ -29,7 +29,7 @@ import numpy as np
 import pinocchio as pin
 
 from .. import urdf as urdf_io
-from .._typing import FloatArray
+from .._typing import BoolArray, FloatArray
 from ..config import RobotConfig, ShapeConfig
 from .arm import ArmModel
 
@@ -245,6 +245,15 @@ def robot_geometry(robot: RobotConfig, arm: ArmModel) -> RobotGeometry:
         geo = RobotGeometry(robot, arm)
         arm._collision_geometry = geo  # type: ignore[attr-defined]
     return geo
+
+
+def exempt_mask(geometry: RobotGeometry, exempt: tuple[str, ...]) -> BoolArray:
+    """True for the bodies an obstacle is checked against: all but those on its ``exempt`` links
+    ("ee": every body on the EE frame's joint)."""
+    ee_joint = geometry.arm.model.frames[geometry.arm.frame_id].parentJoint
+    return np.array(
+        [not (b.link in exempt or ("ee" in exempt and b.joint == ee_joint)) for b in geometry.bodies], dtype=bool
+    )
 
 
 def transform(M: pin.SE3) -> coal.Transform3s:
