@@ -25,11 +25,10 @@ from .._jit import jit
 from .._typing import FloatArray, IntArray
 from ..config import CollisionParams, ShapeConfig
 from ..model.collision import RobotGeometry
-from ..scene import Fence, Scene, obstacles_from_tables
-from .dampers import damper_bounds
-from .fence import FenceRows
+from ..scene import obstacles_from_tables
+from .dampers import DamperRows, damper_bounds
 from .pair_search import Obstacle, PairSearch
-from .rows import Rows
+from .rows import Rows, Tick
 
 PARALLEL = 0.995  # two rows of one pair of links this parallel (cos) are one
 MAX_ROWS = 48
@@ -39,14 +38,14 @@ inside its safety distance, however many are. Of those, two rows of one pair of 
 parallel (cos > ``PARALLEL``) become one, the more restrictive."""
 
 
-class CollisionRows:
-    """Builds the damper rows of the robot's monitored pairs each tick (see the module docstring),
-    and the fence's (:class:`~wmm_qp.limits.fence.FenceRows`) below them.
+class CollisionRows(DamperRows):
+    """The damper rows of the robot's monitored pairs each tick (see the module docstring).
 
     Args:
         geometry: the robot's bodies and pairs.
         M: the base's 3 × n_wheels matrix (eq. (3)).
-        params: d_i, d_s, the floor margin, ξ, β.
+        params: d_i, d_s, the floor margin, ξ, β; the robot file's own influence distance
+            replaces d_i where it is larger (``params`` then holds it).
         latency: [s] τ, the state's age the rows account for (the controller's ``state_latency``).
         accel: A of each column of v = [wheels, arm] (the controller's bounds (13)): the braking
             profile's deceleration.
@@ -60,12 +59,11 @@ class CollisionRows:
         if own is not None and own > params.influence_distance:
             params = replace(params, influence_distance=own)
         self.p = params
-        self._latency = latency
+        self.latency = latency
         self.n_w = self.M.shape[1]
         self.n_a = geometry.arm.n
         self._accel = np.asarray(accel, dtype=float)
         self.search = PairSearch(geometry, params)
-        self.fence_rows = FenceRows(self.M, self.n_a, params, latency, self._accel)
         bodies = geometry.bodies
         model = geometry.arm.model  # support[j, k]: joint j moves with the velocity column k
         self._support = np.zeros((model.njoints, model.nv))
@@ -81,20 +79,6 @@ class CollisionRows:
         self._n_links = len(links)
 
     @property
-    def latency(self) -> float:
-        """[s] τ of the rows (the pairs' and the fence's)."""
-        return self._latency
-
-    @latency.setter
-    def latency(self, latency: float) -> None:
-        self._latency = self.fence_rows.latency = latency
-
-    @property
-    def fence(self) -> Fence:
-        """The scene's fence in force."""
-        return self.fence_rows.fence
-
-    @property
     def obstacles(self) -> list[Obstacle]:
         """The obstacles in force."""
         return self.search.obstacles
@@ -104,46 +88,23 @@ class CollisionRows:
         """The obstacles in force, as given to :meth:`set_obstacles`."""
         return self.search.shapes
 
-    def set_scene(self, scene: Scene) -> None:
-        self.set_obstacles(scene.obstacles)
-        self.fence_rows.set_fence(scene.fence)
-
     def set_obstacles(self, obstacles: tuple[ShapeConfig, ...] | list[ShapeConfig]) -> None:
         """Replace the obstacle set (atomically: the next tick sees the new set only)."""
         self.search.set_obstacles(obstacles)
 
-    # ------------------------------------------------------------------ per tick
-    def rows(
-        self,
-        q_base: FloatArray,
-        x_ee: FloatArray,
-        J_ee: FloatArray,
-        v_prev: FloatArray,
-        lb: FloatArray,
-        ub: FloatArray,
-    ) -> Rows:
-        """The rows at the state the arm's data was last computed at (``kinematics`` ran just before:
-        the arm's forward kinematics and joint Jacobians are current).
+    def compute_rows(self, tick: Tick) -> Rows:
+        """The pairs' rows at the tick's state (its kinematics ran just before: the arm's forward
+        kinematics and joint Jacobians are current)."""
+        return self.rows(tick.kin.q_base, tick.v_prev, tick.lb, tick.ub)
+
+    def rows(self, q_base: FloatArray, v_prev: FloatArray, lb: FloatArray, ub: FloatArray) -> Rows:
+        """The monitored pairs' rows at the state the arm's data was last computed at.
 
         Args:
             q_base: [m, m, rad] base pose.
-            x_ee: [m] EE position (world), J_ee its 3 × n_v world Jacobian (for the EE fence).
-            v_prev: the bounds' centre (last command or state rates), for the latency term.
+            v_prev: the bounds' centre (the last command), for the latency term.
             lb, ub: the stage's box bounds on v (for the relaxations).
         """
-        pairs = self.pair_rows(q_base, v_prev, lb, ub)
-        fence = self.fence_rows.rows(q_base, x_ee, J_ee, v_prev, lb, ub)
-        if not fence.l.shape[0]:
-            return pairs
-        out = Rows(np.vstack((pairs.C, fence.C)), np.concatenate((pairs.l, fence.l)),
-                   l_brake=np.concatenate((pairs.l_brake, fence.l_brake)),
-                   damper=np.concatenate((pairs.damper, fence.damper)), names=pairs.names + fence.names,
-                   distances=np.concatenate((pairs.distances, fence.distances)))
-        out.min_distance, out.closest = pairs.min_distance, pairs.closest
-        return out
-
-    def pair_rows(self, q_base: FloatArray, v_prev: FloatArray, lb: FloatArray, ub: FloatArray) -> Rows:
-        """The monitored pairs' rows (:meth:`rows` without the fence's)."""
         p, d_i = self.p, self.p.influence_distance
         n_v = self.n_w + self.n_a
         found = self.search.search(q_base)

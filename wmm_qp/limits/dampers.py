@@ -21,8 +21,10 @@ apart.
 Priority: the acceleration bounds (13) win. Each row is relaxed, where the bounds cannot meet it,
 to the most separating rate they admit, l ← min(l, max_{lb ≤ v ≤ ub} C_k v): the robot then
 separates (or stops approaching) as hard as (13) allows, and each row alone is feasible. Rows that
-exclude each other are relaxed together (:meth:`~wmm_qp.limits.rows.Rows.relax_together`). The
-influence distance must exceed the distance the robot needs to stop (docs/model.md "Collisions").
+exclude each other are relaxed together (:meth:`~wmm_qp.limits.rows.Rows.relax_together`): every
+damper source (:class:`DamperRows`: the collision pairs, the fence) is pooled, relaxed and
+reported with the others. The influence distance must exceed the distance the robot needs to stop
+(docs/model.md "Collisions").
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ import numpy as np
 
 from .._jit import jit
 from .._typing import FloatArray
-from .rows import RELAX_MARGIN
+from .rows import RELAX_MARGIN, Retry, Rows, RowSource
 
 
 @jit
@@ -92,3 +94,28 @@ def damper_bounds(
         l[k] = min(dk, best - RELAX_MARGIN)
         l_brake[k] = min(dk, brake - RELAX_MARGIN)
     return l, l_brake, damper
+
+
+class DamperRows(RowSource):
+    """A source of velocity dampers (the collision pairs, the fence): rows whose ``distances`` are
+    metres to their safety distance, relaxed together with every other damper when they exclude
+    each other, re-checked whatever solved the stage, and reported as "collision: <the nearest
+    row the command sits on> ..." when they cut the task."""
+
+    name = "collision"
+    retry = Retry.TOGETHER
+    rechecked = True
+
+    def cut_reason(self, rows: Rows, v: FloatArray) -> str:
+        """The active row (the command on its bound l, to 1e-9 relative) nearest its limit, and how
+        many more are active."""
+        slack = rows.C @ v - rows.l
+        active = np.flatnonzero(slack <= 1e-9 * np.maximum(1.0, np.abs(rows.l)))
+        if not active.size:
+            return ""
+        k = active[np.argmin(rows.distances[active])]
+        more = f" (+{active.size - 1} more)" if active.size > 1 else ""
+        return f"collision: {rows.names[k]} at {rows.distances[k]:.3f} m{more} (task cut)"
+
+    def row_label(self, rows: Rows, k: int) -> str:
+        return f"collision row {rows.names[k]}"

@@ -21,8 +21,8 @@ from .._jit import jit
 from .._typing import FloatArray
 from ..config import CollisionParams
 from ..scene import Fence
-from .dampers import damper_bounds
-from .rows import Rows
+from .dampers import DamperRows, damper_bounds
+from .rows import Rows, Tick
 
 
 @jit
@@ -39,7 +39,7 @@ def _fence_near(A: FloatArray, c: FloatArray, qx: float, qy: float, n_w: int, lo
     return False
 
 
-class FenceRows:
+class FenceRows(DamperRows):
     """The fence's dampers each tick (see the module docstring).
 
     Args:
@@ -70,6 +70,11 @@ class FenceRows:
         """The fence bounds anything: a polygon for the base, or a finite face for the EE."""
         f = self.fence
         return f.base.shape[0] >= 3 or bool(np.isfinite(f.ee_lower).any()) or bool(np.isfinite(f.ee_upper).any())
+
+    def compute_rows(self, tick: Tick) -> Rows:
+        """The fence's rows at the tick's state."""
+        kin = tick.kin
+        return self.rows(kin.q_base, kin.x, kin.J[:3], tick.v_prev, tick.lb, tick.ub)
 
     def rows(self, q_base: FloatArray, x_ee: FloatArray, J_ee: FloatArray, v_prev: FloatArray, lb: FloatArray,
              ub: FloatArray) -> Rows:

@@ -1,21 +1,30 @@
-"""Rows of the QP: named linear constraints l ≤ C v (≤ u) on v = [v_b; v_m], one set per source
-and tick, and how a stage relaxes them together when they exclude each other.
+"""Rows of the QP: named linear constraints l ≤ C v ≤ u on v = [v_b; v_m], and the sources that
+give them each tick (pink's and mink's ``Limit.compute_qp_inequalities``).
 
-The dampers (collision pairs, the fence) yield to bounds (13): each row is relaxed, where the
-bounds cannot meet it, to the most separating rate they admit (``l``, :mod:`.dampers`). Each row
-alone is then feasible; should the rows together not be, the stage is solved again with them
-relaxed together (:meth:`Rows.relax_together`, ``l_brake``): no row ever makes a stage infeasible.
+A :class:`RowSource` returns its :class:`Rows` for the tick (the EE box of eq. (17),
+:mod:`.ee_box`; the collision dampers, :mod:`.collision`; the fence, :mod:`.fence`; the σ_min
+floor, :mod:`.singularity_floor`) and says how the QP's stages treat them (:class:`Retry`,
+``rechecked``); the stages stack the sources' rows and treat every source alike.
+
+Every row yields to bounds (13): it is relaxed, where the bounds cannot meet it, to what they
+admit (``l``). Each row alone is then feasible; should rows together not be, the stage is solved
+again with them relaxed further (``l_brake``): the dampers together, to their joint command
+(:meth:`Rows.relax_together`): no row ever makes a stage infeasible.
 """
 
 from __future__ import annotations
 
+import enum
 import math
+from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .._jit import jit
 from .._typing import FloatArray
+from ..model.wmm import Kinematics
+from ..types import Mode
 
 RELAX_MARGIN = 1e-9
 """[m/s] a row relaxed to a command of the box passes this far below it: a relaxed row would pass
@@ -28,18 +37,22 @@ JOINT_FLOOR_WEIGHT = 10.0  # its penalty on a row below what the braking command
 
 @dataclass
 class Rows:
-    """The collision and fence rows of one tick: l ≤ C v (no upper bound).
+    """The rows one source gives one tick: l ≤ C v ≤ u.
 
     Attributes:
         C: (k, n_v) the rows, on v = [v_b; v_m].
-        l: (k,) the damper, relaxed to the most separating rate the bounds admit.
-        l_brake: (k,) relaxed to admit the braking command (or, after :meth:`relax_together`, the
-            rows' joint command).
-        damper: (k,) the damper's own bound, before any relaxation.
-        names: one per row: "a/b" (a pair of bodies), "a/floor", "a/<obstacle>", "fence:...".
-        distances: [m] (k,) each row's distance (the pair's, or the fence's margin).
+        l: (k,) the lower bound, relaxed to what bounds (13) admit (a damper: to the most
+            separating rate they admit).
+        l_brake: (k,) the lower bound of the stage solved again when the rows exclude each other:
+            relaxed to admit the braking command v₀ = clip(0, lb, ub), or, after
+            :meth:`relax_together`, the rows' joint command.
+        damper: (k,) the bound the source asks for before any relaxation (a damper's own bound).
+        names: one per row, e.g. "a/b" (a pair of bodies), "a/floor", "fence:ee x", "EE box z".
+        distances: (k,) how far each row's quantity is from its limit ([m]: a pair's distance, the
+            fence's margin, the EE's to the box; [m/rad] σ_min − σ_f).
         min_distance: [m] the closest monitored pair this tick (also beyond the influence distance).
         closest: that pair's name.
+        u: (k,) the upper bound, or None: none (l ≤ C v).
     """
 
     C: FloatArray
@@ -50,6 +63,32 @@ class Rows:
     distances: FloatArray = field(default_factory=lambda: np.zeros(0))
     min_distance: float = math.inf
     closest: str = ""
+    u: FloatArray | None = None
+
+    @property
+    def n(self) -> int:
+        """The number of rows."""
+        return int(self.l.shape[0])
+
+    def upper(self) -> FloatArray:
+        """(k,) the upper bound, +inf where there is none."""
+        return self.u if self.u is not None else np.full(self.l.shape[0], np.inf)
+
+    @staticmethod
+    def stack(parts: list[Rows], n_v: int) -> Rows:
+        """One Rows of several, in order; ``min_distance``, ``closest``: the nearest part's. A part
+        that is the only one with rows and the nearest is returned as it is."""
+        nearest = min(parts, key=lambda r: r.min_distance) if parts else Rows(np.zeros((0, n_v)), np.zeros(0))
+        full = [r for r in parts if r.l.shape[0]]
+        if not full or (len(full) == 1 and full[0] is nearest):
+            return nearest
+        out = Rows(np.vstack([r.C for r in full]), np.concatenate([r.l for r in full]),
+                   l_brake=np.concatenate([r.l_brake for r in full]), damper=np.concatenate([r.damper for r in full]),
+                   names=[name for r in full for name in r.names],
+                   distances=np.concatenate([r.distances for r in full]),
+                   u=None if all(r.u is None for r in full) else np.concatenate([r.upper() for r in full]))
+        out.min_distance, out.closest = nearest.min_distance, nearest.closest
+        return out
 
     def relax_together(self, lb: FloatArray, ub: FloatArray, C_box: FloatArray | None = None,
                        l_box: FloatArray | None = None, u_box: FloatArray | None = None) -> FloatArray:
@@ -133,3 +172,67 @@ def _joint_command(C: FloatArray, target: FloatArray, floor: FloatArray, lb: Flo
             break
     for i in range(n):
         out[i] = x[i]
+
+
+class Retry(enum.Enum):
+    """How the stage solved again when rows exclude each other treats a source's rows."""
+
+    TOGETHER = "together"
+    """Velocity dampers: pooled with every other TOGETHER source's rows, relaxed together to their
+    joint command (:meth:`Rows.relax_together`), reported together (the task cut by the nearest)."""
+    KEEP = "keep"
+    """Kept as they are (they admit the braking command already); the joint command must meet them."""
+    ADMIT = "admit"
+    """Relaxed (``l_brake``) to admit the braking command, and then the dampers' joint command too."""
+
+
+@dataclass(slots=True)
+class Tick:
+    """What a row source reads each tick.
+
+    Attributes:
+        mode: the controller's mode.
+        kin: the tick's kinematics (eqs. (2), (5); the arm's data is current, for the collision
+            rows' joint placements).
+        v_prev: [v_b; v_m] the bounds' centre: the last command [rad/s, rad/s or m/s].
+        lb, ub: the bounds on v: the wheel bounds and eq. (13).
+    """
+
+    mode: Mode
+    kin: Kinematics
+    v_prev: FloatArray
+    lb: FloatArray
+    ub: FloatArray
+
+
+class RowSource(ABC):
+    """A source of hard QP rows (pink's and mink's ``Limit``): each tick, named rows l ≤ C v ≤ u.
+
+    Attributes:
+        name: what the rows are, in reasons ("EE box", "collision", "fence", "sigma_min floor").
+        retry: how the stage solved again when rows exclude each other treats them (:class:`Retry`).
+        rechecked: whatever solved a stage, the command is re-checked on these rows and projected
+            back onto any it leaves (the EE box, the dampers); False: met to the solver's
+            tolerance (the σ_min floor, which steers the DM ascent).
+    """
+
+    name: str = "rows"
+    retry: Retry = Retry.KEEP
+    rechecked: bool = True
+
+    @abstractmethod
+    def compute_rows(self, tick: Tick) -> Rows | None:
+        """This tick's rows (every array with one entry per row), or None: none in this mode."""
+
+    def yields_to_task(self, mode: Mode) -> bool:
+        """In this mode the task outranks the rows: a stage whose task they cut (or that no solver
+        solves with them) is solved again without them, and that command taken if it meets the task."""
+        return False
+
+    def cut_reason(self, rows: Rows, v: FloatArray) -> str:
+        """Why the task was cut, if the command v sits on one of these rows ("" if not)."""
+        return ""
+
+    def row_label(self, rows: Rows, k: int) -> str:
+        """Row k in a reason (the re-check's: "<label>: the solution left it by ...")."""
+        return self.name
