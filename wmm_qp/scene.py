@@ -15,12 +15,13 @@ A scene file (``configs/scenes/default.toml`` is the default; ``--scene FILE`` o
 
     [fence]
     base = [[-3, -3], [3, -3], [3, 3], [-3, 3]]   # the base stays inside this polygon (world x, y)
-    ee_lower = [-3.5, -3.5, -1.0]                 # the EE stays inside this box (world)
+    ee_lower = [-3.5, -3.5, -1.0]                 # the EE fence: the EE stays inside this box (world)
     ee_upper = [3.5, 3.5, 2.0]
 
 Every obstacle is a hard constraint for every body of the robot (the velocity dampers of
 :mod:`wmm_qp.limits.collision`) but its ``exempt`` ones; the fence is one for the base's origin and
-the EE. The daemon clamps every setpoint into the EE box and above the floor margin
+the EE (the EE fence; not eq. (17)'s EE box of DM_CARTESIAN, a controller setting). The daemon
+clamps every setpoint into the EE fence and above the floor margin
 (:meth:`Scene.clamp_target`) before it chases it. Live obstacles (the daemon's
 ``<prefix>/<robot>/obstacles``) are tables of the same keys as ``[[obstacles]]``
 (:func:`obstacle_from_table`); they replace the previous live set and add to the scene's.
@@ -46,7 +47,7 @@ class Fence:
 
     Attributes:
         base: (k, 2) polygon the base's origin stays inside (counter-clockwise), or an empty (0, 2).
-        ee_lower, ee_upper: [m] the box the EE stays inside (±inf: free).
+        ee_lower, ee_upper: [m] the EE fence, the box the EE stays inside (±inf: free).
     """
 
     base: FloatArray = field(default_factory=lambda: readonly(np.zeros((0, 2))), metadata=toml_key())
@@ -87,7 +88,7 @@ class Scene:
     path: Path | None = None
 
     def clamp_target(self, x: FloatArray, z_min: float = -np.inf) -> tuple[FloatArray, str]:
-        """An EE target clamped into the fence's EE box and above ``z_min`` (the floor margin).
+        """An EE target clamped into the EE fence and above ``z_min`` (the floor margin).
 
         Returns:
             (the clamped target, "" when it was inside, else which axes were clamped, e.g.

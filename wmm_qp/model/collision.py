@@ -53,9 +53,9 @@ def convex_hull(mesh: coal.BVHModelBase) -> coal.ConvexBase:
     """The convex hull of a mesh's vertices, its vertices only (qhull, triangulated).
 
     Not ``buildConvexRepresentation``: its Convex keeps every vertex of the mesh, the interior
-    ones too, and coal's GJK on it is wrong — TIAGo's base_link (202 points, 89 on the hull) came
-    out 2.7 cm clear of a box it penetrated by 6.9 mm, flipping at sub-millimetre motion; on the
-    hull of its vertices the distance is the vertices' own and continuous."""
+    ones too, on which coal's GJK gives wrong distances that jump at sub-millimetre motion; on the
+    hull of its vertices the distance is the vertices' own and continuous
+    (``tests/test_convex_hulls.py``)."""
     points = [np.asarray(mesh.vertex(i), dtype=float) for i in range(mesh.num_vertices)]
     return coal.Convex.convexHull(points, False, "Qt")
 
@@ -75,8 +75,8 @@ def row_shape(shape: coal.CollisionGeometry) -> coal.CollisionGeometry:
 
     The rows keep these shapes ``collision.safety_distance`` apart: since each one contains its
     body, the bodies are at least as far apart (the referee checks the bodies). Convex meshes are
-    not wrapped in capsules: those are fat enough that the UR5's and TIAGo's start configurations
-    are inside d_s and the rows then fight every task (the UR5's floor test ran > 10 min)."""
+    not wrapped in capsules: capsules around meshes can be fat enough to put a robot's start
+    configuration inside d_s, and the rows then fight every task."""
     if isinstance(shape, coal.Cylinder):
         return coal.Capsule(shape.radius, 2.0 * shape.halfLength)
     return shape
