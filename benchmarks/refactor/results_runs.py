@@ -95,7 +95,6 @@ def _experiment_runs() -> list[Run]:
     runs.append(Run("circle_r100_mujoco", "§7.3", (*exp, "circle", "--radius", "1.0", *phys, "--json")))
     runs.append(Run("dmx_mujoco", "§7.3", (*exp, "dm", *phys, "--json")))
     runs.append(Run("dmz_mujoco", "§7.3", (*exp, "dm", "--direction", "z", *phys, "--json")))
-    runs.append(Run("push_mujoco", "§7.1", (*exp, "push", *phys, "--json")))
     return runs
 
 
@@ -154,9 +153,14 @@ EXCLUDED: tuple[tuple[str, str], ...] = (
         "realtime: processes over Zenoh, deadline misses and faults depend on the machine's load",
     ),
     (
+        "wmm-qp experiment push --physics mujoco --json (§7.1)",
+        "not deterministic to 1e-9: two runs of the same code (two worktrees of 11f4f79) gave "
+        "without_dm.max_abs_torque[2] = 30.32377551174574 and 30.323775469845394 N·m (4.2e-8, 1.4e-9 relative; "
+        "the other 50 numbers equal); docs/results.md §7 saw 3e-8 N·m between runs",
+    ),
+    (
         "wmm-qp experiment push --physics mujoco --max-mass [--robot-config ...] (§7.2)",
-        "a bisection on the mass: 14 full pushes per robot (its JSON's trials), each one half of push_mujoco, "
-        "which covers the same code",
+        "a bisection on the mass, 14 pushes per robot (its JSON's trials), each as nondeterministic as the push",
     ),
     ("python -m wmm_qp_service.experiments.latency_check 0|1 (§4)", "prints text, no JSON"),
     (
