@@ -395,3 +395,18 @@ def test_bad_embedded_flags_are_one_line_and_exit_2(argv: list[str], says: str,
     assert main(["sim", *argv]) == 2
     err = capsys.readouterr().err
     assert says in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_the_physics_plant_runs_embedded_too(host: Any, robot: w.RobotConfig) -> None:
+    pytest.importorskip("mujoco")
+    from wmm_qp_sim.robot import SimRobot
+
+    cfg = load_sim_config().with_(physics={"plant": "mujoco"})
+    sim = SimRobot(w.WmmModel(robot), cfg, ramp=True)
+    emb, clk = host(sim=sim)
+    rec = Recorder(emb)
+    st = tracking(emb, clk, (0.05, 0.0, 0.0), 300)
+    states = [m for tag, m, *_ in emb.control.outbox if tag == "state"]
+    by_state = {c.state_seq: c.seq for c in rec.commands}
+    assert all(s.cmd_seq == by_state[s.seq - 1] for s in states if s.seq - 1 in by_state)
+    assert type(emb.node.sim.plant).__name__ == "MujocoPlant" and violations(st) == 0, st.violations

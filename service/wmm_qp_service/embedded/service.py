@@ -22,7 +22,7 @@ import contextlib
 import sys
 import threading
 from collections.abc import Iterator
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import zenoh
 
@@ -34,7 +34,8 @@ from ..protocol import encode
 from ..transport import ROLE_EMBEDDED, open_session
 from .control import EmbeddedControl, telemetry_msg
 
-Channel = zenoh.handlers.FifoChannel[zenoh.Sample] | zenoh.handlers.RingChannel[zenoh.Sample]
+if TYPE_CHECKING:
+    Channel = zenoh.handlers.FifoChannel[zenoh.Sample] | zenoh.handlers.RingChannel[zenoh.Sample]
 
 IDLE = 0.02
 """[s] the service thread's longest sleep when the cycle does not wake it (a robot side that
