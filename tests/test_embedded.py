@@ -397,6 +397,21 @@ def test_bad_embedded_flags_are_one_line_and_exit_2(argv: list[str], says: str,
     assert says in err and len(err.strip().splitlines()) == 1, err
 
 
+@pytest.mark.parametrize(("argv", "says"), [
+    (["demo", "--embedded", "--rate", "300"], "must divide the robot's cycle rate 1000 Hz"),
+    (["demo", "--embedded", "--driver", "franka", "--robot-ip", "127.0.0.1"], "a real robot's driver is not a sim"),
+    (["soak", "--embedded", "--rate", "300"], "must divide the robot's cycle rate 1000 Hz"),
+    (["soak", "--embedded", "--trigger", "state"], "--trigger is the split daemon's"),
+])
+def test_bad_embedded_demo_and_soak_flags_are_one_line_and_exit_2(argv: list[str], says: str,
+                                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    from wmm_qp_service.cli import main
+
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert says in err and len(err.strip().splitlines()) == 1, err
+
+
 def test_the_physics_plant_runs_embedded_too(host: Any, robot: w.RobotConfig) -> None:
     pytest.importorskip("mujoco")
     from wmm_qp_sim.robot import SimRobot

@@ -31,6 +31,7 @@ from ..daemon.lease import acquire
 from ..daemon.zenoh_service import matching
 from ..keys import Keys
 from ..protocol import encode
+from ..rate_loop import realtime_priority
 from ..transport import ROLE_EMBEDDED, open_session
 from .control import EmbeddedControl, telemetry_msg
 
@@ -51,10 +52,15 @@ class ServiceThread:
         control: the hosted core (its inbox, queries and outbox).
         truth: publish the evaluation data on ``sim/truth``.
         robot_inputs: the robot side's own input keys to forward (``box``, ``gripper``).
+        rt_priority: the cycle's SCHED_FIFO priority (0: normal scheduling); this thread takes
+            one below it. It holds the GIL while it publishes: at normal priority on a loaded host
+            the scheduler could take the CPU from it mid-call, and the cycle, real-time but
+            waiting for the GIL, would wait for it (a priority inversion); one level below the
+            cycle it finishes its call, then yields within the switch interval.
     """
 
     def __init__(self, session: zenoh.Session, keys: Keys, control: EmbeddedControl, truth: bool = True,
-                 robot_inputs: tuple[str, ...] = ("box", "gripper")) -> None:
+                 robot_inputs: tuple[str, ...] = ("box", "gripper"), rt_priority: int = 0) -> None:
         ring, fifo = zenoh.handlers.RingChannel, zenoh.handlers.FifoChannel
         self.keys, self.control, self.robot = keys, control, control.svc.robot
         inputs: dict[str, tuple[str, Channel]] = {
@@ -78,6 +84,8 @@ class ServiceThread:
         self._stop = False
         self.errors = 0  # publications that failed (said on stderr, the first 10)
         self.pumps = 0
+        self.rt_priority = max(0, rt_priority - 1) if rt_priority > 0 else 0
+        self.scheduling = "not started"
         self._thread = threading.Thread(target=self._run, name="embedded-service", daemon=True)
 
     def start(self) -> ServiceThread:
@@ -86,6 +94,7 @@ class ServiceThread:
         return self
 
     def _run(self) -> None:
+        self.scheduling = realtime_priority(self.rt_priority)
         while not self._stop:
             self._wake.wait(IDLE)
             self._wake.clear()
@@ -154,8 +163,8 @@ class ServiceThread:
 
 @contextlib.contextmanager
 def embedded_session(svc: ServiceConfig, control: EmbeddedControl, stop: threading.Event, *,
-                     wait_lease: bool = False, truth: bool = True,
-                     robot_inputs: tuple[str, ...] = ("box", "gripper")) -> Iterator[ServiceThread | None]:
+                     wait_lease: bool = False, truth: bool = True, robot_inputs: tuple[str, ...] = ("box", "gripper"),
+                     rt_priority: int = 0) -> Iterator[ServiceThread | None]:
     """Open the embedded host's session, take the control lease and run its service thread.
 
     Args:
@@ -165,6 +174,7 @@ def embedded_session(svc: ServiceConfig, control: EmbeddedControl, stop: threadi
         wait_lease: wait while another daemon holds the lease (else :class:`~..daemon.LeaseHeld`).
         truth: publish the evaluation data.
         robot_inputs: the robot side's input keys.
+        rt_priority: the cycle's SCHED_FIFO priority (the service thread takes one below).
 
     Yields:
         the running service thread, or None (stopped while waiting for the lease).
@@ -178,7 +188,7 @@ def embedded_session(svc: ServiceConfig, control: EmbeddedControl, stop: threadi
         if not acquire(session, keys, control.core.lease, wait_lease, stop):
             yield None
             return
-        service = ServiceThread(session, keys, control, truth, robot_inputs).start()
+        service = ServiceThread(session, keys, control, truth, robot_inputs, rt_priority).start()
         try:
             yield service
         finally:

@@ -154,13 +154,15 @@ class EmbeddedSim:
             LeaseHeld: another daemon controls this robot.
         """
         st = self.node.sim.state()
-        with embedded_session(self.svc, self.control, stop, wait_lease=wait_lease, truth=self.node.truth) as svc:
+        with embedded_session(self.svc, self.control, stop, wait_lease=wait_lease, truth=self.node.truth,
+                              rt_priority=self.rt_priority) as svc:
             if svc is None:
                 return st
             self.scheduling = realtime_priority(self.rt_priority)
             log = FaultLog()
             self.say = log
-            print(f"wmm-qp sim: embedded cycle: {self.scheduling}; control at {self.control.timing.rate_hz:g} Hz "
+            print(f"wmm-qp sim: embedded cycle: {self.scheduling} (service thread: one level below); control at "
+                  f"{self.control.timing.rate_hz:g} Hz "
                   f"(every {self.control.decimation} robot cycle(s)); lease {self.control.core.lease}",
                   file=sys.stderr, flush=True)
             now = self.start()
