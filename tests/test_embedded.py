@@ -399,7 +399,9 @@ def test_bad_embedded_flags_are_one_line_and_exit_2(argv: list[str], says: str,
 
 @pytest.mark.parametrize(("argv", "says"), [
     (["demo", "--embedded", "--rate", "300"], "must divide the robot's cycle rate 1000 Hz"),
-    (["demo", "--embedded", "--driver", "franka", "--robot-ip", "127.0.0.1"], "a real robot's driver is not a sim"),
+    (["driver", "franka", "--robot-ip", "127.0.0.1", "--control-rate", "500"], "--control-rate needs --embedded"),
+    (["driver", "franka", "--robot-ip", "127.0.0.1", "--embedded", "--control-rate", "0"],
+     "--control-rate must be in (0, 1000] Hz"),
     (["soak", "--embedded", "--rate", "300"], "must divide the robot's cycle rate 1000 Hz"),
     (["soak", "--embedded", "--trigger", "state"], "--trigger is the split daemon's"),
 ])

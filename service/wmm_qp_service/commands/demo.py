@@ -16,7 +16,8 @@ With ``--driver franka --robot-ip IP`` the scenario runs through a real robot's 
 
 With ``--embedded`` the same scenario runs through one process, ``wmm-qp sim --embedded``: the
 control core in the sim's own cycle (``--rate`` is its control rate, dividing the sim's 1 kHz);
-``exit_codes`` and ``cpu_pct`` name ``embedded``.
+``exit_codes`` and ``cpu_pct`` name ``embedded``. With ``--driver franka --embedded`` the one
+process is ``wmm-qp driver franka --embedded`` (the core in libfranka's cycle; ``driver``).
 """
 
 from __future__ import annotations
@@ -64,7 +65,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(needs --robot-ip; docs/drivers.md)")
     parser.add_argument("--embedded", action="store_true",
                         help="one process instead of two: the control core in the sim's own cycle "
-                             "(wmm-qp sim --embedded; --rate must divide the sim's rate)")
+                             "(wmm-qp sim --embedded; --rate must divide the sim's rate), or with --driver "
+                             "in the driver's (wmm-qp driver franka --embedded)")
     parser.add_argument("--robot-ip", metavar="IP", default=None,
                         help="the address of the running robot the --driver drives (e.g. franky-sim's)")
     add_robot_argument(parser)
@@ -83,10 +85,6 @@ def run(args: argparse.Namespace) -> int:
     if (args.driver is None) != (args.robot_ip is None):
         print("wmm-qp demo: error: --driver and --robot-ip go together (--driver franka --robot-ip IP)",
               file=sys.stderr)
-        return 2
-    if args.embedded and args.driver is not None:
-        print("wmm-qp demo: error: --embedded runs the sim with the control core in its cycle; a real robot's "
-              "driver is not a sim (drive it with wmm-qp driver franka --embedded)", file=sys.stderr)
         return 2
     import wmm_qp as w
 
@@ -114,9 +112,12 @@ def run(args: argparse.Namespace) -> int:
     bar = ProgressLine("demo")
     try:
         if args.driver is not None:
-            bar.update(f"starting the {args.driver} driver for {args.robot_ip} and the daemon (logs: {log_dir})")
+            bar.update(f"starting the {args.driver} driver for {args.robot_ip}"
+                       f"{' with the control core in its cycle' if args.embedded else ' and the daemon'} "
+                       f"(logs: {log_dir})")
             stack.start_driver(args.driver, args.robot_ip)
-            stack.start_daemon()
+            if not args.embedded:
+                stack.start_daemon()
         else:
             bar.update(f"starting the {'embedded sim' if args.embedded else 'sim and the daemon'} (logs: {log_dir})")
             stack.start()

@@ -9,7 +9,9 @@ to the cycle's inbox as they are (the cycle validates and applies them in its sl
 outputs are what the cycle hands over: the state (express, real-time priority), the evaluation
 data, telemetry, status and ``info`` replies, encoded and published here. It holds the tokens
 ``alive/daemon``, ``alive/sim`` and ``lease/<id>``. The cycle wakes it every few cycles, after
-the command; it wakes by itself every :data:`IDLE` at most.
+the command; it wakes by itself every :data:`IDLE` at most. Where the robot's library holds the
+GIL while it waits for the robot (pylibfranka), no thread could run: the cycle then calls
+:meth:`ServiceThread.pump` itself in its slack (``threaded=False``).
 
 :func:`embedded_session` opens the session (both endpoints: clients, ``wmm-qp status`` and a
 second daemon find the robot where they look for a daemon and a sim), takes the control lease
@@ -52,6 +54,9 @@ class ServiceThread:
         control: the hosted core (its inbox, queries and outbox).
         truth: publish the evaluation data on ``sim/truth``.
         robot_inputs: the robot side's own input keys to forward (``box``, ``gripper``).
+        threaded: run on a thread of its own; False: the cycle runs :meth:`pump` itself, in its
+            slack, every few cycles (a robot library that holds the GIL while it waits for the
+            robot, as pylibfranka's ``readOnce`` does, would starve a thread).
         rt_priority: the cycle's SCHED_FIFO priority (0: normal scheduling); this thread takes
             one below it. It holds the GIL while it publishes: at normal priority on a loaded host
             the scheduler could take the CPU from it mid-call, and the cycle, real-time but
@@ -60,7 +65,8 @@ class ServiceThread:
     """
 
     def __init__(self, session: zenoh.Session, keys: Keys, control: EmbeddedControl, truth: bool = True,
-                 robot_inputs: tuple[str, ...] = ("box", "gripper"), rt_priority: int = 0) -> None:
+                 robot_inputs: tuple[str, ...] = ("box", "gripper"), rt_priority: int = 0,
+                 threaded: bool = True) -> None:
         ring, fifo = zenoh.handlers.RingChannel, zenoh.handlers.FifoChannel
         self.keys, self.control, self.robot = keys, control, control.svc.robot
         inputs: dict[str, tuple[str, Channel]] = {
@@ -85,12 +91,16 @@ class ServiceThread:
         self.errors = 0  # publications that failed (said on stderr, the first 10)
         self.pumps = 0
         self.rt_priority = max(0, rt_priority - 1) if rt_priority > 0 else 0
-        self.scheduling = "not started"
+        self.scheduling = "not started" if threaded else "the cycle's slack"
+        self.threaded = threaded
         self._thread = threading.Thread(target=self._run, name="embedded-service", daemon=True)
 
     def start(self) -> ServiceThread:
-        self.control.kick = self._wake.set
-        self._thread.start()
+        if self.threaded:
+            self.control.kick = self._wake.set
+            self._thread.start()
+        else:
+            self.control.kick = self.pump
         return self
 
     def _run(self) -> None:
@@ -151,7 +161,8 @@ class ServiceThread:
         """Stop the thread, publish what is left, undeclare everything (never raises)."""
         self._stop = True
         self._wake.set()
-        self._thread.join(timeout=2.0)
+        if self.threaded:
+            self._thread.join(timeout=2.0)
         self.pump()
         self.control.kick = lambda: None
         for ent in (*self._tokens, *(s for _, s in self._inputs), self._queryable, self._state, self._truth,
@@ -164,7 +175,7 @@ class ServiceThread:
 @contextlib.contextmanager
 def embedded_session(svc: ServiceConfig, control: EmbeddedControl, stop: threading.Event, *,
                      wait_lease: bool = False, truth: bool = True, robot_inputs: tuple[str, ...] = ("box", "gripper"),
-                     rt_priority: int = 0) -> Iterator[ServiceThread | None]:
+                     rt_priority: int = 0, threaded: bool = True) -> Iterator[ServiceThread | None]:
     """Open the embedded host's session, take the control lease and run its service thread.
 
     Args:
@@ -175,6 +186,7 @@ def embedded_session(svc: ServiceConfig, control: EmbeddedControl, stop: threadi
         truth: publish the evaluation data.
         robot_inputs: the robot side's input keys.
         rt_priority: the cycle's SCHED_FIFO priority (the service thread takes one below).
+        threaded: the service side on its own thread (False: in the cycle's slack).
 
     Yields:
         the running service thread, or None (stopped while waiting for the lease).
@@ -188,7 +200,7 @@ def embedded_session(svc: ServiceConfig, control: EmbeddedControl, stop: threadi
         if not acquire(session, keys, control.core.lease, wait_lease, stop):
             yield None
             return
-        service = ServiceThread(session, keys, control, truth, robot_inputs, rt_priority).start()
+        service = ServiceThread(session, keys, control, truth, robot_inputs, rt_priority, threaded).start()
         try:
             yield service
         finally:
