@@ -111,8 +111,11 @@ def test_e2e_over_zenoh(capsys: pytest.CaptureFixture[str]) -> None:
         assert r["state_to_cmd_us"]["p50"] > 0 and r["misses_per_10k"] is not None
         assert set(r["cpu_pct"]) == {"embedded", "client"} and sum(r["violations"].values()) == 0
         assert r["cycle"]["decimation"] == 1000 // int(rate) and r["cycle"]["ticks"] > 0
+    plain = e2e["embedded_plain"]["1000"]  # without the cycle's cost cuts, beside it
+    assert plain["available"] and not plain["cycle"]["cuts"] and e2e["embedded"]["1000"]["cycle"]["cuts"]
+    assert plain["cycle"]["gc"]["enabled"] is False and plain["state_to_cmd_us"]["n"] > 0
     f = e2e["floor"]["1000"]
-    assert f["ticks"] == 1000 and f["misses_per_10k"] is not None and f["spin_us"] == 0.0
+    assert f["ticks"] == 1000 and f["misses_per_10k"] is not None and f["spin_us"] == 200.0
 
 
 @pytest.mark.integration

@@ -42,9 +42,13 @@ the tick; ``state_transport_us`` is the hand-over, ``daemon_us`` the rest); ``cp
 ticks, misses, the tick's work, the garbage collector's collections in the slack). At 500 Hz the
 core ticks every other cycle of the 1 kHz sim: half the states have no command of their own.
 
-The floor (``floor.<rate>``): an empty loop at the sim's rate with the sim's loop settings (its
-sleep, no spin; its SCHED_FIFO priority), :func:`~.jitter.run_one`: the misses the machine makes
-whatever the work.
+``embedded_plain.<rate>``: the embedded stack without its cycle's cost cuts (``--plain-cycle``:
+the interpreter's own garbage collection, its 5 ms switch interval, no spin before the deadline,
+the service thread at normal priority), in the same run: what the cuts buy.
+
+The floor (``floor.<rate>``): an empty loop at the sim's rate with the embedded loop's settings
+(the service config's spin, the sim's SCHED_FIFO priority), :func:`~.jitter.run_one`: the misses
+the machine makes whatever the work.
 """
 
 from __future__ import annotations
@@ -68,6 +72,8 @@ CASES: tuple[tuple[str, float], ...] = (("rate", 500.0), ("rate", 1000.0), ("sta
 """(trigger, rate [Hz]) of each case; the state-triggered loop runs at the sim's rate (1 kHz)."""
 EMBEDDED_RATES: tuple[float, ...] = (500.0, 1000.0)
 """[Hz] the embedded stack's control rates (the sim's cycle is 1 kHz)."""
+PLAIN_RATES: tuple[float, ...] = (1000.0,)
+"""[Hz] the embedded stack without its cycle's cost cuts (``--plain-cycle``), beside it."""
 FLOOR_RATES: tuple[float, ...] = (1000.0,)
 """[Hz] the empty loop's rates (the robot's cycle)."""
 SETPOINT_HZ = 100.0  # [Hz]
@@ -97,6 +103,7 @@ def run_case(
     robot: RobotConfig | None = None,
     controller_file: Path | None = None,
     breakdown: bool = False,
+    plain: bool = False,
 ) -> dict[str, Any]:
     """One case: start the stack, track the circle for ``ticks`` ticks, measure, stop.
 
@@ -112,6 +119,7 @@ def run_case(
         breakdown: the daemon times each stage of its ticks (``--breakdown``): the result gains
             ``breakdown`` (:meth:`~..tick_stages.TickStages.summary`, over the ticks that
             published a command, start-up included).
+        plain: the embedded stack without its cycle's cost cuts (``--plain-cycle``).
 
     Returns:
         The figures of the module docstring, plus the load average, exit codes and faults.
@@ -141,7 +149,7 @@ def run_case(
     if breakdown and not embedded:
         args += ["--breakdown", str(breakdown_file)]
     if embedded:
-        args += ["--cycle-report", str(cycle_file)]
+        args += ["--cycle-report", str(cycle_file)] + (["--plain-cycle"] if plain else [])
     stack = Stack(svc, rate_hz=rate_hz, log_dir=log_dir, extra_daemon_args=args, embedded=embedded,
                   robot_file=None if robot is None else robot.path)  # fmt: skip
     svc = stack.svc
@@ -281,13 +289,16 @@ def run(
     robot: RobotConfig | None = None,
     controller_file: Path | None = None,
     embedded_rates: tuple[float, ...] = EMBEDDED_RATES,
+    plain_rates: tuple[float, ...] = PLAIN_RATES,
     floor_rates: tuple[float, ...] = FLOOR_RATES,
 ) -> dict[str, Any]:
     """Every case in turn, in one run: {"available", "<trigger> <rate>": figures of
     :func:`run_case` (the split stack), "embedded": {"<rate>": the same figures of the embedded
-    stack}, "floor": {"<rate>": :func:`~.jitter.run_one` of the sim's loop, empty}}."""
+    stack}, "embedded_plain": {"<rate>": the same without its cycle's cost cuts}, "floor":
+    {"<rate>": :func:`~.jitter.run_one` of the embedded loop's settings, empty}}."""
     from wmm_qp_sim import load_sim_config
 
+    from ..config import load_service_config
     from .jitter import run_one
 
     out: dict[str, Any] = {"available": True}
@@ -302,10 +313,16 @@ def run(
         res = run_case("embedded", r, ticks, robot=robot, controller_file=controller_file)
         out["embedded"][f"{r:g}"] = res
         out["available"] = out["available"] and bool(res.get("available"))
-    sim_cfg = load_sim_config()
+    out["embedded_plain"] = {}
+    for r in plain_rates:
+        print(f"e2e: embedded without the cuts, {r:g} Hz for {ticks} ticks ({ticks / r:.0f} s)", file=sys.stderr,
+              flush=True)
+        res = run_case("embedded", r, ticks, robot=robot, controller_file=controller_file, plain=True)
+        out["embedded_plain"][f"{r:g}"] = res
+    sim_cfg, spin_us = load_sim_config(), load_service_config().loop.spin_us
     out["floor"] = {}
     for r in floor_rates:
         n = min(ticks, int(60 * r))
         print(f"e2e: the floor, an empty {r:g} Hz loop for {n} ticks ({n / r:.0f} s)", file=sys.stderr, flush=True)
-        out["floor"][f"{r:g}"] = run_one(n, r, 0.0, sim_cfg.rt_priority)
+        out["floor"][f"{r:g}"] = run_one(n, r, spin_us, sim_cfg.rt_priority)
     return out

@@ -110,8 +110,9 @@ def _print_report(r: dict[str, Any]) -> None:
             for n, row in rows.items():
                 print(f"scaling    {solver:9s} {n:>2s} arm joints ({row['n_vars']} vars) {_fmt(row['tick_us'])}")
     e2e = r.get("e2e", {})
-    cases = [(k, v) for k, v in e2e.items() if k not in ("embedded", "floor")]
+    cases = [(k, v) for k, v in e2e.items() if k not in ("embedded", "embedded_plain", "floor")]
     cases += [(f"embedded {k}", v) for k, v in (e2e.get("embedded") or {}).items()]
+    cases += [(f"plain {k}", v) for k, v in (e2e.get("embedded_plain") or {}).items()]
     for case, e in cases:
         if not isinstance(e, dict):
             continue

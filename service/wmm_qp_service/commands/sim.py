@@ -51,6 +51,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     e.add_argument("--cycle-report", metavar="JSON",
                    help="with --embedded: write the cycle's figures (ticks, misses, tick work, the garbage "
                         "collector's work in the slack) to this file at exit")
+    e.add_argument("--plain-cycle", action="store_true",
+                   help="with --embedded: without the cycle's cost cuts (the garbage collector in the slack "
+                        "only, a 0.2 ms switch interval, the spin before each deadline, the service thread "
+                        "below the cycle's priority): to measure them (docs/benchmarks.md)")
     f = parser.add_argument_group("fault injection (reliability tests)")
     f.add_argument("--state-loss", type=float, default=0.0, metavar="P",
                    help="drop each state publication with probability P in [0, 1)")
@@ -88,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
     for flag, given in (("--controller-config", args.controller_config), ("--control-rate", args.control_rate),
                         ("--controller", args.controller), ("--task", args.task),
                         ("--no-collision", args.no_collision or None), ("--wait-lease", args.wait_lease or None),
-                        ("--cycle-report", args.cycle_report)):
+                        ("--cycle-report", args.cycle_report), ("--plain-cycle", args.plain_cycle or None)):
         if given is not None:
             print(f"wmm-qp sim: error: {flag} needs --embedded (without it the sim hosts no controller: "
                   f"give it to wmm-qp serve)", file=sys.stderr)
@@ -131,7 +135,7 @@ def _run_embedded(args: argparse.Namespace, robot: Any, svc: Any, scene: Any, si
     ctl_cfg = controller_config(args)  # a bad file: one line, exit 2
     emb = EmbeddedSim(svc, sim_cfg, robot, ctl_cfg, control_rate=args.control_rate, kind=args.controller,
                       scene=scene, seed=args.seed, ramp=not args.no_ramp, truth=not args.no_truth,
-                      rt_priority=prio)
+                      rt_priority=prio, spin_s=svc.loop.spin_us * 1e-6, cuts=not args.plain_cycle)
     core = emb.control.core
     stop = stop_on_signals()
     print(f"wmm-qp sim: {svc.prefix}/{svc.robot} at {sim_cfg.rate_hz:g} Hz, embedded control at "

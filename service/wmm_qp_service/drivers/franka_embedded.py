@@ -55,19 +55,19 @@ class FrankaEmbedded:
         kind: controller kind (None: the controller config's).
         scene: the fence and obstacles of the controller (None: the default scene).
         clock: [s] monotonic clock (the time within a cycle); wall: [s] wall clock (stamps).
-        collector: Python's collector in the slack only.
+        cuts: the cycle's cost cuts (:class:`~..embedded.EmbeddedControl`).
     """
 
     def __init__(self, driver: FrankaDriver, ctl_cfg: w.ControllerConfig, *, control_rate: float | None = None,
                  kind: str | None = None, scene: Scene | None = None, clock: Callable[[], float] = time.monotonic,
-                 wall: Callable[[], float] = time.time, collector: bool = True) -> None:
+                 wall: Callable[[], float] = time.time, cuts: bool = True) -> None:
         self.driver = driver
         self.mono = clock
         self._t_read = clock()
         rate = 1.0 / DT if control_rate is None else control_rate
         self.control = EmbeddedControl(driver.svc.with_(loop={"rate_hz": rate}), ctl_cfg, driver.robot,
                                        self._deliver, 1.0 / DT, kind=kind, scene=scene, on_input=self._on_input,
-                                       clock=self.clock, wall=wall, collector=collector)
+                                       clock=self.clock, wall=wall, cuts=cuts)
         self.cycles = 0
         self._q = np.zeros(driver.robot.n_arm)
         self._state: StateMsg | None = None

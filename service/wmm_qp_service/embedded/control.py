@@ -209,7 +209,9 @@ class EmbeddedControl:
             ``gripper`` and ``obstacles`` (its referee's; the core gets the obstacles too).
         clock: [s] monotonic clock (the robot side's).
         wall: [s] wall clock (stamps).
-        collector: run Python's garbage collector in the slack only (:class:`SlackCollector`).
+        cuts: the cycle's cost cuts: Python's garbage collector in the slack only
+            (:class:`SlackCollector`) and a short thread switch interval (:data:`SWITCH_INTERVAL`);
+            False: the interpreter's defaults (``--plain-cycle``: to measure what they cut).
 
     Attributes:
         inbox: (kind, payload) from the service thread: ``mode``, ``setpoint``, ``obstacles``,
@@ -227,7 +229,7 @@ class EmbeddedControl:
                  deliver: Callable[[Any], None], robot_rate_hz: float, *, kind: str | None = None,
                  scene: Scene | None = None, on_input: Callable[[str, bytes], object] | None = None,
                  clock: Callable[[], float] = time.monotonic, wall: Callable[[], float] = time.time,
-                 collector: bool = True) -> None:
+                 cuts: bool = True) -> None:
         svc = svc.with_robot(robot)
         self.svc = svc
         rate = svc.loop.rate_hz
@@ -257,7 +259,8 @@ class EmbeddedControl:
         self.queries_per_tick = lp.queries_per_tick
         self.kick: Callable[[], object] = lambda: None
         self.wake_every = max(1, round(robot_rate_hz / 250.0))  # the service thread: every ~4 ms
-        self.gc = SlackCollector(collector)
+        self.cuts = cuts
+        self.gc = SlackCollector(cuts)
         self.sent: Sent | None = None
         self._t_update = 0.0
         self._cycles = 0
@@ -271,7 +274,8 @@ class EmbeddedControl:
         self._fault_log = FaultLog()
         self.core.say = self._fault_log
         self._switch = sys.getswitchinterval()
-        sys.setswitchinterval(SWITCH_INTERVAL)
+        if self.cuts:
+            sys.setswitchinterval(SWITCH_INTERVAL)
         self.gc.start()
         self.core.t0 = t0 = self.timing.start()
         return t0
@@ -399,6 +403,7 @@ class EmbeddedControl:
         t = self.timing
         p50, p99 = t.percentiles_us(50.0, 99.0)
         return {"rate_hz": t.rate_hz, "robot_rate_hz": self.robot_rate_hz, "decimation": self.decimation,
+                "cuts": self.cuts, "switch_interval_s": SWITCH_INTERVAL if self.cuts else self._switch,
                 "ticks": t.ticks, "deadline_misses": t.deadline_misses,
                 "tick_us": {"p50": round(p50, 1), "p99": round(p99, 1), "max": round(t.tick_max * 1e6, 1)},
                 "gc": self.gc.report()}

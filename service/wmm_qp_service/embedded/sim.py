@@ -60,7 +60,12 @@ class EmbeddedSim:
         clock: [s] monotonic clock of the loop, the inbox and the core.
         sleep: the loop's sleep [s].
         wall: [s] wall clock (stamps).
-        collector: Python's collector in the slack only (:class:`~.control.SlackCollector`).
+        spin_s: [s] spin this long before each cycle's deadline instead of sleeping (the
+            daemon's ``loop.spin_us``: a core that slept a whole period runs the next tick from
+            cold caches; with ``cuts`` only).
+        cuts: the cycle's cost cuts (:class:`~.control.EmbeddedControl`'s, the spin, and the
+            service thread one SCHED_FIFO level below the cycle); False: the interpreter's and
+            the sim's defaults (``--plain-cycle``).
     """
 
     def __init__(self, svc: ServiceConfig, sim_cfg: SimConfig, robot: w.RobotConfig, ctl_cfg: w.ControllerConfig,
@@ -68,7 +73,7 @@ class EmbeddedSim:
                  seed: int | None = None, ramp: bool = True, truth: bool = True, sim: SimRobot | None = None,
                  rt_priority: int = 0, clock: Callable[[], float] = time.monotonic,
                  sleep: Callable[[float], None] = time.sleep, wall: Callable[[], float] = time.time,
-                 collector: bool = True) -> None:
+                 spin_s: float = 0.0, cuts: bool = True) -> None:
         scene = scene if scene is not None else load_scene()
         self.node = SimNode(svc, sim_cfg, robot, seed=seed, ramp=ramp, scene=scene, sim=sim, truth=truth)
         self.svc = self.node.svc
@@ -77,8 +82,9 @@ class EmbeddedSim:
         rate = sim_cfg.rate_hz if control_rate is None else control_rate
         self.control = EmbeddedControl(self.svc.with_(loop={"rate_hz": rate}), ctl_cfg, robot, self.inbox.put,
                                        sim_cfg.rate_hz, kind=kind, scene=scene, on_input=self._on_input,
-                                       clock=clock, wall=wall, collector=collector)
-        self.loop = RateLoop(sim_cfg.rate_hz, 0.0, clock=clock, sleep=sleep)  # the sim's: sleep, no spin
+                                       clock=clock, wall=wall, cuts=cuts)
+        self.cuts = cuts
+        self.loop = RateLoop(sim_cfg.rate_hz, spin_s if cuts else 0.0, clock=clock, sleep=sleep)
         self.cycles = 0
         self.scheduling = "not started"
         self.say: Callable[[str], None] = lambda line: print(line, file=sys.stderr, flush=True)
@@ -155,14 +161,16 @@ class EmbeddedSim:
         """
         st = self.node.sim.state()
         with embedded_session(self.svc, self.control, stop, wait_lease=wait_lease, truth=self.node.truth,
-                              rt_priority=self.rt_priority) as svc:
+                              rt_priority=self.rt_priority if self.cuts else 0) as svc:
             if svc is None:
                 return st
             self.scheduling = realtime_priority(self.rt_priority)
             log = FaultLog()
             self.say = log
-            print(f"wmm-qp sim: embedded cycle: {self.scheduling} (service thread: one level below); control at "
-                  f"{self.control.timing.rate_hz:g} Hz "
+            print(f"wmm-qp sim: embedded cycle: {self.scheduling}, spin {self.loop.spin_s * 1e6:g} µs, "
+                  f"{'cuts on' if self.cuts else 'plain (no cuts)'}; service thread: "
+                  f"{f'SCHED_FIFO {svc.rt_priority} asked' if svc.rt_priority else 'normal scheduling'}; "
+                  f"control at {self.control.timing.rate_hz:g} Hz "
                   f"(every {self.control.decimation} robot cycle(s)); lease {self.control.core.lease}",
                   file=sys.stderr, flush=True)
             now = self.start()
