@@ -101,6 +101,21 @@ def test_e2e_over_zenoh(capsys: pytest.CaptureFixture[str]) -> None:
         assert 0.0 <= r["applied_next_step"] <= 1.0 and r["tick_over_step_p50"] > 1.0
         assert set(r["cpu_pct"]) == {"sim", "daemon", "client"}
         assert r["daemon_loop_end"]["trigger"] == case.split()[0]
+    # the embedded stack in the same run, its keys mirroring the split's rates; the machine's floor
+    for rate in ("500", "1000"):
+        r = e2e["embedded"][rate]
+        assert r["available"] and r["exit_codes"] == {"embedded": 0}
+        assert r["daemon_loop_end"]["trigger"] == "embedded" and r["daemon_loop_end"]["rate_hz"] == float(rate)
+        for k in ("tick_us", "step_us", "state_to_cmd_us"):
+            assert set(r[k]) == {"p50", "p99", "p999", "max", "n"} and r[k]["n"] > 0, k
+        assert r["state_to_cmd_us"]["p50"] > 0 and r["misses_per_10k"] is not None
+        assert set(r["cpu_pct"]) == {"embedded", "client"} and sum(r["violations"].values()) == 0
+        assert r["cycle"]["decimation"] == 1000 // int(rate) and r["cycle"]["ticks"] > 0
+    plain = e2e["embedded_plain"]["1000"]  # without the cycle's cost cuts, beside it
+    assert plain["available"] and not plain["cycle"]["cuts"] and e2e["embedded"]["1000"]["cycle"]["cuts"]
+    assert plain["cycle"]["gc"]["enabled"] is False and plain["state_to_cmd_us"]["n"] > 0
+    f = e2e["floor"]["1000"]
+    assert f["ticks"] == 1000 and f["misses_per_10k"] is not None and f["spin_us"] == 200.0
 
 
 @pytest.mark.integration

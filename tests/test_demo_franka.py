@@ -21,18 +21,23 @@ import wmm_qp as w
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
 
-def test_the_demo_runs_through_the_franka_driver_against_franky_sim(tmp_path: Path) -> None:
+@pytest.mark.parametrize("embedded", [False, True], ids=["driver+daemon", "embedded"])
+def test_the_demo_runs_through_the_franka_driver_against_franky_sim(tmp_path: Path, embedded: bool) -> None:
+    """Through the driver and a daemon, or (``--embedded``) the driver alone with the control core
+    in libfranka's cycle."""
     sim = start_franky_sim(w.load_robot_config(FR3))
     try:
         p = subprocess.run([sys.executable, "-m", "wmm_qp_service.cli", "demo", "--robot-config", str(FR3),
                             "--driver", "franka", "--robot-ip", sim.host, "--duration", "8",
-                            "--json", "--logs", str(tmp_path)],
+                            "--json", "--logs", str(tmp_path), *(["--embedded"] if embedded else [])],
                            capture_output=True, text=True, timeout=600, stdin=subprocess.DEVNULL)
         assert p.stdout.strip(), p.stderr
         out = json.loads(p.stdout)
         assert {"violations", "violations_total", "loop", "phases", "faults", "verdict", "exit_codes"} <= set(out)
-        assert set(out["exit_codes"]) == {"driver", "daemon"}, out["exit_codes"]  # no sim was started
-        assert out["exit_codes"] == {"driver": 0, "daemon": 0}, (out["exit_codes"], p.stderr)
+        procs = {"driver": 0} if embedded else {"driver": 0, "daemon": 0}
+        assert set(out["exit_codes"]) == set(procs), out["exit_codes"]  # no sim was started
+        assert out["exit_codes"] == procs, (out["exit_codes"], p.stderr)
+        assert out["loop"]["trigger"] == ("embedded" if embedded else "rate")
         assert out["violations_total"] == 0, out["violations"]
         assert out["ee_error_max"] is None  # no ground truth from a real robot
         assert out["dm_end"] > out["dm_start"], out

@@ -225,6 +225,30 @@ def targets(r: dict[str, Any]) -> dict[str, Any]:
         t["zenoh_1khz_misses_per_10k"] = khz["misses_per_10k"]
         t["zenoh_1khz_lt_10_misses_per_10k"] = khz["misses_per_10k"] < 10.0
     t |= issue15_targets(e)
+    t |= embedded_targets(e)
+    return t
+
+
+def embedded_targets(e: dict[str, Any]) -> dict[str, Any]:
+    """The embedded stack's targets against one e2e run: at 1 kHz, state → command p50 within
+    2× its own ``ctl.step`` p50 and p99 ≤ 1 ms; its misses below the split stack's at the same
+    rate (both triggers at 1 kHz), beside the floor's (an empty loop's)."""
+    t: dict[str, Any] = {}
+    emb = (e.get("embedded") or {}).get("1000")
+    if not (emb and emb.get("available")):
+        return t
+    lat, step = emb["state_to_cmd_us"], emb["step_us"]
+    t["embedded 1000: state_to_cmd_p50_us"] = lat["p50"]
+    t["embedded 1000: state_to_cmd_p50_le_2x_step_p50"] = lat["p50"] <= 2.0 * step["p50"]
+    t["embedded 1000: state_to_cmd_p99_le_1ms"] = lat["p99"] <= 1000.0
+    t["embedded 1000: misses_per_10k"] = emb["misses_per_10k"]
+    for key in ("rate 1000", "state 1000"):
+        c = e.get(key)
+        if c and c.get("available") and c.get("misses_per_10k") is not None:
+            t[f"embedded 1000: misses_below_{key.replace(' ', '_')}"] = emb["misses_per_10k"] < c["misses_per_10k"]
+    floor = (e.get("floor") or {}).get("1000")
+    if floor:
+        t["floor 1000: misses_per_10k"] = floor["misses_per_10k"]
     return t
 
 

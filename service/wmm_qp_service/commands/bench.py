@@ -121,20 +121,27 @@ def _print_report(r: dict[str, Any]) -> None:
         if isinstance(rows, dict):
             for n, row in rows.items():
                 print(f"scaling    {solver:9s} {n:>2s} arm joints ({row['n_vars']} vars) {_fmt(row['tick_us'])}")
-    for case, e in r.get("e2e", {}).items():
+    e2e = r.get("e2e", {})
+    cases = [(k, v) for k, v in e2e.items() if k not in ("embedded", "embedded_plain", "floor")]
+    cases += [(f"embedded {k}", v) for k, v in (e2e.get("embedded") or {}).items()]
+    cases += [(f"plain {k}", v) for k, v in (e2e.get("embedded_plain") or {}).items()]
+    for case, e in cases:
         if not isinstance(e, dict):
             continue
         if not e.get("available"):
             print(f"e2e        {case} Hz: {e.get('reason')}")
             continue
         print(
-            f"e2e        {case:>10s} Hz: achieved {e['achieved_hz']} Hz, {e['ticks']} ticks, "
+            f"e2e        {case:>13s} Hz: achieved {e['achieved_hz']} Hz, {e['ticks']} ticks, "
             f"misses {e['deadline_misses']} ({e['misses_per_10k']} / 10k, watchdog {e['watchdog_ticks']}), "
             f"tick/step p50 ×{e['tick_over_step_p50']}, applied at k+1 {e['applied_next_step']}, "
             f"overwritten {e['cmds_not_applied']}/{e['cmds_in_window']}, CPU % {e.get('cpu_pct')}"
         )
         for k in ("tick_us", "step_us", "state_to_cmd_us", "state_transport_us", "daemon_us", "cmd_to_applied_us"):
             print(f"           {k:18s} {_fmt(e[k])}")
+    for rate, f in (e2e.get("floor") or {}).items():
+        print(f"e2e        floor {rate:>7s} Hz: an empty loop, {f['scheduling']}: {f['deadline_misses']} deadline "
+              f"misses in {f['ticks']} ticks ({f['misses_per_10k']} per 10k), late {f['late_us']} µs")
     for case, e in r.get("daemon", {}).items():
         if not isinstance(e, dict):
             continue

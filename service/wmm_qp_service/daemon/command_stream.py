@@ -105,7 +105,12 @@ class CommandStream:
 
     def observe(self, msg: StateMsg, now: float) -> None:
         """An accepted state arrived at ``now`` [s]: if it applied a command of this stream, its
-        age is at most the time since that command was published."""
+        age is at most the time since that command was published. Not while the stream is broken:
+        the robot brakes by itself meanwhile, still naming the last command it applied, and the
+        time since that one says nothing of the link (it would fill the window with the stop's
+        length and fault the next stream as "state too old")."""
+        if self.broken:
+            return
         cs = msg.cmd_seq
         if cs >= max(0, self.start) and self._sent_seq[cs % SENT] == cs:  # this stream's only
             self._age[self._n_age % ROUND_TRIPS] = now - float(self._sent_t[cs % SENT])

@@ -125,7 +125,21 @@ class FrankaDriver(LeaseGate):
         Returns:
             True when the shaper took it as its target.
         """
-        msg = self.admit(data, self.referee)
+        return self._obey(self.admit(data, self.referee), q, received, recover)
+
+    def on_command_msg(self, msg: CommandMsg, q: np.ndarray, received: float,
+                       recover: Callable[[], str | None] | None = None) -> bool:
+        """:meth:`on_command` for a command handed over in memory by a control core in this
+        process (``--embedded``): the same checks on the message itself, nothing decoded."""
+        checked = self.validate.checked(msg)
+        if checked is None:
+            self.refused["invalid"] += 1
+            return False
+        return self._obey(self.obey(checked, self.referee), q, received, recover)
+
+    def _obey(self, msg: CommandMsg | None, q: np.ndarray, received: float,
+              recover: Callable[[], str | None] | None) -> bool:
+        """An obeyed command (None: refused) to the referee, as received, then to the shaper."""
         if msg is None:
             return False
         rates = np.array(msg.arm_rates, dtype=float)
@@ -165,6 +179,18 @@ class FrankaDriver(LeaseGate):
             [rad/s] the joint velocities to write.
         """
         self.t += elapsed
+        return self.shape(q)
+
+    def shape(self, q: np.ndarray) -> np.ndarray:
+        """The second half of :meth:`cycle`, at the robot's time already advanced: judge the
+        positions, shape the next command.
+
+        Args:
+            q: [rad] the measured joint positions.
+
+        Returns:
+            [rad/s] the joint velocities to write.
+        """
         self.referee.check_positions(q)
         v = self.shaper.step(self.t, q)
         stopped = self.shaper.stale_stop or self.shaper.protective_stop
@@ -267,6 +293,24 @@ class FrankaDriver(LeaseGate):
                     if ent is not None:
                         with contextlib.suppress(Exception):
                             ent.undeclare()
+
+    def recover(self, fr: Any, robot: Any, e: Exception, robot_ip: str) -> Any:
+        """A libfranka ``ControlException`` in the embedded cycle (a reflex of the robot): report a
+        protective stop, recover, start a new control (the caller dropped the aborted one first:
+        libfranka runs one control at a time). Returns the new control, or None (said on stderr:
+        the connection is lost, or the robot did not recover)."""
+        reason = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        print(f"wmm-qp driver franka: protective stop: {reason}", file=sys.stderr, flush=True)
+        self.fault(reason)
+        try:
+            robot.automatic_error_recovery()
+            return robot.start_joint_velocity_control(fr.ControllerMode.JointImpedance)
+        except fr.NetworkException as e2:
+            print(f"wmm-qp driver franka: error: lost the connection to the robot at {robot_ip}: {e2}",
+                  file=sys.stderr, flush=True)
+        except (fr.FrankaException, RuntimeError) as e2:
+            print(f"wmm-qp driver franka: error: the robot did not recover: {e2}", file=sys.stderr, flush=True)
+        return None
 
     def _loop(self, fr: Any, link: FrankaLink, subs: tuple[Any, Any], lease_sub: Any, pubs: tuple[Any, Any],
               stop: threading.Event, max_cycles: int | None, robot_ip: str) -> int:
