@@ -43,7 +43,7 @@ ticks, misses, the tick's work, the garbage collector's collections in the slack
 core ticks every other cycle of the 1 kHz sim: half the states have no command of their own.
 
 ``embedded_plain.<rate>``: the embedded stack without its cycle's cost cuts (``--plain-cycle``:
-the interpreter's own garbage collection, its 5 ms switch interval, no spin before the deadline,
+the interpreter's own garbage collection, no spin before the deadline,
 the service thread at normal priority), in the same run: what the cuts buy.
 
 The floor (``floor.<rate>``): an empty loop at the sim's rate with the embedded loop's settings

@@ -53,8 +53,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "collector's work in the slack) to this file at exit")
     e.add_argument("--plain-cycle", action="store_true",
                    help="with --embedded: without the cycle's cost cuts (the garbage collector in the slack "
-                        "only, a 0.2 ms switch interval, the spin before each deadline, the service thread "
-                        "below the cycle's priority): to measure them (docs/benchmarks.md)")
+                        "only, the spin before each deadline, the service thread one level below the cycle's "
+                        "priority): to measure them (docs/benchmarks.md)")
     f = parser.add_argument_group("fault injection (reliability tests)")
     f.add_argument("--state-loss", type=float, default=0.0, metavar="P",
                    help="drop each state publication with probability P in [0, 1)")

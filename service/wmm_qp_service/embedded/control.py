@@ -48,10 +48,10 @@ OUTBOX = 4096
 """Messages waiting for the service thread at most (the oldest dropped beyond: a stalled
 service thread costs clients messages, never the cycle time)."""
 
-SWITCH_INTERVAL = 2e-4
-"""[s] the interpreter's thread switch interval while an embedded core runs (Python's default
-is 5 ms: a service thread holding the GIL when the cycle's deadline comes would keep it that
-long)."""
+# The interpreter's thread switch interval stays its default (5 ms): a short one (0.2 ms) made
+# the cycle hand the GIL to the service thread in the middle of its ticks; in an interleaved A/B
+# under load it missed more deadlines at 1 kHz in each of three rounds (818.9, 724.5, 1129.6 per
+# 10,000 against 326.8, 535.6, 264.5; benchmarks/results/embedded/ab_switch_interval.json).
 
 
 class CycleTiming(LoopTiming):
@@ -210,8 +210,8 @@ class EmbeddedControl:
         clock: [s] monotonic clock (the robot side's).
         wall: [s] wall clock (stamps).
         cuts: the cycle's cost cuts: Python's garbage collector in the slack only
-            (:class:`SlackCollector`) and a short thread switch interval (:data:`SWITCH_INTERVAL`);
-            False: the interpreter's defaults (``--plain-cycle``: to measure what they cut).
+            (:class:`SlackCollector`); False: the interpreter's own collection (``--plain-cycle``:
+            to measure what the cuts buy).
 
     Attributes:
         inbox: (kind, payload) from the service thread: ``mode``, ``setpoint``, ``obstacles``,
@@ -264,18 +264,14 @@ class EmbeddedControl:
         self.sent: Sent | None = None
         self._t_update = 0.0
         self._cycles = 0
-        self._switch = sys.getswitchinterval()
         self._fault_log: FaultLog | None = None
 
     # ------------------------------------------------------------------ life
     def start(self) -> float:
-        """Before the first cycle: fault lines to their own thread, the collector frozen, a short
-        switch interval; returns the loop's start [s]."""
+        """Before the first cycle: fault lines to their own thread, the collector frozen; returns
+        the loop's start [s]."""
         self._fault_log = FaultLog()
         self.core.say = self._fault_log
-        self._switch = sys.getswitchinterval()
-        if self.cuts:
-            sys.setswitchinterval(SWITCH_INTERVAL)
         self.gc.start()
         self.core.t0 = t0 = self.timing.start()
         return t0
@@ -283,7 +279,6 @@ class EmbeddedControl:
     def stop(self) -> None:
         """After the last cycle (never raises)."""
         self.gc.stop()
-        sys.setswitchinterval(self._switch)
         if self._fault_log is not None:
             self._fault_log.close()
             self._fault_log = None
@@ -403,7 +398,7 @@ class EmbeddedControl:
         t = self.timing
         p50, p99 = t.percentiles_us(50.0, 99.0)
         return {"rate_hz": t.rate_hz, "robot_rate_hz": self.robot_rate_hz, "decimation": self.decimation,
-                "cuts": self.cuts, "switch_interval_s": SWITCH_INTERVAL if self.cuts else self._switch,
+                "cuts": self.cuts, "switch_interval_s": sys.getswitchinterval(),
                 "ticks": t.ticks, "deadline_misses": t.deadline_misses,
                 "tick_us": {"p50": round(p50, 1), "p99": round(p99, 1), "max": round(t.tick_max * 1e6, 1)},
                 "gc": self.gc.report()}

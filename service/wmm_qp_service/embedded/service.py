@@ -61,7 +61,7 @@ class ServiceThread:
             one below it. It holds the GIL while it publishes: at normal priority on a loaded host
             the scheduler could take the CPU from it mid-call, and the cycle, real-time but
             waiting for the GIL, would wait for it (a priority inversion); one level below the
-            cycle it finishes its call, then yields within the switch interval.
+            cycle it finishes its pump and sleeps again.
     """
 
     def __init__(self, session: zenoh.Session, keys: Keys, control: EmbeddedControl, truth: bool = True,

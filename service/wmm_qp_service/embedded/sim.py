@@ -63,9 +63,9 @@ class EmbeddedSim:
         spin_s: [s] spin this long before each cycle's deadline instead of sleeping (the
             daemon's ``loop.spin_us``: a core that slept a whole period runs the next tick from
             cold caches; with ``cuts`` only).
-        cuts: the cycle's cost cuts (:class:`~.control.EmbeddedControl`'s, the spin, and the
-            service thread one SCHED_FIFO level below the cycle); False: the interpreter's and
-            the sim's defaults (``--plain-cycle``).
+        cuts: the cycle's cost cuts (:class:`~.control.EmbeddedControl`'s collector, the spin,
+            and the service thread one SCHED_FIFO level below the cycle); False: the
+            interpreter's and the sim's defaults (``--plain-cycle``).
     """
 
     def __init__(self, svc: ServiceConfig, sim_cfg: SimConfig, robot: w.RobotConfig, ctl_cfg: w.ControllerConfig,
