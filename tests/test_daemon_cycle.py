@@ -8,7 +8,7 @@ import pytest
 from test_daemon_core import DT, Plant
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.daemon import ControlCore, Cycle, RobotLink
-from wmm_qp_service.protocol import CommandMsg, StateMsg
+from wmm_qp_service.protocol import CommandMsg, ModeMsg, StateMsg
 
 import wmm_qp as w
 
@@ -94,13 +94,24 @@ def test_a_state_the_core_refuses_is_not_received(robot: w.RobotConfig) -> None:
     assert cycle.state_rx == pytest.approx(WALL0 + 2 * DT)
 
 
-def test_a_command_its_own_tick_made_late_is_not_sent_and_breaks_the_stream(robot: w.RobotConfig) -> None:
+def test_a_command_its_own_tick_made_late_is_not_sent_and_the_stream_is_braked_from_the_last_sent(
+        robot: w.RobotConfig) -> None:
+    """The tick took longer than the robot's command timeout: its command is not sent, and the
+    next one brakes the stream from the last command sent (within A·Δt of it), not from the one
+    withdrawn, in the same stream."""
     core, plant, link, clock, cycle = make(robot)
-    run(core, plant, link, clock, cycle, 5)
+    core.on_mode(ModeMsg(robot="wmm", seq=1, stamp=0.0, mode="dm_cartesian"))  # moving
+    run(core, plant, link, clock, cycle, 50)
+    last = link.sent[-1]
     link.inbox.append((WALL0 + clock.t, plant.msg()))
     assert cycle.poll_state() is not None
     now = clock.t
     clock.t = now + 1.0  # the tick took a second: the robot stopped by itself meanwhile
     assert cycle.command(now) is None
-    assert len(link.sent) == 5 and core.seq == 5
-    assert core.stream_broken and core.last_fault.startswith("command stream broken (the tick took 1000 ms")
+    assert len(link.sent) == 50 and core.seq == 50 and not core.stream_broken
+    assert core.last_fault.startswith("braking stream after a stall (the tick took 1000 ms")
+    sent = cycle.command(clock.t)
+    assert sent is not None and link.sent[-1].stream == last.stream and sent.seq == 51
+    a = np.asarray(robot.arm.acceleration_max) * DT
+    step = np.abs(np.asarray(link.sent[-1].arm_rates) - last.arm_rates)
+    assert np.all(step <= a * (1 + 1e-9)) and np.any(step > 0.5 * a)  # braking from the last one sent

@@ -496,19 +496,28 @@ def test_the_robots_own_stop_after_a_stall_is_no_state_age_for_the_next_stream(r
 
 def test_after_its_own_stall_the_daemon_waits_for_the_robots_stop(robot: w.RobotConfig) -> None:
     """A SIGSTOPped daemon: the robot stopped following its commands after its timeout. The
-    first command after the stall must start from what the robot does, not from the last one."""
+    commands after the stall continue the stream, braking from its last command (the robot, having
+    stopped the stream, refuses them); once a state shows the robot's stop, nothing goes out until
+    it rests, and the next stream's first command starts from what the robot does."""
     core, plant = make(robot)
     x0 = core.model.ee_position(plant.q_base, plant.q_arm)
     mode(core, "track")
     t = track(core, plant, 0.0, 200, x0 + np.array([0.2, 0.0, 0.0]))
     assert core.cmd is not None and np.abs(core.cmd.v).max() > 0.05  # moving
+    last, start = core.cmd, core.stream_start
     t += 0.2  # stalled for 200 ms
     core.on_state(plant.msg(), t)  # an old state, from before the stall, arrives first
-    assert core.tick(t) is None and core.stream_broken and "command stream broken" in core.last_fault
-    # the robot is braking itself; its state says so, but it is not at rest yet: still nothing
+    cmd = core.tick(t)
+    assert cmd is not None and cmd.status == w.Status.SAFE_STOP and core.stream_start == start
+    assert core.last_fault.startswith("braking stream after a stall (202 ms without a command")
+    assert max_step_ratio(robot, [last, cmd]) <= 1.0 + 1e-6  # braking the stream from its last command
+    core.seq += 1
+    core.sent(core.seq, t)
+    plant.cmd_seq = core.seq  # received, and refused: the robot's stop ended the stream
+    # the robot is braking itself; its state says so, but it is not at rest yet: nothing
     plant.v_arm, plant.wheels = 0.5 * plant.v_arm, 0.5 * plant.wheels
     core.on_state(plant.msg(stale_stop=True), t + DT)
-    assert core.tick(t + DT) is None
+    assert core.tick(t + DT) is None and core.stream_broken
     plant.v_arm, plant.wheels = np.zeros(robot.n_arm), np.zeros(robot.n_wheels)  # at rest
     t += 2 * DT
     core.on_state(plant.msg(stale_stop=True), t)

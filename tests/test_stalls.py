@@ -8,15 +8,24 @@ loaded hosts and SIGSTOP drills produced, replayed with fake clocks (no timing).
    frozen daemon's transmit queue, reached the robot after it had braked to rest in its stale stop
    and restarted it; the daemon, having seen the stop, started a new stream from rest: the robot's
    executed rates and the new stream's first command met as a jump (2.50 A·Δt).
+3. The daemon's own stall while its stream's commands were still on the way (the UR5's physics
+   demo at 1 kHz: 8 counts, one command): it went silent and started a new stream on a state of
+   the robot at rest in an older stream's stop, which had applied none of the broken stream's
+   commands; those reached the robot afterwards and moved it, and the new stream's first command,
+   computed from rest, met it moving. The daemon now keeps the stream and brakes it.
 """
 
 from __future__ import annotations
 
+from collections import deque
+
 import numpy as np
 import pytest
+from test_daemon_core import max_step_ratio
 from wmm_qp_service.config import ServiceConfig
+from wmm_qp_service.daemon import ControlCore
 from wmm_qp_service.drivers.sim_node import CommandInbox, SimNode
-from wmm_qp_service.protocol import CommandMsg, encode
+from wmm_qp_service.protocol import CommandMsg, ModeMsg, SetpointMsg, StateMsg, encode
 from wmm_qp_sim import load_sim_config
 from wmm_qp_sim.robot import SimCommand, SimRobot
 
@@ -206,3 +215,186 @@ def test_a_flushed_transmit_queue_is_judged_over_the_sender_s_clock(sender_stamp
     assert st.stale_stop and node.sim.refused == 2
     counted = st.violations["acceleration"]
     assert counted == (0 if sender_stamps else 1), node.sim.referee.last_event
+
+
+# ---------------------------------------------------------------- 3. the daemon's own stall
+class Wire:
+    """The daemon's core and a simulated robot joined in memory on one fake clock: each daemon
+    tick (``PERIOD``) is two robot steps (``DT``). A command goes into the wire and reaches the
+    robot at the next step, one per step, oldest first; ``hold`` keeps them in the wire (a
+    congested link, a starved transmit thread) and ``drop`` loses them. States reach the daemon
+    at once. Commands are numbered, stamped and given their stream as the daemon's cycle does."""
+
+    def __init__(self, robot: w.RobotConfig) -> None:
+        self.core = ControlCore(ServiceConfig(), w.load_controller_config(), robot)
+        self.robot = robot
+        self.sim = SimRobot(self.core.model, load_sim_config(), ramp=True)
+        self.sim.reset()
+        self.t = 0.0
+        self.queue: deque[SimCommand] = deque()
+        self.hold = self.drop = False
+        self.sent: list[tuple[int, int, w.Command]] = []  # (seq, stream, command) as sent
+        self.cmd_seq = -1  # the last command the robot received
+        self.n = 0
+        self.target: np.ndarray | None = None  # the setpoint streamed each tick (None: none)
+
+    def msg(self) -> StateMsg:
+        st = self.sim.state()
+        self.n += 1
+        return StateMsg(robot="wmm", seq=self.n, stamp=0.0, t=st.t, q_base=st.base_odom.tolist(),
+                        q_arm=st.q_arm.tolist(), v_arm=st.v_arm.tolist(), wheel_speeds=st.wheel_speeds.tolist(),
+                        tau=st.tau.tolist(), stale_stop=st.stale_stop, cmd_seq=self.cmd_seq, instance="sim-A",
+                        lease=self.core.lease, protective_stop=st.protective_stop,
+                        protective_stops=st.protective_stops, protective_reason=st.protective_reason,
+                        refused={"firmware": st.refused_commands} if st.refused_commands else {})
+
+    def mode(self, name: str) -> None:
+        self.core.on_mode(ModeMsg(robot="wmm", seq=1, stamp=0.0, mode=name))
+
+    def tick(self, state: StateMsg | None = None) -> w.Command | None:
+        """One daemon tick at the robot's current state (or ``state``), then the robot's steps."""
+        core = self.core
+        core.on_state(state if state is not None else self.msg(), self.t)
+        if self.target is not None:
+            core.on_setpoint(SetpointMsg(robot="wmm", seq=1, stamp=self.t, x=self.target.tolist(), source="op"),
+                             self.t)
+        cmd = core.tick(self.t)
+        if cmd is not None:
+            core.seq += 1
+            core.sent(core.seq, self.t)
+            self.sent.append((core.seq, core.stream_start, cmd))
+            if not self.drop:
+                self.queue.append(SimCommand(cmd.wheel_speeds.copy(), cmd.arm_rates.copy(), period=PERIOD,
+                                             seq=core.seq, stream=core.stream_start, sent=self.t))
+        self.run(PERIOD)
+        return cmd
+
+    def run(self, seconds: float) -> None:
+        """The robot lives ``seconds`` [s] on (the daemon does not tick: it is stalled)."""
+        for _ in range(round(seconds / DT)):
+            c = self.queue.popleft() if self.queue and not self.hold else None
+            if c is not None:
+                c.received = self.sim.t
+                self.cmd_seq = c.seq  # type: ignore[assignment]
+            self.sim.step(c, DT)
+        self.t += seconds
+
+    def counts(self) -> int:
+        return sum(self.sim.state().violations.values())
+
+
+@pytest.fixture(scope="module")
+def robot() -> w.RobotConfig:
+    return w.load_robot_config()
+
+
+def _tracking(robot: w.RobotConfig) -> tuple[Wire, np.ndarray]:
+    """A daemon tracking a target 20 cm away for 0.2 s, the robot following (moving)."""
+    wire = Wire(robot)
+    x0 = wire.core.model.ee_position(wire.sim.base_odom, wire.sim.q_arm)
+    wire.mode("track")
+    wire.target = x0 + np.array([0.2, 0.0, 0.0])
+    for _ in range(100):
+        assert wire.tick() is not None
+    assert np.abs(wire.sim.v_arm).max() > 0.05 and not wire.core.fault_active
+    return wire, x0
+
+
+def test_after_its_own_stall_the_daemon_brakes_its_stream_while_its_commands_may_be_on_the_way(
+        robot: w.RobotConfig) -> None:
+    """The defect, replayed: the robot rests in the stop of an older stream A; the daemon's
+    stream B (40 commands, tracking) sits in the wire; the daemon stalls 50 ms; the next state
+    still shows A's stop at rest. Before, the daemon started a new stream C from rest on it; B's
+    commands, reaching the robot afterwards, moved it, and C's first met it moving (a jump, "from
+    the executed rates (a new stream)"). Now it keeps B and brakes it to rest: whenever B reaches
+    the robot it runs from rest to rest, 0 counts; once a state shows B's zero applied at rest,
+    the daemon goes on within B (in hold until a mode message)."""
+    wire = Wire(robot)
+    core = wire.core
+    for _ in range(20):  # stream A, in hold, followed
+        assert wire.tick() is not None
+    a_start = core.stream_start
+    wire.drop = True  # A's commands are lost: the robot stops A by itself, at rest
+    while not (wire.sim.stale and not wire.sim.v_arm.any()):
+        wire.tick()
+    wire.drop, wire.hold = False, True  # the next stream's commands wait in the wire
+    assert wire.tick() is not None  # the state shows A's stop at rest: A breaks, B starts from rest
+    assert "its command timeout" in core.last_fault and core.stream_start > a_start
+    b = core.stream_start
+    x0 = core.model.ee_position(wire.sim.base_odom, wire.sim.q_arm)
+    wire.mode("track")
+    wire.target = x0 + np.array([0.2, 0.0, 0.0])
+    for _ in range(40):
+        wire.tick()
+    assert core.stream_start == b and len(wire.queue) == 41 and wire.sim.stale  # none of B applied
+    assert np.abs(wire.sent[-1][2].arm_rates).max() > 2 * robot.arm.acceleration_max[0] * PERIOD  # B moves
+    wire.run(0.050)  # the daemon stalls 50 ms
+    wire.tick()  # on a state of the robot at rest in A's stop: B's commands may still be on the way
+    wire.hold = False  # they are: the wire delivers them, and what the daemon sent after them
+    for _ in range(150):
+        wire.tick()
+    assert wire.counts() == 0, wire.sim.referee.last_event
+    after = [(seq, stream, cmd) for seq, stream, cmd in wire.sent if stream == b]
+    assert [stream for _, stream, _ in wire.sent[-150:]] == [b] * 150  # no new stream
+    assert max_step_ratio(robot, [cmd for _, _, cmd in after]) <= 1.0 + 1e-9  # each inside A·Δt
+    assert core.faults["braking stream after a stall"] == 1
+    # the robot followed B from A's stop and braked with it to rest; the daemon goes on within B
+    assert not wire.sim.stale and not wire.sim.v_arm.any() and not wire.sim.wheels.any()
+    assert not core.safe and core.mode == w.Mode.HOLD and core.resume_needed
+    wire.mode("track")  # resume: the task goes on in B, anchored on its last command
+    for _ in range(100):
+        wire.tick()
+    assert core.stream_start == b and not core.fault_active and wire.counts() == 0
+    assert np.abs(wire.sim.v_arm).max() > 0.01  # moving again
+
+
+def test_a_stall_inside_the_robots_timeout_brakes_with_the_robot_following(robot: w.RobotConfig) -> None:
+    """A 22 ms stall: past the daemon's own limit (20 ms, 0.8 × the robot's 25 ms timeout), not
+    the robot's. The daemon goes on in the same stream with braking commands: the robot never
+    stops by itself, brakes with the stream to rest, 0 counts, and the daemon goes on in it,
+    holding until a mode message. (Before, it went silent: the robot's timeout stopped it.)"""
+    wire, _ = _tracking(robot)
+    core = wire.core
+    b = core.stream_start
+    last = wire.sent[-1][2]
+    wire.run(0.020)  # and the tick's own period: 22 ms since the last command
+    cmd = wire.tick()
+    assert cmd is not None and core.stream_start == b  # braking, in the same stream
+    assert core.last_fault.startswith("braking stream after a stall (22 ms without a command")
+    assert cmd.status == w.Status.SAFE_STOP and cmd.reason == core.last_fault
+    assert max_step_ratio(robot, [last, cmd]) <= 1.0 + 1e-9  # from the last command sent
+    for _ in range(200):
+        wire.tick()
+        assert not wire.sim.stale  # the robot never stopped by itself
+    assert wire.counts() == 0, wire.sim.referee.last_event
+    assert {stream for _, stream, _ in wire.sent} == {b}
+    assert not core.safe and core.mode == w.Mode.HOLD and core.resume_needed
+    assert not wire.sim.v_arm.any()
+
+
+def test_a_robot_that_stopped_the_stream_during_the_stall_refuses_its_braking(robot: w.RobotConfig) -> None:
+    """A 200 ms stall: the robot stopped the stream (its timeout) and braked to rest. The first
+    state after the stall is one from before (a late one): the daemon brakes the stream from its
+    last command; the robot refuses those commands (its stop ended the stream); the next state
+    shows its stop with one of them applied: the stream breaks, and (the robot at rest) a new
+    stream starts from rest. 0 counts; the robot never moved again before the new stream."""
+    wire, _ = _tracking(robot)
+    core = wire.core
+    b = core.stream_start
+    old = wire.msg()  # a state from before the stall
+    last = wire.sent[-1][2]
+    wire.run(0.200)
+    assert wire.sim.stale and not wire.sim.v_arm.any()  # stopped, at rest
+    q_stop = wire.sim.q_arm.copy()
+    cmd = wire.tick(old)
+    assert cmd is not None and core.stream_start == b and max_step_ratio(robot, [last, cmd]) <= 1.0 + 1e-9
+    assert wire.sim.refused == 1  # the robot refused it: its stop ended B
+    cmd = wire.tick()  # its state shows the stop, with B's command applied: B breaks; at rest, a new stream
+    assert core.faults["the robot stopped following the commands"] == 1
+    assert cmd is not None and core.stream_start > b and np.allclose(wire.sim.q_arm, q_stop)  # from rest
+    a = np.asarray(robot.arm.acceleration_max) * PERIOD
+    assert np.all(np.abs(cmd.arm_rates) <= a * (1 + 1e-9))
+    for _ in range(50):
+        wire.tick()
+    assert wire.counts() == 0, wire.sim.referee.last_event
+    assert core.mode == w.Mode.HOLD and core.resume_needed

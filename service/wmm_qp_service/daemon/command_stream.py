@@ -6,11 +6,14 @@ command was sent, without shared clocks. The median bound over :data:`~.watchdog
 states is the round trip the watchdog checks; with the state trigger the worst one sets bounds
 (13)'s latency margin (``follow_state_age``).
 
-A stream is the commands since the robot last followed them from rest: it breaks when this
-daemon stalls past the robot's command timeout (:meth:`CommandStream.late`), when the robot
-stops by itself (:meth:`CommandStream.left`), or when the lease is lost. While it holds, the
-controller's acceleration bounds start from the last command (:meth:`CommandStream.anchored`:
-what the robot executes next), and a tick without a new state predicts one (:func:`predicted`).
+A stream is the commands since the robot last followed them from rest: it breaks when the robot
+stops by itself (:meth:`CommandStream.left`) or when the lease is lost. This daemon's own stall
+past the robot's command timeout (:meth:`CommandStream.late`) does not break it: the stream is
+kept and braked to rest (:meth:`CommandStream.stall`, :meth:`CommandStream.braked`), since its
+commands may still be on the way and every braking command is a legal continuation of them,
+whatever the robot did meanwhile. While it holds, the controller's acceleration bounds start from
+the last command (:meth:`CommandStream.anchored`: what the robot executes next), and a tick
+without a new state predicts one (:func:`predicted`).
 """
 
 from __future__ import annotations
@@ -51,6 +54,8 @@ class CommandStream:
         inherited_cmd_seq: the last command the robot applied before this daemon drove it (a
             restarted daemon): not of this daemon's stream, until the robot applies one of
             this daemon's (-1: none).
+        stalled: why the stream is being braked after this daemon's own stall ("": it is not).
+        rest_seq: the seq of the braked stream's first command at rest (0: not sent yet).
     """
 
     def __init__(self, wd: WatchdogConfig, base_latency: float, set_latency: Callable[[float], None]) -> None:
@@ -78,6 +83,8 @@ class CommandStream:
         self.anchor_on_command = False
         self.cmd_state_seq = -1
         self.inherited_cmd_seq = -1
+        self.stalled = ""
+        self.rest_seq = 0
         self._anchor: w.RobotState | None = None  # the anchored state handed to the controller
 
     def sent(self, seq: int, now: float) -> None:
@@ -95,6 +102,7 @@ class CommandStream:
         daemon's, or -1): its rates are what it executes, its ages start anew."""
         self.inherited_cmd_seq = cmd_seq
         self.anchor_on_command = False
+        self.stalled = ""  # the braked stream's commands name the old instance: it refuses them
         self.reset_age()
 
     def applied(self, msg: StateMsg) -> None:
@@ -144,10 +152,40 @@ class CommandStream:
         return ((msg.stale_stop or msg.protective_stop) and 0 < self.start <= msg.cmd_seq
                 and msg.cmd_seq != self.inherited_cmd_seq)
 
+    def stall(self, why: str) -> None:
+        """This daemon stalled past the robot's command timeout: the stream is kept and braked.
+
+        Its commands may still be on the way (a congested link, a starved transmit thread), so
+        no new stream may start: the robot could still follow this one when the new one's first
+        command, computed from rest, reaches it. Each braking command (the controller's safe
+        stop, anchored on the last command sent) is a legal continuation of the stream whatever
+        the robot did: if it stopped the stream meanwhile, it refuses the rest and a state shows
+        its stop (:meth:`left`: the stream breaks); if it still follows, it brakes to rest with
+        the stream; if none of the stream's commands has reached it yet, they make a sequence
+        from rest to rest whenever they do. The states' ages measured across the stall say
+        nothing about the link: the window starts anew, and the stall is not counted again.
+
+        Args:
+            why: the fault, as the status and the braking commands say it.
+        """
+        self.stalled = why
+        self.rest_seq = 0
+        self.last_sent_t = -math.inf  # acted on: the next command is not late by this stall
+        self.reset_age()
+
+    def braked(self, msg: StateMsg) -> bool:
+        """The braked stream reached the robot: the state applied its first command at rest (or
+        a later one of this daemon's) and shows the robot at rest, not in a stop. Every command
+        sent before it has reached the robot or is lost, so the stream goes on from rest."""
+        return (0 < self.rest_seq <= msg.cmd_seq <= self.seq and msg.cmd_seq != self.inherited_cmd_seq
+                and not (msg.stale_stop or msg.protective_stop) and not any(msg.v_arm)
+                and not any(msg.wheel_speeds))
+
     def break_off(self) -> None:
         """The robot no longer follows the stream: nothing goes out until it rests, and the
         next stream starts from its measured rates and its own clock."""
         self.broken = True
+        self.stalled = ""
         self.reset_age()  # silent meanwhile: the states' ages say nothing about the link
         self.anchor_on_command = False
         self.last_sent_t = -math.inf
@@ -161,8 +199,7 @@ class CommandStream:
         command against the previous one). The measured rates lag it by the state's age, and
         a late state would pull the bounds back and let two consecutive commands differ by
         more than A·Δt. The measured rates are used for the first command of a stream (to a
-        new sim instance, or after this daemon's own stall) and when the robot stopped
-        following the stream (a state that applied one of its commands shows a stale or a
+        new sim instance, or after a break) and when the robot stopped following the stream (a state that applied one of its commands shows a stale or a
         protective stop); a state from before the stream began does not count.
         """
         if not self.anchor_on_command or cmd is None or (msg is not None and self.left(msg)):

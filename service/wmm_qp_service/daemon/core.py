@@ -121,6 +121,7 @@ class ControlCore(CoreInputs):
         self.truth: TruthMsg | None = None  # the latched instance's last evaluation data (optional)
         self.stages: TickStages | None = None  # the breakdown's stopwatch (None: off)
         self.step_ns = 0  # [ns] the last ctl.step
+        self._sent: tuple[w.Command | None, bool] = (None, False)  # the last command sent, and anchored
 
     # ------------------------------------------------------------------ the state
     def on_state(self, msg: StateMsg, now: float) -> bool:
@@ -184,9 +185,8 @@ class ControlCore(CoreInputs):
                       self.stream.round_trip, self.fault_record)
 
     def break_stream(self, why: str) -> None:
-        """The robot no longer follows this daemon's commands: this daemon stalled past the
-        robot's command timeout, the robot stopped itself (its timeout, a protective stop),
-        or another daemon holds the lease.
+        """The robot no longer follows this daemon's commands: it stopped itself (its timeout,
+        a protective stop), or another daemon holds the lease.
 
         The robot is braking by itself, at rates the daemon does not know: a command now would
         jump from them. Until a state shows the robot at rest in its own stop, :meth:`tick` sends
@@ -196,6 +196,27 @@ class ControlCore(CoreInputs):
         self._fault(why)
         self.safe = True
         self.stream.break_off()
+
+    def brake_stream(self, why: str) -> None:
+        """This daemon stalled past the robot's command timeout: keep the stream and brake it.
+
+        :meth:`tick` sends the controller's safe stop anchored on the last command sent, down
+        to zero, then zeros, in the same stream (:meth:`.CommandStream.stall` says why no new
+        stream may start while its commands may be on the way). A state that shows the robot's
+        own stop having applied one of them breaks it (:meth:`break_stream`); one that shows the
+        robot at rest having applied its first zero ends the braking: the stream goes on, in
+        hold until a mode message resumes (``resume = "manual"``).
+        """
+        self._fault(why)
+        self.safe = True
+        self.stream.stall(why)
+
+    def withdraw(self, why: str) -> None:
+        """The command :meth:`tick` returned was not sent (the tick itself took past the robot's
+        command timeout): the last command sent anchors again, and the stream is braked from it
+        (:meth:`brake_stream`)."""
+        self.cmd, self.stream.anchor_on_command = self._sent
+        self.brake_stream(why)
 
     @property
     def lease_taken(self) -> bool:
@@ -212,13 +233,16 @@ class ControlCore(CoreInputs):
     def tick(self, now: float) -> w.Command | None:
         """One control tick at ``now`` [s]; returns the command to send (None: nothing)."""
         self.now = now
+        stream = self.stream
+        self._sent = (self.cmd, stream.anchor_on_command)  # the last command sent (withdraw)
         if self.state is None or not self._may_send(now):
             return None
-        stream = self.stream
         if not stream.anchor_on_command:  # this tick's command starts a stream (the referee's baseline)
             stream.start = stream.seq + 1  # the seq the sender gives it
-        if (why := self.hazard(now)) is not None:
+        if (why := self.hazard(now) or stream.stalled or None) is not None:
             cmd = self._safe_stop(why)
+            if stream.stalled and not stream.rest_seq and not cmd.arm_rates.any() and not cmd.wheel_speeds.any():
+                stream.rest_seq = stream.seq + 1  # the braked stream's first command at rest
             if self.stages is not None:
                 self.stages.lap(WATCHDOGS)
             return cmd
@@ -266,11 +290,12 @@ class ControlCore(CoreInputs):
 
     def _may_send(self, now: float) -> bool:
         """Whether this tick may send at all: not while the robot stopped following the stream
-        (until a state shows it at rest in its own stop), nor while another daemon holds the lease."""
+        (until a state shows it at rest in its own stop), nor while another daemon holds the lease.
+        A stall of this daemon's own starts braking the stream (:meth:`brake_stream`)."""
         stream, msg = self.stream, self.state_msg
         if not stream.broken and stream.late(now):
-            self.break_stream(f"command stream broken ({(now - stream.last_sent_t) * 1e3:.0f} ms without a "
-                              f"command: the robot stops itself)")
+            self.brake_stream(f"braking stream after a stall ({(now - stream.last_sent_t) * 1e3:.0f} ms without "
+                              f"a command: its commands may still reach the robot)")
         if not stream.broken and self.state_fresh and msg is not None and stream.left(msg):
             cause = f"protective stop: {msg.protective_reason}" if msg.protective_stop else "its command timeout"
             self.break_stream(f"the robot stopped following the commands ({cause})")
@@ -286,6 +311,8 @@ class ControlCore(CoreInputs):
                 return False
             stream.broken = False
             stream.anchor_on_command = False
+        if stream.stalled and self.state_fresh and msg is not None and stream.braked(msg):
+            stream.stalled = ""  # the robot follows the braked stream, at rest: it goes on
         return True
 
     def _after_fault(self) -> None:

@@ -5,7 +5,7 @@ Each cycle takes the newest state off the :class:`~.robot_link.RobotLink` and ha
 with its bookkeeping: the next seq, the stream it belongs to, the lease and the robot instance
 it is for, and its publication time (the state-age window's reference). A command the tick
 itself made late (longer than the robot's command timeout since the last one) is not sent: the
-stream breaks instead.
+stream is braked from the last command sent instead (:meth:`.ControlCore.withdraw`).
 """
 
 from __future__ import annotations
@@ -92,8 +92,8 @@ class Cycle:
         if cmd is None:
             return None
         if core.late(t_pub := self.clock()):  # this tick itself stalled
-            core.break_stream(f"command stream broken (the tick took "
-                              f"{(t_pub - now) * 1e3:.0f} ms: its command is too late)")
+            core.withdraw(f"braking stream after a stall (the tick took {(t_pub - now) * 1e3:.0f} ms: "
+                          f"its command is too late)")
             return None
         stream = core.stream
         stream.seq += 1
