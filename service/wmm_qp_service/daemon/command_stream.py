@@ -199,8 +199,9 @@ class CommandStream:
         command against the previous one). The measured rates lag it by the state's age, and
         a late state would pull the bounds back and let two consecutive commands differ by
         more than A·Δt. The measured rates are used for the first command of a stream (to a
-        new sim instance, or after a break) and when the robot stopped following the stream (a state that applied one of its commands shows a stale or a
-        protective stop); a state from before the stream began does not count.
+        new sim instance, or after a break) and when the robot stopped following the stream (a
+        state that applied one of its commands shows a stale or a protective stop); a state
+        from before the stream began does not count.
         """
         if not self.anchor_on_command or cmd is None or (msg is not None and self.left(msg)):
             return st
