@@ -257,3 +257,10 @@ def save_shot(png: bytes, tmp: Path, name: str) -> Path:
         Path(dest).mkdir(parents=True, exist_ok=True)
         shutil.copy(out, Path(dest) / name)
     return out
+
+
+def urdf_mesh_links(urdf: Path) -> int:
+    """How many links of a URDF have a visual mesh (read from its XML, not by the console's loader)."""
+    import xml.etree.ElementTree as ET
+
+    return sum(1 for link in ET.parse(urdf).getroot().iter("link") if link.find("visual/geometry/mesh") is not None)

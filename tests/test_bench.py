@@ -101,6 +101,21 @@ def test_e2e_over_zenoh(capsys: pytest.CaptureFixture[str]) -> None:
         assert 0.0 <= r["applied_next_step"] <= 1.0 and r["tick_over_step_p50"] > 1.0
         assert set(r["cpu_pct"]) == {"sim", "daemon", "client"}
         assert r["daemon_loop_end"]["trigger"] == case.split()[0]
+    # the embedded stack in the same run, its keys mirroring the split's rates; the machine's floor
+    for rate in ("500", "1000"):
+        r = e2e["embedded"][rate]
+        assert r["available"] and r["exit_codes"] == {"embedded": 0}
+        assert r["daemon_loop_end"]["trigger"] == "embedded" and r["daemon_loop_end"]["rate_hz"] == float(rate)
+        for k in ("tick_us", "step_us", "state_to_cmd_us"):
+            assert set(r[k]) == {"p50", "p99", "p999", "max", "n"} and r[k]["n"] > 0, k
+        assert r["state_to_cmd_us"]["p50"] > 0 and r["misses_per_10k"] is not None
+        assert set(r["cpu_pct"]) == {"embedded", "client"} and sum(r["violations"].values()) == 0
+        assert r["cycle"]["decimation"] == 1000 // int(rate) and r["cycle"]["ticks"] > 0
+    plain = e2e["embedded_plain"]["1000"]  # without the cycle's cost cuts, beside it
+    assert plain["available"] and not plain["cycle"]["cuts"] and e2e["embedded"]["1000"]["cycle"]["cuts"]
+    assert plain["cycle"]["gc"]["enabled"] is False and plain["state_to_cmd_us"]["n"] > 0
+    f = e2e["floor"]["1000"]
+    assert f["ticks"] == 1000 and f["misses_per_10k"] is not None and f["spin_us"] == 200.0
 
 
 @pytest.mark.integration
@@ -286,3 +301,41 @@ def test_sim_section_on_one_plant(capsys: pytest.CaptureFixture[str]) -> None:
     out = json.loads(capsys.readouterr().out)
     assert out["physics"] == ["kinematic"]
     assert all(set(row) == {"file", "available", "kinematic"} for row in out["sim"].values())
+
+
+def test_tick_section_times_this_tree_and_a_baseline_tree_in_alternating_rounds(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """``--only tick --baseline-tree DIR`` (DIR: this same tree): each round one worker run per tree,
+    the first of a round alternating; the JSON's tick_compare and the report's line (no timing asserted)."""
+    from wmm_qp_service.bench.compare_commits import HERE
+    from wmm_qp_service.bench.tick_compare import round_order
+    from wmm_qp_service.commands.bench import _print_report
+
+    assert [round_order(k) for k in range(3)] == [("this", "baseline"), ("baseline", "this"), ("this", "baseline")]
+    argv = ["bench", "--json", "--only", "tick", "--baseline-tree", str(HERE), "--ticks", "5", "--rounds", "2"]
+    assert main([*argv, "--solver", "daqp"]) == 0
+    r = json.loads(capsys.readouterr().out)
+    t = r["tick_compare"]
+    assert {"this_us_p50", "baseline_us_p50", "ratio", "rounds"} <= set(t)
+    assert t["rounds"] == 2 and len(t["ratio_rounds"]) == 2 and t["solver"] == "daqp" and t["ratio"] > 0
+    assert t["same_run"]["stages"] and t["same_run"]["status"]  # the same tree: the same numerics
+    _print_report(r)  # the text report: one line with the ratio
+    (line,) = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("tick ")]
+    assert "ratio this/baseline" in line and "over 2 rounds" in line
+
+
+def test_tick_section_a_bad_baseline_tree_is_one_line_and_exit_2(
+    tmp_path, capsys: pytest.CaptureFixture[str]  # type: ignore[no-untyped-def]
+) -> None:
+    for argv, says in (
+        (["--only", "tick", "--baseline-tree", str(tmp_path)], f"--baseline-tree {tmp_path}: not a wmm-qp source tree"),
+        (["--only", "tick", "--baseline-tree", str(tmp_path / "nope")], "not a directory"),
+        (["--only", "tick"], "--only tick needs --baseline-tree DIR"),
+        (["--only", "controller", "--baseline-tree", str(tmp_path)], "--baseline-tree applies to the tick section"),
+        (["--only", "tick", "--baseline-tree", str(tmp_path), "--rounds", "0"], "--rounds must be at least 1"),
+    ):
+        assert main(["bench", *argv]) == 2
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+        assert err.startswith("wmm-qp bench: error: ") and says in err, err

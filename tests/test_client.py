@@ -1,16 +1,18 @@
 """The client API without transport: robot ids, the fault bookkeeping fed by the status stream,
-and the deliberate resume (the session's subscribers and publishers replaced by fakes)."""
+the deliberate resume and the wait until the daemon is ready (the session's subscribers,
+publishers and queries replaced by fakes)."""
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import Any
 
 import msgspec
 import pytest
-from wmm_qp_service.client import Client, robot_id
+from wmm_qp_service.client import Client, NotReady, robot_id
 from wmm_qp_service.config import ServiceConfig
-from wmm_qp_service.protocol import ModeMsg, StatusMsg, encode
+from wmm_qp_service.protocol import InfoMsg, ModeMsg, StatusMsg, encode
 
 from wmm_qp import ConfigError
 
@@ -24,8 +26,9 @@ class _Payload:
 
 
 class _Sample:
-    def __init__(self, data: bytes) -> None:
+    def __init__(self, data: bytes, key: str = "") -> None:
         self.payload = _Payload(data)
+        self.key_expr = key
 
 
 class FakeSub:
@@ -149,3 +152,61 @@ def test_robot_ids_from_a_robot_file_or_an_id(tmp_path: Path) -> None:
         robot_id(bad)
     with pytest.raises(ConfigError, match="robot"):
         robot_id("a b")
+
+
+class _Reply:
+    def __init__(self, key: str, data: bytes = b"") -> None:
+        self.ok = _Sample(data, key)
+
+
+class FakeSession:
+    """The daemon's liveliness token and ``info`` queryable (``answers`` None: no daemon at all).
+    Its status says ``state_ok`` from the ``ok_from``-th info query on (None: never)."""
+
+    def __init__(self, answers: bool = True, ok_from: int | None = 1) -> None:
+        self.answers = answers
+        self.ok_from = ok_from
+        self.queries = 0
+
+    def liveliness(self) -> FakeSession:
+        return self
+
+    def get(self, key: str, timeout: float = 1.0) -> list[_Reply]:
+        if not self.answers:
+            return []
+        if key.endswith("/alive/daemon"):
+            return [_Reply(key)]
+        assert key.endswith("/info"), key
+        self.queries += 1
+        ok = self.ok_from is not None and self.queries >= self.ok_from
+        st = StatusMsg(robot="r", mode="hold", state_ok=ok, safe_stop=False, sim_alive=True)
+        return [_Reply(key, encode(InfoMsg(robot="r", status=st)))]
+
+
+def session_client(session: FakeSession) -> Client:
+    c = Client(ServiceConfig(robot="r"))
+    c.session = session  # type: ignore[assignment]
+    return c
+
+
+def test_wait_ready_returns_the_info_once_the_state_is_valid() -> None:
+    session = FakeSession(ok_from=3)  # the daemon answers at once, its robot's state is valid from the 3rd query
+    info = session_client(session).wait_ready(timeout=5.0)
+    assert info.status.state_ok and session.queries == 3
+
+
+def test_wait_ready_without_a_daemon_times_out_naming_the_robot() -> None:
+    t0 = time.monotonic()
+    with pytest.raises(NotReady, match=r"not ready after 0\.\d s: no daemon for robot wmm/r ") as e:
+        session_client(FakeSession(answers=False)).wait_ready(timeout=0.3)
+    assert e.value.info is None and e.value.robot == "wmm/r" and 0.3 <= e.value.waited < 2.0
+    assert "daemons seen: none" in e.value.reason and time.monotonic() - t0 < 2.0
+
+
+def test_wait_ready_with_a_daemon_but_no_valid_state_times_out_with_its_last_answer() -> None:
+    session = FakeSession(ok_from=None)
+    t0 = time.monotonic()
+    with pytest.raises(NotReady, match="has no valid state from its robot") as e:
+        session_client(session).wait_ready(timeout=5.0, state_timeout=0.3)
+    assert e.value.info is not None and not e.value.info.status.state_ok
+    assert session.queries >= 2 and 0.3 <= time.monotonic() - t0 < 2.0  # state_timeout, not timeout

@@ -241,7 +241,7 @@ def test_no_monitored_pair_starts_inside_the_safety_distance(name: str) -> None:
 
 def test_the_damper_bound_is_the_braking_profile_where_the_linear_damper_asks_too_much() -> None:
     """ḋ ≥ max(−ξ (d − d_s)/(d_i − d_s), −√(2 β a_n (d − d_s))), a_n = Σ_j |C_j| A_j."""
-    from wmm_qp.limits.collision import _row_bounds
+    from wmm_qp.limits.dampers import _row_bounds
 
     row, accel = np.array([0.0, 0.2, -0.1]), np.array([1.0, 1.0, 2.0])  # a_n = 0.4
     zero, lo, hi = np.zeros(3), -np.ones(3), np.ones(3)
@@ -320,7 +320,7 @@ def test_a_capsule_whose_segment_is_inside_a_box_is_left_to_coal() -> None:
     import coal
     import pinocchio as pin
 
-    from wmm_qp.limits.collision import Table, _pair_distances
+    from wmm_qp.limits.pair_search import Table, _pair_distances
 
     along_x = pin.rpy.rpyToMatrix(0.0, math.pi / 2, 0.0)
     capsule, wall = coal.Capsule(0.02, 0.08), coal.Box(0.1, 2.0, 2.0)  # segment x in ±0.04, wall x in ±0.05
@@ -428,7 +428,7 @@ def test_rows_relaxed_together_slow_an_approach_the_braking_command_keeps() -> N
     (C v = −0.1 at a vertex). Relaxed together, the row admits no faster approach than that;
     relaxed to v₀ (before), TIAGo's hand kept approaching its torso column at the braking
     command's rate, into contact."""
-    from wmm_qp.limits.collision import Rows
+    from wmm_qp.limits.rows import Rows
 
     lb, ub = np.array([0.4, -0.9]), np.array([0.6, -0.7])
     rows = Rows(C=np.array([[1.0, 1.0]]), l=np.array([-0.1]), damper=np.array([0.5]))
@@ -446,7 +446,7 @@ def test_rows_relaxed_together_admit_their_command_and_come_nearer_than_braking(
     to the braking command v₀ (what verify's collision rule asks of a pair inside d_s), and the
     approaches it leaves (rates below min(damper, 0)) are no larger, in squares, than v₀'s; with
     EE box rows that admit v₀, they admit the joint command too."""
-    from wmm_qp.limits.collision import Rows
+    from wmm_qp.limits.rows import Rows
 
     rng = np.random.default_rng(seed)
     n, m = 10, int(rng.integers(1, 12))

@@ -165,7 +165,7 @@ def test_the_fr3_file_holds_frankas_published_limits() -> None:
     pytest.importorskip("franky_sim", reason="the FR3's URDF ships with franky-sim (pip install franky-sim)")
     r = w.load_robot_config(default_config_dir() / "robots" / "fr3.toml")
     a = r.arm
-    assert r.base.kind == "fixed" and a.n == 7 and a.ee_frame == "link8"
+    assert r.base.kind == "fixed" and a.n == 7 and a.ee_frame == "fr3_link8"
     np.testing.assert_array_equal(a.position_upper, [2.7437, 1.7837, 2.9007, -0.1518, 2.8065, 4.5169, 3.0159])
     np.testing.assert_array_equal(a.velocity_max, [2.62] * 4 + [5.26, 4.18, 5.26])
     np.testing.assert_array_equal(a.acceleration_max, [10.0] * 7)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from typing import Any
 
 import numpy as np
 import pytest
@@ -101,6 +102,54 @@ def test_status_text_shows_every_counter_and_clamped_when_present() -> None:
 
     st = msgspec.structs.replace(st, clamped=3, last_clamp="x 20 -> 3.5")
     assert "clamped** 3 (last: x 20 -> 3.5)" in status_markdown(st, None, "x")
+
+
+def test_status_text_shows_the_grippers_opening_only_for_a_robot_with_a_gripper() -> None:
+    from wmm_qp_service.console import status_markdown
+    from wmm_qp_service.protocol import StatusMsg
+
+    st = StatusMsg(robot="fr3", mode="hold", state_ok=True, safe_stop=False)
+    assert "**gripper** 41.5 mm open" in status_markdown(st, None, "x", gripper_width=0.0415)
+    assert "gripper" not in status_markdown(st, None, "x")  # nan: the robot has none
+
+
+@pytest.fixture
+def viser_server() -> Any:
+    """A real viser server on a free port."""
+    import socket
+
+    viser = pytest.importorskip("viser")
+    pytest.importorskip("yourdfpy")
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    server = viser.ViserServer(host="127.0.0.1", port=port, verbose=False)
+    yield server
+    server.stop()
+
+
+def test_the_view_draws_the_fr3_from_its_meshes_every_link_that_has_one_and_no_odometry(viser_server: Any) -> None:
+    """The FR3's URDF (franky-sim's package, a ``pkg://`` path) with its meshes; a fixed base has no
+    odometry frame to draw over the arm's foot."""
+    pytest.importorskip("franky_sim", reason="the FR3's URDF ships with franky-sim (pip install franky-sim)")
+    from console_helpers import urdf_mesh_links
+    from wmm_qp_service.console.view import RobotView
+
+    fr3 = w.load_robot_config(w.default_config_dir() / "robots" / "fr3.toml")
+    links = urdf_mesh_links(fr3.arm.urdf)
+    assert links >= 10  # link0 … link7, the hand, its two fingers
+    view = RobotView(viser_server, fr3, fr3.arm.default_W(), None, pose_task=False)
+    assert view.drawn == f"the URDF's meshes ({links} links)"
+    assert not view.odom.visible
+
+
+def test_the_view_draws_the_gen3_from_its_collision_shapes_with_its_odometry(viser_server: Any) -> None:
+    from wmm_qp_service.console.view import RobotView
+
+    gen3 = w.load_robot_config()
+    view = RobotView(viser_server, gen3, gen3.arm.default_W(), None, pose_task=False)
+    links = {sh.link for sh in gen3.collision.shapes if sh.link not in ("", "base")}
+    assert view.drawn == f"the robot file's collision shapes ({len(links)} links)" and view.odom.visible
 
 
 def test_the_robot_file_is_the_daemons_else_the_shipped_one_of_that_name(tmp_path) -> None:

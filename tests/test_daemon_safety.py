@@ -9,6 +9,7 @@ bounded queries. No transport, no timing.
 from __future__ import annotations
 
 import collections
+import math
 
 import numpy as np
 import pytest
@@ -464,6 +465,35 @@ def test_info_queries_are_bounded_per_tick(robot: w.RobotConfig) -> None:
 
 
 # ---------------------------------------------------------------- the daemon's own stall
+def test_the_robots_own_stop_after_a_stall_is_no_state_age_for_the_next_stream(robot: w.RobotConfig) -> None:
+    """While the stream is broken the robot brakes by itself for longer than the age window's 50
+    states, each state naming the last command it applied; their growing ages are not the link's:
+    the stream that starts from rest is not held in its safe stop as "state too old" (the old
+    window's median of 341 ms held it until 50 new states had replaced it)."""
+    core, plant = make(robot)
+    x0 = core.model.ee_position(plant.q_base, plant.q_arm)
+    mode(core, "track")
+    t = track(core, plant, 0.0, 200, x0 + np.array([0.2, 0.0, 0.0]))
+    t += 0.1  # the daemon stalled for 100 ms
+    core.on_state(plant.msg(), t)
+    assert core.tick(t) is None and core.stream_broken
+    for k in range(150):  # the robot brakes in its stale stop, 150 ms
+        t += DT
+        plant.v_arm, plant.wheels = 0.97 * plant.v_arm, 0.97 * plant.wheels
+        if k == 149:
+            plant.v_arm, plant.wheels = np.zeros(robot.n_arm), np.zeros(robot.n_wheels)
+        core.on_state(plant.msg(stale_stop=True), t)
+        assert core.tick(t) is None or k == 149
+    assert not core.stream_broken  # at rest: the new stream began
+    assert core.hazard(t) is None and not core.round_trip <= math.inf  # an empty window: no age yet
+    for _ in range(60):
+        t += DT
+        core.on_state(plant.msg(), t)
+        tick(core, plant, t)
+        assert not core.safe
+    assert "state too old" not in core.faults and core.round_trip < 0.01
+
+
 def test_after_its_own_stall_the_daemon_waits_for_the_robots_stop(robot: w.RobotConfig) -> None:
     """A SIGSTOPped daemon: the robot stopped following its commands after its timeout. The
     commands after the stall continue the stream, braking from its last command (the robot, having

@@ -8,10 +8,6 @@ prefix and yields its service config, robot, rate and command timeout.
 from __future__ import annotations
 
 import contextlib
-import multiprocessing as mp
-import subprocess
-import sys
-import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -22,7 +18,6 @@ from wmm_qp_service.processes import Stack, isolated_config
 from wmm_qp_sim import load_sim_config
 
 import wmm_qp as w
-from wmm_qp.config import default_config_dir
 
 pytestmark = pytest.mark.integration
 
@@ -47,38 +42,15 @@ def franka_driver(tmp: Path) -> Iterator[Driver]:
     """``wmm-qp driver franka`` against franky-sim, each in its own process."""
     pytest.importorskip("pylibfranka", reason="needs pylibfranka (pip install 'wmm-qp[franka]')")
     pytest.importorskip("franky_sim", reason="needs franky-sim (pip install franky-sim)")
-    from test_franka_driver import N_SHARED, _serve
+    from franky_rig import FR3, driver_stack, start_franky_sim
 
-    fr3 = default_config_dir() / "robots" / "fr3.toml"
-    robot = w.load_robot_config(fr3)
-    a = robot.arm
-    ctx = mp.get_context("spawn")
-    shared, hostname, stop = ctx.Array("d", N_SHARED), ctx.Array("c", 64), ctx.Event()
-    sim = ctx.Process(target=_serve, args=(shared, hostname, stop, a.position_lower.tolist(),
-                                            a.position_upper.tolist(), a.velocity_max.tolist()), daemon=True)
-    sim.start()
-    t0 = time.monotonic()
-    while not hostname.value and time.monotonic() - t0 < 60:
-        time.sleep(0.1)
-    assert hostname.value, "franky-sim did not start"
-    svc = isolated_config(robot=robot)
-    with open(tmp / "driver.log", "w") as err:
-        drv = subprocess.Popen([sys.executable, "-m", "wmm_qp_service.cli", "driver", "franka", "--robot-ip",
-                                hostname.value.decode(), "--robot-config", str(fr3), "--prefix", svc.prefix,
-                                "--daemon-endpoint", svc.zenoh.daemon_endpoint,
-                                "--sim-endpoint", svc.zenoh.sim_endpoint], stderr=err)
+    robot = w.load_robot_config(FR3)
+    sim = start_franky_sim(robot)
     try:
-        yield svc, robot, 1000.0, 0.025
+        with driver_stack(sim, tmp, serve=False) as (svc, _):
+            yield svc, robot, 1000.0, 0.025
     finally:
-        drv.terminate()
-        try:
-            drv.wait(10)
-        except subprocess.TimeoutExpired:
-            drv.kill()
-        stop.set()
-        sim.join(10)
-        if sim.is_alive():
-            sim.kill()
+        sim.close()
 
 
 DRIVERS: dict[str, Callable[[Path], contextlib.AbstractContextManager[Driver]]] = {
@@ -109,6 +81,11 @@ def test_it_brakes_to_rest_on_stale_commands(controller: Any) -> None:
     c, _, timeout = controller
     out = contract.check_brakes_when_stale(c, timeout)
     assert out["detect_s"] < timeout + contract.SLACK
+
+
+def test_a_stale_stop_ends_the_stream_and_a_new_stream_resumes(controller: Any) -> None:
+    c, _, timeout = controller
+    contract.check_stale_ends_the_stream(c, timeout)
 
 
 def test_it_refuses_a_command_past_the_limits_with_a_protective_stop(controller: Any) -> None:

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 from wmm_qp_service.cli import main
 from wmm_qp_service.experiments import circle
-from wmm_qp_service.experiments.runner import anchored, make_setup
+from wmm_qp_service.experiments.runner import anchored
+from wmm_qp_service.experiments.setup import make_setup
 
 import wmm_qp as w
 

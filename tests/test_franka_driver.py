@@ -1,15 +1,11 @@
-"""``wmm-qp driver franka`` against franky-sim (a MuJoCo FR3 speaking libfranka's protocol).
-
-franky-sim enforces none of the robot's limits: a post-step callback watches its physics state
-and counts every step with a joint past the FR3's position or velocity limits. franky-sim runs
-in a child process of the test (libfranka's connect holds the GIL while it waits for the server,
-so the two cannot share one interpreter), the driver as ``wmm-qp driver franka``, and the test
-plays the daemon: it holds the control lease and publishes ``cmd`` at 500 Hz.
+"""``wmm-qp driver franka`` against franky-sim (a MuJoCo FR3 speaking libfranka's protocol,
+:mod:`franky_rig`): franky-sim runs in a child process of the test, the driver as ``wmm-qp
+driver franka``; the test plays the daemon (it holds the control lease and publishes ``cmd`` at
+500 Hz) or runs ``wmm-qp serve`` and talks to it as a client.
 """
 
 from __future__ import annotations
 
-import multiprocessing as mp
 import subprocess
 import sys
 import time
@@ -24,41 +20,13 @@ pytest.importorskip("pylibfranka", reason="needs pylibfranka (pip install 'wmm-q
 pytest.importorskip("franky_sim", reason="needs franky-sim (pip install franky-sim)")
 
 import zenoh
+from franky_rig import FR3, RECOVERIES, REFLEXES, driver_stack, start_franky_sim
 from wmm_qp_service.keys import Keys
 from wmm_qp_service.processes import isolated_config
 from wmm_qp_service.protocol import CommandMsg, GripperMsg, StateMsg, TruthMsg, decode, encode
 from wmm_qp_service.transport import ROLE_DAEMON, open_session
 
 import wmm_qp as w
-from wmm_qp.config import default_config_dir
-
-FR3 = default_config_dir() / "robots" / "fr3.toml"
-# shared with the sim process: q (7), dq (7), steps, steps with a joint past its position limit,
-# steps with a joint past its velocity limit
-N_SHARED = 17
-
-
-def _serve(shared: Any, hostname: Any, stop: Any, q_lo: list[float], q_hi: list[float], v_max: list[float]) -> None:
-    from franky_sim import SimulationServer
-    from franky_sim.mujoco_simulator import MujocoSimulator
-
-    lo, hi, vm = np.array(q_lo), np.array(q_hi), np.array(v_max)
-    with MujocoSimulator(enable_visualization=False) as sim:
-        rm = sim.add_robot()
-
-        def watch(s: Any) -> None:
-            st = s.robots[0].inner_state
-            q, dq = np.asarray(st.q, dtype=float), np.asarray(st.dq, dtype=float)
-            shared[0:7], shared[7:14] = q.tolist(), dq.tolist()
-            shared[14] += 1
-            shared[15] += bool(np.any((q < lo - 1e-6) | (q > hi + 1e-6)))
-            shared[16] += bool(np.any(np.abs(dq) > vm * 1.01))  # 1 %: the physics' own tracking
-
-        sim.register_post_step_callback(watch)
-        with SimulationServer(sim) as server:
-            hostname.value = rm.hostname.encode()
-            server.run_async()
-            stop.wait()
 
 
 class Daemon:
@@ -116,21 +84,12 @@ class Daemon:
 @pytest.fixture(scope="module")
 def rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Daemon, Any]]:
     robot = w.load_robot_config(FR3)
-    a = robot.arm
-    ctx = mp.get_context("spawn")
-    shared, hostname, stop = ctx.Array("d", N_SHARED), ctx.Array("c", 64), ctx.Event()
-    sim = ctx.Process(target=_serve, args=(shared, hostname, stop, a.position_lower.tolist(),
-                                            a.position_upper.tolist(), a.velocity_max.tolist()), daemon=True)
-    sim.start()
-    t0 = time.monotonic()
-    while not hostname.value and time.monotonic() - t0 < 60:
-        time.sleep(0.1)
-    assert hostname.value, "franky-sim did not start"
+    sim = start_franky_sim(robot)
     svc = isolated_config(robot=robot)
     log = tmp_path_factory.mktemp("franka") / "driver.log"
     with open(log, "w") as err:
         drv = subprocess.Popen([sys.executable, "-m", "wmm_qp_service.cli", "driver", "franka", "--robot-ip",
-                                hostname.value.decode(), "--robot-config", str(FR3), "--prefix", svc.prefix,
+                                sim.host, "--robot-config", str(FR3), "--prefix", svc.prefix,
                                 "--daemon-endpoint", svc.zenoh.daemon_endpoint,
                                 "--sim-endpoint", svc.zenoh.sim_endpoint], stderr=err)
     try:
@@ -142,17 +101,14 @@ def rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Daemon, Any]
                 time.sleep(0.05)
             assert d.state is not None, "no state from the driver: " + Path(log).read_text()
             d.wait(0.5)  # the lease reaches the driver
-            yield d, shared
+            yield d, sim.shared
     finally:
         drv.terminate()
         try:
             drv.wait(20)
         except subprocess.TimeoutExpired:
             drv.kill()
-        stop.set()
-        sim.join(10)
-        if sim.is_alive():
-            sim.kill()
+        sim.close()
 
 
 def test_the_driver_streams_within_the_fr3s_limits_and_brakes_when_the_commands_stop(rig: Any) -> None:
@@ -190,17 +146,31 @@ def test_a_command_past_the_limits_is_refused_with_a_protective_stop(rig: Any) -
     assert abs(shared[4] - q0[4]) < 0.005 and shared[16] == 0  # joint 5 never moved off: refused
 
 
-def _start_franky_sim(ctx: Any, robot: w.RobotConfig) -> tuple[Any, Any, Any, str]:
-    a = robot.arm
-    shared, hostname, stop = ctx.Array("d", N_SHARED), ctx.Array("c", 64), ctx.Event()
-    sim = ctx.Process(target=_serve, args=(shared, hostname, stop, a.position_lower.tolist(),
-                                            a.position_upper.tolist(), a.velocity_max.tolist()), daemon=True)
-    sim.start()
-    t0 = time.monotonic()
-    while not hostname.value and time.monotonic() - t0 < 60:
-        time.sleep(0.1)
-    assert hostname.value, "franky-sim did not start"
-    return sim, shared, stop, hostname.value.decode()
+def _follow(c: Any, x0: np.ndarray, seconds: float, k0: int, resume: bool = True) -> int:
+    """Stream setpoints for ``seconds``: 5 cm along y in about 3 s and back (100 Hz); returns the
+    setpoint count to go on from. ``resume``: after a fault (a loaded host delays states and
+    commands: the daemon's safe stop) send the mode message again, as an operator would."""
+    k = k0
+    t_end = time.monotonic() + seconds
+    while time.monotonic() < t_end:
+        if resume and c.resume_needed():
+            t0 = time.monotonic()
+            c.resume("track", timeout=20)
+            t_end += time.monotonic() - t0  # the time the resume took is not tracking time
+        if c.send_setpoint(x0 + [0.0, 0.05 * np.sin(0.005 * k), 0.0]):
+            k += 1
+        time.sleep(0.01)
+    return k
+
+
+def _wait(what: str, fn: Any, timeout: float, logs: Path) -> Any:
+    end = time.monotonic() + timeout
+    while not (v := fn()):
+        if time.monotonic() > end:
+            tails = "\n".join(f"--- {f.name}:\n{f.read_text()[-1500:]}" for f in sorted(logs.glob("*.log")))
+            raise AssertionError(f"timed out after {timeout:g} s waiting for {what}\n{tails}")
+        time.sleep(0.02)
+    return v
 
 
 def test_serve_tracks_through_the_driver_and_resumes_after_the_robot_braked_in_its_own_stop(tmp_path: Path) -> None:
@@ -212,61 +182,89 @@ def test_serve_tracks_through_the_driver_and_resumes_after_the_robot_braked_in_i
 
     from wmm_qp_service.client import Client
 
-    robot = w.load_robot_config(FR3)
-    sim, shared, stop, host = _start_franky_sim(mp.get_context("spawn"), robot)
-    svc = isolated_config(robot=robot)
-    common = ["--robot-config", str(FR3), "--prefix", svc.prefix, "--daemon-endpoint", svc.zenoh.daemon_endpoint,
-              "--sim-endpoint", svc.zenoh.sim_endpoint]
-    procs = []
+    sim = start_franky_sim(w.load_robot_config(FR3))
     try:
-        for name, argv in (("driver", ["driver", "franka", "--robot-ip", host]), ("serve", ["serve"])):
-            with open(tmp_path / f"{name}.log", "w") as err:
-                procs.append(subprocess.Popen([sys.executable, "-m", "wmm_qp_service.cli", *argv, *common],
-                                              stderr=err))
-        serve = procs[1]
-        with Client(svc, name="e2e") as c:
+        with driver_stack(sim, tmp_path) as (svc, procs), Client(svc, name="e2e") as c:
             info = c.wait_for_daemon(timeout=60)
             assert info is not None, (tmp_path / "serve.log").read_text()
             x0 = np.array(info.status.x)
             assert c.resume("track", timeout=20), (tmp_path / "serve.log").read_text()
-
-            def follow(seconds: float, k0: int) -> int:
-                k = k0
-                t_end = time.monotonic() + seconds
-                while time.monotonic() < t_end:  # 5 cm along y in about 3 s, and back, 100 Hz
-                    if c.send_setpoint(x0 + [0.0, 0.05 * np.sin(0.005 * k), 0.0]):
-                        k += 1
-                    time.sleep(0.01)
-                return k
-
-            k = follow(3.0, 0)
+            k = _follow(c, x0, 3.0, 0)
             st = c.info()
             assert st is not None and abs(st.status.x[1] - x0[1]) > 0.02, (st, x0)
-            os.kill(serve.pid, signal.SIGSTOP)  # the daemon freezes: no command for 0.3 s
+            os.kill(procs["serve"].pid, signal.SIGSTOP)  # the daemon freezes: no command for 0.3 s
             time.sleep(0.3)
-            os.kill(serve.pid, signal.SIGCONT)
+            os.kill(procs["serve"].pid, signal.SIGCONT)
             time.sleep(0.5)
             mid = c.info()
             assert mid is not None and mid.status.faults, mid  # the daemon saw its stream broken
             assert c.resume("track", timeout=20), "the daemon did not resume after the robot's stale stop"
-            follow(1.5, k)
+            _follow(c, x0, 1.5, k)
             state, truth = c.latest_state(), c.latest_truth() or c.wait_truth(1.0)
             info = c.info()
         assert state is not None and not state.stale_stop and not state.protective_stop, state
         assert truth is not None and not any(truth.violations.values()), truth.violations
         assert info is not None and not any(info.status.sim_violations.values())
-        assert shared[15] == 0 and shared[16] == 0, "franky-sim saw a joint past a limit"
+        assert sim.shared[15] == 0 and sim.shared[16] == 0, "franky-sim saw a joint past a limit"
     finally:
-        for p in reversed(procs):
-            p.send_signal(signal.SIGINT)
-            try:
-                p.wait(20)
-            except subprocess.TimeoutExpired:
-                p.kill()
-        stop.set()
-        sim.join(10)
-        if sim.is_alive():
-            sim.kill()
+        sim.close()
+
+
+def test_a_libfranka_reflex_is_a_protective_stop_the_arm_brakes_and_a_mode_message_resumes(tmp_path: Path) -> None:
+    """wmm-qp serve + the driver + franky-sim with a reflex model (:class:`franky_rig.ReflexModel`):
+    while the arm tracks, the robot aborts the motion with a Cartesian reflex, reported over
+    libfranka's protocol; libfranka raises its own ``ControlException`` in the driver. The driver
+    reports a protective stop naming it, the daemon faults and holds, the arm stands still in
+    franky-sim's physics; the robot is recovered (libfranka's ``automatic_error_recovery``) and
+    moves again after a mode message. Safety (no violation, no joint past a limit) whatever the
+    timing."""
+    from wmm_qp_service.client import Client
+
+    sim = start_franky_sim(w.load_robot_config(FR3), reflex=True)
+    try:
+        with driver_stack(sim, tmp_path) as (svc, _), Client(svc, name="e2e") as c:
+            info = c.wait_for_daemon(timeout=60)
+            assert info is not None, (tmp_path / "serve.log").read_text()
+            x0 = np.array(info.status.x)
+            assert c.resume("track", timeout=20), (tmp_path / "serve.log").read_text()
+            q_start = sim.q()
+            k = _follow(c, x0, 1.0, 0)
+            assert np.max(np.abs(sim.q() - q_start)) > 0.005, "the arm did not move before the reflex"
+            stops = c.latest_state().protective_stops  # type: ignore[union-attr]
+            sim.trip.set()  # the reflex, while the arm moves
+            st = _wait("the driver's protective stop", lambda: (s := c.latest_state()) is not None
+                       and s.protective_stops > stops and s, 20.0, tmp_path)
+            assert st.protective_reason.startswith("robot: libfranka") and "cartesian_reflex" in st.protective_reason, \
+                st.protective_reason
+            assert sim.shared[REFLEXES] == 1
+            status = _wait("the daemon's fault", lambda: (s := c.latest_status()) is not None
+                           and "robot firmware" in s.faults and s, 20.0, tmp_path)
+            assert status.faults["robot firmware"] >= 1, status.faults
+            # the arm brakes: franky-sim holds the joints; their positions stand still (its joint 7
+            # chatters at about ±0.08 rad/s around a still position: rest is judged on positions)
+            time.sleep(0.2)
+            q_stopped = sim.q()
+            st = _wait("the daemon holding, to be resumed", lambda: (s := c.latest_status()) is not None
+                       and s.resume_needed and s, 20.0, tmp_path)
+            assert st.mode == "hold"
+            # the daemon's safe-stop stream has had the robot recover; the daemon holds it still
+            assert sim.shared[RECOVERIES] == 1, "the robot was not recovered"
+            _follow(c, x0, 0.5, k, resume=False)  # setpoints without a mode message move nothing
+            assert np.max(np.abs(sim.q() - q_stopped)) < 0.005, sim.q() - q_stopped
+            # the mode message: the daemon resumes, the arm follows again
+            assert c.resume("track", timeout=20), f"the daemon did not resume: {c.latest_status()}"
+            q_resumed = sim.q()
+            _follow(c, x0, 1.5, k)
+            assert np.max(np.abs(sim.q() - q_resumed)) > 0.005, "the arm did not move after the mode message"
+            state, truth = c.latest_state(), c.latest_truth() or c.wait_truth(1.0)
+        assert state is not None and not state.protective_stop and not state.stale_stop, state
+        assert truth is not None and not any(truth.violations.values()), truth.violations
+        assert sim.shared[15] == 0 and sim.shared[16] == 0, "franky-sim saw a joint past a limit"
+        log = (tmp_path / "driver.log").read_text()
+        assert "protective stop: libfranka: Move command aborted: motion aborted by reflex!" in log, log
+        assert "the robot recovered" in log, log
+    finally:
+        sim.close()
 
 
 def test_the_franka_hand_closes_and_opens_through_gripper_commands(rig: Any) -> None:

@@ -53,6 +53,7 @@ def test_only_the_lease_holders_commands_for_this_instance_with_increasing_seq_a
 
 def test_a_robot_reflex_is_a_protective_stop_that_only_a_new_stream_releases(drv: FrankaDriver) -> None:
     d = drv
+    asked: list[int] = []
     assert d.on_command(cmd(d, 1, [0.01] * 7), READY, 0.0)
     for _ in range(5):
         d.cycle(1e-3, READY)
@@ -60,10 +61,56 @@ def test_a_robot_reflex_is_a_protective_stop_that_only_a_new_stream_releases(drv
     st = d.state_msg(READY, np.zeros(7))
     assert st.protective_stop and st.protective_stops == 1 and st.protective_reason == "robot: joint_velocity_violation"
     assert st.v_arm == [0.0] * 7  # the robot stopped: the next stream starts from rest
-    assert not d.on_command(cmd(d, 2, [0.0] * 7), READY, 0.001)  # the same stream: refused
-    assert d.refused["firmware"] == 1
-    assert d.on_command(cmd(d, 3, [0.0] * 7, stream=3), READY, 0.002)  # a new stream: resumes
+    assert not d.on_command(cmd(d, 2, [0.0] * 7), READY, 0.001, lambda: asked.append(2))  # the same stream
+    assert d.refused["firmware"] == 1 and asked == []  # refused, and the robot not asked to recover
+    assert d.on_command(cmd(d, 3, [0.0] * 7, stream=3), READY, 0.002, lambda: asked.append(3))  # a new stream
+    assert asked == [3] and d.robot_error is None  # it recovered the robot first, then resumed
     assert not d.state_msg(READY, np.zeros(7)).protective_stop
+
+
+def test_a_refused_recovery_keeps_the_stop_and_is_asked_again_once_per_new_stream(drv: FrankaDriver) -> None:
+    d = drv
+    answers = ["CommandException: libfranka: Automatic Error Recovery command rejected: manual error recovery "
+               "required!", None]
+    asked: list[int] = []
+
+    def recover() -> str | None:
+        asked.append(1)
+        return answers.pop(0)
+
+    d.fault('libfranka: Move command aborted: motion aborted by reflex! ["cartesian_reflex"]')
+    assert not d.on_command(cmd(d, 1, [0.0] * 7, stream=1), READY, 0.0, recover)
+    assert not d.on_command(cmd(d, 2, [0.0] * 7, stream=1), READY, 0.001, recover)  # the same stream: no retry
+    st = d.state_msg(READY, np.zeros(7))
+    assert len(asked) == 1 and st.protective_stop and st.refused["firmware"] == 2
+    assert st.protective_reason.startswith('robot: libfranka: Move command aborted: motion aborted by reflex! '
+                                           '["cartesian_reflex"]; recovery refused: CommandException'), \
+        st.protective_reason
+    assert d.on_command(cmd(d, 3, [0.0] * 7, stream=3), READY, 0.002, recover)  # a new stream asks again
+    assert len(asked) == 2 and not d.state_msg(READY, np.zeros(7)).protective_stop
+    assert d.on_command(cmd(d, 4, [0.0] * 7, stream=3), READY, 0.003)  # running: no recovery to ask for
+    assert len(asked) == 2
+
+
+def test_a_reflex_judges_the_stopped_streams_late_commands_against_each_other(drv: FrankaDriver) -> None:
+    """The commands the daemon sent before it saw the reflex arrive after it: refused, and judged
+    against the stream's own previous command, not against the stopped arm's 0 (they were not
+    jumps of the controller)."""
+    d = drv
+    rates = np.zeros(7)
+    t = 0.0
+    for k in range(1, 200):  # joint 7 ramps to 0.3 rad/s at 5 rad/s², one command every 2 ms
+        rates[6] = min(0.3, 5.0 * k * 0.002)
+        assert d.on_command(cmd(d, k, rates.tolist()), READY, t)
+        d.cycle(1e-3, READY)
+        d.cycle(1e-3, READY)
+        t += 0.002
+    d.fault('libfranka: Move command aborted: motion aborted by reflex! ["cartesian_reflex"]')
+    for k in range(200, 205):  # the stream goes on at 0.3 rad/s until the daemon sees the stop
+        assert not d.on_command(cmd(d, k, rates.tolist()), READY, t)
+        d.cycle(1e-3, READY)
+        t += 0.002
+    assert not any(d.truth_msg(np.zeros(3)).violations.values()), d.referee.counts
 
 
 def test_the_truth_has_no_ground_truth_and_counts_the_referees_violations(drv: FrankaDriver) -> None:

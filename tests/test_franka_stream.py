@@ -127,7 +127,7 @@ def test_a_new_stream_while_still_braking_is_refused() -> None:
     assert not sh.at_rest and not sh.command(0.101, np.zeros(7), stream=2, q=READY)
 
 
-def test_stale_commands_brake_to_rest_and_the_next_command_resumes() -> None:
+def test_stale_commands_brake_to_rest_and_only_a_new_stream_resumes() -> None:
     sh = CommandShaper(LIM, DT, stale_timeout=0.05)
     sh.command(0.0, np.full(7, 0.2), stream=1, q=READY)
     for k in range(1, 51):
@@ -135,10 +135,24 @@ def test_stale_commands_brake_to_rest_and_the_next_command_resumes() -> None:
     assert not sh.stale_stop and np.all(sh.v == 0.2)  # reached the target (in 22 ms), held it
     sh.step(51 * DT, READY)
     assert sh.stale_stop  # 51 ms after the last command
+    assert not sh.command(0.052, np.full(7, 0.2), stream=1, q=READY)  # the stopped stream, late: refused
     for k in range(52, 300):
         sh.step(k * DT, READY)
-    assert sh.at_rest
-    assert sh.command(0.3, np.full(7, 0.2), stream=1, q=READY) and not sh.stale_stop
+        assert not sh.command(k * DT, np.full(7, 0.2), stream=1, q=READY)
+    assert sh.at_rest and sh.stale_stop and sh.refused == 249 and not sh.protective_stop
+    assert sh.command(0.3, np.full(7, 0.2), stream=2, q=READY) and not sh.stale_stop  # a new stream
+
+
+def test_a_new_stream_resumes_a_stale_stop_while_still_braking() -> None:
+    sh = CommandShaper(LIM, DT, stale_timeout=0.02)
+    sh.command(0.0, np.full(7, 0.5), stream=1, q=READY)
+    k = 0
+    while not sh.stale_stop:
+        k += 1
+        sh.step(k * DT, READY)
+    sh.step((k + 1) * DT, READY)
+    assert not sh.at_rest  # braking
+    assert sh.command((k + 1) * DT, np.full(7, 0.1), stream=2, q=READY) and not sh.stale_stop
 
 
 @pytest.mark.parametrize("period_ms", [1, 2])

@@ -501,7 +501,7 @@ def test_the_ee_box_holds_whatever_solved_the_stage(path: str, solver: str, monk
 def test_the_ee_box_recheck_restores_every_row_inside_the_box_bounds(seed: int, rows: int, relaxed: bool) -> None:
     """_hold_ee_box on random rows that admit v₀ = clip(0, lb, ub) (as _ee_box builds them, some
     relaxed to exactly C v₀): after it, every row and every box bound holds."""
-    from wmm_qp.controllers.qp import EE_BOX_TOL, _hold_ee_box
+    from wmm_qp.controllers.qp.kernels import EE_BOX_TOL, _hold_ee_box
 
     rng = np.random.default_rng(seed)
     n = 11

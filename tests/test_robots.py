@@ -15,8 +15,8 @@ from core_fixtures import Q0
 from wmm_qp_sim import SimCommand, SimRobot, load_sim_config
 
 import wmm_qp as w
+from wmm_qp import urdf as urdf_io
 from wmm_qp.config import BaseConfig, default_config_dir
-from wmm_qp.model import urdf as urdf_io
 from wmm_qp.model.bases import DiffDriveBase, FixedBase, MecanumBase, OmniBase
 from wmm_qp.tasks import orientation_error, quat_to_matrix, rotation_to_quat
 

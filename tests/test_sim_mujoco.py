@@ -14,10 +14,10 @@ from wmm_qp_sim import SimCommand, SimConfig, SimRobot, load_sim_config
 from wmm_qp_sim.config import BoxConfig
 
 import wmm_qp as w
+from wmm_qp import urdf as urdf_io
 from wmm_qp.config import default_config_dir
 from wmm_qp.exceptions import ConfigError
 from wmm_qp.limits import MotionBounds
-from wmm_qp.model import urdf as urdf_io
 
 mujoco = pytest.importorskip("mujoco", reason="the physics plant needs mujoco: pip install 'wmm-qp[physics]'")
 

@@ -33,6 +33,25 @@ def test_the_demo_under_cpu_hogs_disk_writes_and_random_freezes_counts_no_violat
     assert applied["freezes_sim"] and applied["freezes_daemon"], applied
 
 
+def test_the_embedded_demo_under_cpu_hogs_disk_writes_and_random_freezes_counts_no_violation(tmp_path: Path) -> None:
+    """``wmm-qp demo --embedded``: one process, the robot and its controller in one cycle, frozen
+    at random (the robot runs every step it missed when continued: its firmware brakes past the
+    command timeout), under CPU hogs and a disk writer: the referee counts 0."""
+    argv = [sys.executable, "-m", "wmm_qp_service.cli", "demo", "--embedded", "--json", "--duration", "10",
+            "--logs", str(tmp_path)]
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL)
+    with stressed("all", parent=lambda: proc.pid, seed=11) as applied:
+        out, _ = proc.communicate(timeout=600)
+    summary = json.loads(out.decode())
+    referee = [ln for ln in (tmp_path / "embedded.log").read_text(errors="replace").splitlines()
+               if "sim: referee:" in ln]
+    assert summary["violations_total"] == 0, (summary["violations"], referee[:5])
+    assert not referee, referee[:5]
+    assert summary["embedded"] and summary["exit_codes"] == {"embedded": 0}
+    assert summary["loop"]["trigger"] == "embedded" and summary["loop"]["ticks"] > 0
+    assert applied["freezes_sim"] and not applied["freezes_daemon"], applied  # the one process was frozen
+
+
 def test_the_freezer_stops_and_continues_a_process() -> None:
     """The drill's freezer really freezes (the process's state is 'T' while frozen) and always
     continues what it froze."""

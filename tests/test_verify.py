@@ -106,7 +106,7 @@ def test_the_baselines_leave_the_box_and_the_referee_sees_it(kind: str) -> None:
 def test_verify_catches_the_qp_without_its_ee_box_recheck(solver: str, monkeypatch: pytest.MonkeyPatch) -> None:
     """OSQP and DAQP meet the EE box rows only to their primal tolerance (~1e-6 m per tick): without
     the re-check after the solve the referee finds the EE past the box; with it, nothing."""
-    import wmm_qp.controllers.qp as qp_module
+    import wmm_qp.controllers.qp.controller as qp_module
 
     ctl = w.QpController(model(), config().with_(qp={"solver": solver}))
     assert verify_controller(ctl, model(), 300, 0).by_kind["ee_box"] == 0

@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 from ._jit import jit
-from .config import FloatArray
+from ._typing import FloatArray
 from .linalg3 import gram3
 
 

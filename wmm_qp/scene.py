@@ -15,12 +15,13 @@ A scene file (``configs/scenes/default.toml`` is the default; ``--scene FILE`` o
 
     [fence]
     base = [[-3, -3], [3, -3], [3, 3], [-3, 3]]   # the base stays inside this polygon (world x, y)
-    ee_lower = [-3.5, -3.5, -1.0]                 # the EE stays inside this box (world)
+    ee_lower = [-3.5, -3.5, -1.0]                 # the EE fence: the EE stays inside this box (world)
     ee_upper = [3.5, 3.5, 2.0]
 
 Every obstacle is a hard constraint for every body of the robot (the velocity dampers of
 :mod:`wmm_qp.limits.collision`) but its ``exempt`` ones; the fence is one for the base's origin and
-the EE. The daemon clamps every setpoint into the EE box and above the floor margin
+the EE (the EE fence; not eq. (17)'s EE box of DM_CARTESIAN, a controller setting). The daemon
+clamps every setpoint into the EE fence and above the floor margin
 (:meth:`Scene.clamp_target`) before it chases it. Live obstacles (the daemon's
 ``<prefix>/<robot>/obstacles``) are tables of the same keys as ``[[obstacles]]``
 (:func:`obstacle_from_table`); they replace the previous live set and add to the scene's.
@@ -33,7 +34,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import ConfigError, FloatArray, ShapeConfig, TomlTable, _ro, default_config_dir, load_shape, read_toml
+from ._typing import FloatArray, readonly
+from .config import ConfigError, ShapeConfig, TomlTable, default_config_dir, load_shape, read_toml
+from .config.toml import toml_key, toml_keys
 
 OBSTACLE_KINDS = ("box", "sphere", "capsule", "cylinder", "plane")
 
@@ -44,12 +47,12 @@ class Fence:
 
     Attributes:
         base: (k, 2) polygon the base's origin stays inside (counter-clockwise), or an empty (0, 2).
-        ee_lower, ee_upper: [m] the box the EE stays inside (±inf: free).
+        ee_lower, ee_upper: [m] the EE fence, the box the EE stays inside (±inf: free).
     """
 
-    base: FloatArray = field(default_factory=lambda: _ro(np.zeros((0, 2))))
-    ee_lower: FloatArray = field(default_factory=lambda: _ro([-np.inf] * 3))
-    ee_upper: FloatArray = field(default_factory=lambda: _ro([np.inf] * 3))
+    base: FloatArray = field(default_factory=lambda: readonly(np.zeros((0, 2))), metadata=toml_key())
+    ee_lower: FloatArray = field(default_factory=lambda: readonly([-np.inf] * 3), metadata=toml_key())
+    ee_upper: FloatArray = field(default_factory=lambda: readonly([np.inf] * 3), metadata=toml_key())
 
     def half_planes(self) -> tuple[FloatArray, FloatArray]:
         """(A, c): the polygon as A p ≤ c, one row per edge (outward unit normals)."""
@@ -80,12 +83,12 @@ class Scene:
         path: the file it was read from, or None.
     """
 
-    obstacles: tuple[ShapeConfig, ...] = ()
-    fence: Fence = field(default_factory=Fence)
+    obstacles: tuple[ShapeConfig, ...] = field(default=(), metadata=toml_key())
+    fence: Fence = field(default_factory=Fence, metadata=toml_key())
     path: Path | None = None
 
     def clamp_target(self, x: FloatArray, z_min: float = -np.inf) -> tuple[FloatArray, str]:
-        """An EE target clamped into the fence's EE box and above ``z_min`` (the floor margin).
+        """An EE target clamped into the EE fence and above ``z_min`` (the floor margin).
 
         Returns:
             (the clamped target, "" when it was inside, else which axes were clamped, e.g.
@@ -141,13 +144,13 @@ def load_scene(path: Path | str | None = None) -> Scene:
     """
     path = Path(path) if path is not None else default_scene_file()
     r = TomlTable(path, read_toml(path))
-    r.unknown({"obstacles", "fence"})
+    r.unknown(toml_keys(Scene))
     raw = r.get("obstacles", [])
     if not isinstance(raw, list) or not all(isinstance(o, dict) for o in raw):
         raise ConfigError(path, "obstacles", "must be a list of tables ([[obstacles]])")
     obstacles = obstacles_from_tables(path, raw)
     f = r.table("fence", required=False)
-    f.unknown({"base", "ee_lower", "ee_upper"})
+    f.unknown(toml_keys(Fence))
     fence = Fence()
     if f.data:
         poly = f.get("base", [])
@@ -166,5 +169,5 @@ def load_scene(path: Path | str | None = None) -> Scene:
         hi = f.vector("ee_upper", 3, [np.inf] * 3, finite=False)
         if (lo >= hi).any():
             raise ConfigError(path, "fence.ee_lower", "must be < ee_upper on every axis")
-        fence = Fence(base=_ro(P), ee_lower=lo, ee_upper=hi)
+        fence = Fence(base=readonly(P), ee_lower=lo, ee_upper=hi)
     return Scene(obstacles=tuple(obstacles), fence=fence, path=path)

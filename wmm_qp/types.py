@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._jit import all_finite
-from .config import FloatArray
+from ._typing import FloatArray
 
 
 class Mode(enum.StrEnum):

@@ -10,6 +10,12 @@ doing its job and are reported.
 
     python benchmarks/reliability/drill.py --minutes 2 --out /tmp/drill     # every condition
     python benchmarks/reliability/drill.py --conditions freeze_daemon --minutes 5
+    python benchmarks/reliability/drill.py --embedded --minutes 1   # the demo as one embedded process
+
+With ``--embedded`` each demo runs ``wmm-qp demo --embedded``: one process hosts the sim and the
+control core in one cycle; ``freeze_sim`` freezes that process (the robot and its controller
+together: when it is continued the robot runs every step it missed, its firmware braking past its
+command timeout), and ``freeze_daemon`` has no daemon to freeze (its freezes are counted: 0).
 
 Exit status: 0 when every demo counted 0 referee violations and exited, 1 otherwise.
 """
@@ -33,6 +39,8 @@ def one_demo(out: Path, condition: str, i: int, args: argparse.Namespace) -> dic
             "--duration", str(args.demo_duration), "--rate", str(args.rate)]
     if args.robot_config:
         argv += ["--robot-config", args.robot_config]
+    if args.embedded:
+        argv += ["--embedded"]
     t0 = time.monotonic()
     proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=open(logs / "demo.log", "wb"),  # noqa: SIM115
                             stdin=subprocess.DEVNULL)
@@ -44,8 +52,9 @@ def one_demo(out: Path, condition: str, i: int, args: argparse.Namespace) -> dic
     except json.JSONDecodeError:
         summary = None
     (logs / "demo.json").write_bytes(stdout)
-    referee = [ln for ln in (logs / "sim.log").read_text(errors="replace").splitlines() if "sim: referee:" in ln] \
-        if (logs / "sim.log").exists() else []
+    log = logs / ("embedded.log" if args.embedded else "sim.log")
+    referee = [ln for ln in log.read_text(errors="replace").splitlines() if "sim: referee:" in ln] \
+        if log.exists() else []
     row = {"condition": condition, "run": i, "exit": proc.returncode, "wall_s": round(wall, 1),
            "freezes_sim": len(applied.get("freezes_sim", [])),
            "freezes_daemon": len(applied.get("freezes_daemon", [])),
@@ -69,6 +78,7 @@ def main() -> int:
     ap.add_argument("--demo-duration", type=float, default=30.0, help="[s] each demo's scenario")
     ap.add_argument("--rate", type=float, default=500.0, help="[Hz] the daemon's rate")
     ap.add_argument("--robot-config", default=None, help="robot file (default: the Gen3)")
+    ap.add_argument("--embedded", action="store_true", help="each demo with --embedded (one process)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=Path("drill-out"), help="logs and results.json go here")
     args = ap.parse_args()

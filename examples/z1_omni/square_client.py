@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 from wmm_qp_service.cli_common import add_service_arguments, service_config
-from wmm_qp_service.client import Client
+from wmm_qp_service.client import Client, NotReady
 
 HERE = Path(__file__).resolve().parent
 
@@ -57,12 +57,10 @@ def main(argv: list[str] | None = None) -> int:
     dwell = 0.5  # [s] at each corner: the EE settles on it
     with Client(svc, name="square",
                 on_fault=lambda st: print(f"fault: {st.last_fault}", file=sys.stderr, flush=True)) as c:
-        info = c.wait_for_daemon(timeout=60.0)
-        while info is not None and not info.status.state_ok:  # the sim's first states
-            time.sleep(0.1)
-            info = c.info()
-        if info is None:
-            print(f"square_client: error: {c.no_daemon_reason()}", file=sys.stderr)
+        try:
+            info = c.wait_ready(timeout=60.0)  # the daemon answers with the sim's first states
+        except NotReady as e:
+            print(f"square_client: error: {e.reason}", file=sys.stderr)
             return 2
         corners = corner_path(np.array(info.status.x), args.side)
         if not c.resume("track"):  # set the mode and wait until the daemon follows setpoints

@@ -272,8 +272,33 @@ def check_brakes_when_stale(c: Controller, stale_timeout: float, joint: int | No
     return {"detect_s": detect, "stale_stop": True}
 
 
+def check_stale_ends_the_stream(c: Controller, stale_timeout: float, joint: int | None = None,
+                                rate: float = 0.3) -> dict[str, Any]:
+    """After a stale stop the stopped stream's commands (late on the way, or from a sender that
+    froze) are refused (``refused.firmware``) and the robot stays in its stop; a new stream resumes.
+
+    Args:
+        stale_timeout: [s] the driver's command timeout.
+        rate: [rad/s] the joint's speed before the commands stop.
+    """
+    c.hold_lease()
+    j = c.robot.n_arm - 1 if joint is None else joint
+    _moving(c, j, rate)
+    brake = rate / float(c.robot.arm.acceleration_max[j])
+    st0 = c.until(lambda st: st.stale_stop and _at_rest(st), stale_timeout + brake + 2 * SLACK,
+                  "the robot at rest in its stale stop")
+    fw0 = st0.refused.get("firmware", 0)
+    st = _resting(c, 0.1)  # legal commands, the stopped stream
+    if st.refused.get("firmware", 0) <= fw0 or not st.stale_stop:
+        raise ContractError(f"the stale stream's commands were applied: {Controller._brief(st)}")
+    c.new_stream()
+    st = c.until(lambda st: not st.stale_stop, 2.0, "a new stream resuming", lambda: c.send(c.zeros()))
+    return {"refused_firmware": st.refused.get("firmware", 0)}
+
+
 def check_all(c: Controller, min_rate_hz: float, stale_timeout: float) -> dict[str, Any]:
     """Every check, in an order that leaves each one's robot as the next expects it."""
     return {"states": check_states(c, min_rate_hz), "lease": check_lease(c),
             "stale": check_brakes_when_stale(c, stale_timeout),
+            "stale_stream": check_stale_ends_the_stream(c, stale_timeout),
             "limits": check_refuses_past_limits(c), "stopped_stream": check_stops_the_stopped_stream(c)}

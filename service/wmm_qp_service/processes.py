@@ -66,7 +66,7 @@ def _service_args(svc: ServiceConfig, robot_file: Path | None = None, scene_file
 
 @dataclass
 class Stack:
-    """A sim and a daemon process (a context manager that always stops them).
+    """A sim and a daemon process, or one embedded process (a context manager that always stops them).
 
     Attributes:
         svc: the config both run with (an open robot id is filled from the robot file's name,
@@ -75,6 +75,9 @@ class Stack:
         log_dir: where their stderr goes (None: discarded).
         robot_file: the robot description both get (``--robot-config``); None: the default.
         scene_file: the scene both get (``--scene``); None: the default scene.
+        embedded: one process instead of two: ``wmm-qp sim --embedded --control-rate rate_hz``
+            (named ``embedded``), hosting the control core in the sim's cycle; it takes the
+            extra sim arguments and then the extra daemon arguments.
     """
 
     svc: ServiceConfig
@@ -84,6 +87,7 @@ class Stack:
     extra_sim_args: list[str] = field(default_factory=list)
     robot_file: Path | None = None
     scene_file: Path | None = None
+    embedded: bool = False
     procs: dict[str, subprocess.Popen[bytes]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -109,13 +113,24 @@ class Stack:
         return self._spawn("daemon", ["serve", *_service_args(self.svc, self.robot_file, self.scene_file),
                                       "--rate", f"{self.rate_hz:g}", *self.extra_daemon_args])
 
+    def start_embedded(self) -> subprocess.Popen[bytes]:
+        """Start (or restart) the sim with the control core in its cycle (``--embedded``)."""
+        return self._spawn("embedded", ["sim", *_service_args(self.svc, self.robot_file, self.scene_file),
+                                        "--embedded", "--control-rate", f"{self.rate_hz:g}",
+                                        *self.extra_sim_args, *self.extra_daemon_args])
+
     def start_driver(self, kind: str, robot_ip: str) -> subprocess.Popen[bytes]:
-        """Start a real robot's driver (``wmm-qp driver KIND --robot-ip IP``) in the sim's place."""
+        """Start a real robot's driver (``wmm-qp driver KIND --robot-ip IP``) in the sim's place
+        (embedded: with the control core in its cycle, taking the extra daemon arguments)."""
+        extra = ["--embedded", "--control-rate", f"{self.rate_hz:g}", *self.extra_daemon_args] if self.embedded else []
         return self._spawn("driver", ["driver", kind, "--robot-ip", robot_ip,
-                                      *_service_args(self.svc, self.robot_file)])
+                                      *_service_args(self.svc, self.robot_file), *extra])
 
     def start(self) -> Stack:
-        """Start both."""
+        """Start both (embedded: the one process)."""
+        if self.embedded:
+            self.start_embedded()
+            return self
         self.start_sim()
         self.start_daemon()
         return self

@@ -21,13 +21,15 @@ from .config import ServiceConfig
 ROLE_DAEMON = "daemon"
 ROLE_SIM = "sim"
 ROLE_CLIENT = "client"
+ROLE_EMBEDDED = "embedded"
 
 
 def session_config(cfg: ServiceConfig, role: str) -> zenoh.Config:
     """The Zenoh config of one process.
 
     The daemon listens on ``daemon_endpoint`` and connects to the sim; the sim listens on
-    ``sim_endpoint``; a client listens nowhere and connects to both. Peers retry their
+    ``sim_endpoint``; a client listens nowhere and connects to both; a robot side that hosts
+    the control core (``embedded``: ``wmm-qp sim --embedded``) is both, and listens on both. Peers retry their
     connects in the background, so the start order does not matter.
 
     Endpoints listed in the config file are kept: its listen endpoints are added to the
@@ -38,7 +40,7 @@ def session_config(cfg: ServiceConfig, role: str) -> zenoh.Config:
 
     Args:
         cfg: service config (base JSON5 file and endpoints).
-        role: ``daemon``, ``sim`` or ``client``.
+        role: ``daemon``, ``sim``, ``client`` or ``embedded``.
 
     Raises:
         ConfigError: the base file is not a valid Zenoh config, a credential file it names is
@@ -60,6 +62,8 @@ def session_config(cfg: ServiceConfig, role: str) -> zenoh.Config:
         listen, connect = [z.daemon_endpoint], [z.sim_endpoint]
     elif role == ROLE_SIM:
         listen, connect = [z.sim_endpoint], []
+    elif role == ROLE_EMBEDDED:
+        listen, connect = [z.daemon_endpoint, z.sim_endpoint], []
     else:
         listen, connect = [], [z.daemon_endpoint, z.sim_endpoint]
     listen = list(dict.fromkeys([*file_listen, *listen]))

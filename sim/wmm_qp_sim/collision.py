@@ -61,7 +61,7 @@ class CollisionReferee:
             self.gmodel.addCollisionPair(pin.CollisionPair(i, j))
         self.gdata = pin.GeometryData(self.gmodel)
         self._floor = coal.Halfspace(np.array([0.0, 0.0, 1.0]), self.geo.floor_z)  # solid: z ≤ floor_z
-        self.obstacles: list[tuple[str, coal.CollisionGeometry, pin.SE3, FloatArray, FloatArray, float]] = []
+        self.obstacles: list[tuple[str, coal.CollisionGeometry, pin.SE3, np.ndarray, FloatArray, float]] = []
         self._centers = np.array([b.center for b in self.geo.bodies]).reshape(-1, 3)  # each body's frame
         self._radii = np.array([b.radius for b in self.geo.bodies], dtype=float)
         self._pairs = [(k, i, j) for k, (i, j) in enumerate(self.geo.self_pairs)]
@@ -108,7 +108,7 @@ class CollisionReferee:
         return L, R
 
     def set_obstacles(self, obstacles: tuple[ShapeConfig, ...] | list[ShapeConfig]) -> None:
-        from wmm_qp.limits.collision import exempt_mask
+        from wmm_qp.model.collision import exempt_mask
 
         out = []
         for o in obstacles:

@@ -50,6 +50,12 @@ class LeaseGate:
         if msg is None:
             self.refused["invalid"] += 1
             return None
+        return self.obey(msg, referee)
+
+    def obey(self, msg: Any, referee: Referee) -> Any:
+        """A validated command (decoded here, or handed over in memory by a control core in the
+        same process) if this robot obeys it, else None (counted in :attr:`refused` by reason:
+        lease, instance, seq)."""
         if msg.lease != self.holder:
             self.refused["lease"] += 1
             return None

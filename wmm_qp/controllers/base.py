@@ -15,9 +15,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._jit import all_finite, jit
-from ..config import ControllerConfig, FloatArray, RobotConfig, ShapeConfig
+from .._typing import FloatArray
+from ..config import ControllerConfig, RobotConfig, ShapeConfig
 from ..limits import MotionBounds, braking_command, wheel_braking_command
-from ..limits.collision import Rows
+from ..limits.rows import Rows
 from ..manipulability import directional_manipulability, dm_cartesian_gradient, dm_gradient
 from ..model.wmm import Kinematics, WmmModel
 from ..pseudoinverse import damping_factor, sigma_min

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config import FloatArray
+from .._typing import FloatArray
 from ..pseudoinverse import weight_matrix_diag, weighted_pinv
 from ..types import Command, Mode, Reference, RobotState
 from .base import Controller, TickContext

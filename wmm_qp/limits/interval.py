@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config import FloatArray
+from .._typing import FloatArray
 
 
 def intersect_by_priority(

@@ -23,9 +23,8 @@ by the state's age (transport, the robot's own step, a drive that ramps towards 
 it is the command of r ticks ago (r ≥ 2 over a transport). Where the braking bound is active,
 the acceleration bound wins, so each command could then drop only A·dt below the command of r
 ticks ago: the joint brakes at A/r, not A, and overshoots by far more than any latency margin
-covers (issue 11 item 9: joint 4 went 0.02–0.05 rad past its limit in a hold recovery;
-``tests/test_limits.py`` drives a joint into its limit both ways). The latency margin covers the
-lag of the *position*.
+covers (``tests/test_limits.py`` drives a joint into its limit both ways). The latency margin
+covers the lag of the *position*.
 """
 
 from __future__ import annotations
@@ -35,7 +34,7 @@ import math
 import numpy as np
 
 from .._jit import jit
-from ..config import FloatArray
+from .._typing import FloatArray
 
 
 def braking_velocity(distance: FloatArray, a_max: FloatArray, dt: float) -> FloatArray:

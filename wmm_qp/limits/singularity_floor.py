@@ -31,9 +31,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._jit import jit
-from ..config import FloatArray
+from .._typing import FloatArray
 from ..linalg3 import gram3
 from ..pseudoinverse import _sigma_min3
+from ..types import Mode
+from .rows import Retry, Rows, RowSource, Tick
 
 FLOOR_RATE = 2.0  # γ [1/s]: σ_min − σ_f may shrink by at most this fraction per second
 INFLUENCE = 2.0  # the row acts while σ_min < INFLUENCE·σ_f
@@ -50,6 +52,7 @@ class FloorRow:
         l_brake: [m/rad/s] l relaxed further to admit the braking command v₀ = clip(0, lb, ub).
         sigma: [m/rad] σ_min(J_m) this tick.
         floor: [m/rad] σ_f.
+        damper: [m/rad/s] the damper's own bound −γ(σ' − σ_f).
     """
 
     C: FloatArray
@@ -57,6 +60,7 @@ class FloorRow:
     l_brake: float
     sigma: float
     floor: float
+    damper: float = 0.0
 
 
 def sigma_min_gradient(J_arm: FloatArray, dJ_arm: FloatArray) -> tuple[float, FloatArray]:
@@ -150,4 +154,48 @@ def floor_row(
     best = float(np.sum(np.maximum(C * lb, C * ub)))  # the most σ-raising rate the bounds admit
     l = min(damper, best)
     v0 = np.clip(0.0, lb, ub)
-    return FloorRow(C=C, l=l, l_brake=min(l, float(C @ v0)), sigma=sigma, floor=floor)
+    return FloorRow(C=C, l=l, l_brake=min(l, float(C @ v0)), sigma=sigma, floor=floor, damper=damper)
+
+
+class SigmaMinFloor(RowSource):
+    """The σ_min floor as a row source: its row in the DM modes, while σ_min is near σ_f.
+
+    Priority: task, then the floor, then DM. In DM_NULLSPACE the task outranks the row (a stage
+    whose task it cuts is solved again without it); in DM_CARTESIAN the task is the DM ascent
+    itself (v_c of eq. (17)), which the row cuts. It steers the ascent, so a solver meets it to its
+    tolerance (not re-checked), and in the stage solved again when rows exclude each other it is
+    relaxed to admit the braking command and the dampers' joint command.
+
+    Args:
+        floor: σ_f [m/rad] (``dm.sigma_min_floor``; 0: no floor).
+        latency: τ [s], the state's age when the command acts (``state_latency``).
+    """
+
+    name = "sigma_min floor"
+    retry = Retry.ADMIT
+    rechecked = False
+
+    def __init__(self, floor: float, latency: float) -> None:
+        self.floor, self.latency = floor, latency
+        self.last: FloorRow | None = None  # the row of the last tick
+
+    def compute_rows(self, tick: Tick) -> Rows | None:
+        kin = tick.kin
+        self.last = None
+        if tick.mode not in (Mode.DM_CARTESIAN, Mode.DM_NULLSPACE) or kin.dJ_arm is None:
+            return None
+        row = self.last = floor_row(kin.J_arm, kin.dJ_arm, self.floor, tick.v_prev, tick.lb, tick.ub, self.latency)
+        if row is None:
+            return None
+        return Rows(row.C[None, :], np.array([row.l]), l_brake=np.array([row.l_brake]), damper=np.array([row.damper]),
+                    names=[self.name], distances=np.array([row.sigma - row.floor]))
+
+    def yields_to_task(self, mode: Mode) -> bool:
+        return mode == Mode.DM_NULLSPACE
+
+    def cut_reason(self, rows: Rows, v: FloatArray) -> str:
+        """The command on the row, to a solver's tolerance (1e-6 m/rad/s)."""
+        row = self.last
+        if row is None or not float(rows.C[0] @ v) - float(rows.l[0]) <= 1e-6:
+            return ""
+        return f"sigma_min floor: sigma_min {row.sigma:.3g} near {row.floor:.3g} (task cut)"

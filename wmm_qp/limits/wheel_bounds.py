@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config import BaseConfig, FloatArray
+from .._typing import FloatArray
+from ..config import BaseConfig
 from .interval import intersect_by_priority
 
 

@@ -16,7 +16,7 @@ import math
 import numpy as np
 
 from .._jit import jit
-from ..config import FloatArray
+from .._typing import FloatArray
 from ..linalg3 import gram3, solve_sym3
 
 S_MIN = 1e-12  # uᵀ J A Jᵀ u is floored here: H2 ≤ 1e6 where Jᵀu = 0 (a singular direction)

@@ -26,8 +26,10 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from .._jit import jit
-from ..config import FloatArray
+from .._typing import FloatArray
 
 
 @jit
@@ -51,7 +53,5 @@ def dm_preference_gain(grad_q: FloatArray, k_N: float, speed: float, g0: float) 
 
 def dm_preference(grad_q: FloatArray, k_N: float, speed: float, g0: float, v_max: FloatArray) -> FloatArray:
     """v_n's arm part (n,): s(‖∇H2‖)·∇H2 clipped to ±v_max (the QP: 10× the velocity limits)."""
-    import numpy as np
-
     s = dm_preference_gain(grad_q, k_N, speed, g0)
     return np.clip(s * grad_q, -v_max, v_max)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config import FloatArray
+from .._typing import FloatArray
 
 
 def yoshikawa_manipulability(J: FloatArray) -> float:

@@ -19,13 +19,13 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from .. import urdf as urdf_io
 from .._jit import jit
-from ..config import ArmConfig, FloatArray
+from .._typing import FloatArray, IntArray
+from ..config import ArmConfig
 from ..exceptions import ConfigError
-from . import urdf as urdf_io
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-IntArray = np.ndarray[Any, np.dtype[np.int64]]
 
 
 @jit

@@ -28,8 +28,9 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from ..config import FloatArray, RobotConfig, ShapeConfig
-from . import urdf as urdf_io
+from .. import urdf as urdf_io
+from .._typing import BoolArray, FloatArray
+from ..config import RobotConfig, ShapeConfig
 from .arm import ArmModel
 
 
@@ -43,8 +44,8 @@ def coal_shape(shape: ShapeConfig) -> coal.CollisionGeometry:
         return coal.Capsule(shape.radius, shape.length)
     if shape.kind == "cylinder":
         return coal.Cylinder(shape.radius, shape.length)
-    if shape.kind == "plane":  # size = unit normal n, xyz[2] = offset c: n·p ≤ c is free, n·p > c solid
-        return coal.Halfspace(-np.asarray(shape.size, dtype=float), -float(shape.xyz[2]))  # coal: solid where n'·p ≤ d
+    if shape.kind == "plane":  # n·p ≤ c is free, n·p > c solid
+        return coal.Halfspace(-np.asarray(shape.normal, dtype=float), -shape.offset)  # coal: solid where n'·p ≤ d
     raise ValueError(f"unknown shape kind {shape.kind!r}")
 
 
@@ -52,9 +53,9 @@ def convex_hull(mesh: coal.BVHModelBase) -> coal.ConvexBase:
     """The convex hull of a mesh's vertices, its vertices only (qhull, triangulated).
 
     Not ``buildConvexRepresentation``: its Convex keeps every vertex of the mesh, the interior
-    ones too, and coal's GJK on it is wrong — TIAGo's base_link (202 points, 89 on the hull) came
-    out 2.7 cm clear of a box it penetrated by 6.9 mm, flipping at sub-millimetre motion; on the
-    hull of its vertices the distance is the vertices' own and continuous."""
+    ones too, on which coal's GJK gives wrong distances that jump at sub-millimetre motion; on the
+    hull of its vertices the distance is the vertices' own and continuous
+    (``tests/test_convex_hulls.py``)."""
     points = [np.asarray(mesh.vertex(i), dtype=float) for i in range(mesh.num_vertices)]
     return coal.Convex.convexHull(points, False, "Qt")
 
@@ -74,8 +75,8 @@ def row_shape(shape: coal.CollisionGeometry) -> coal.CollisionGeometry:
 
     The rows keep these shapes ``collision.safety_distance`` apart: since each one contains its
     body, the bodies are at least as far apart (the referee checks the bodies). Convex meshes are
-    not wrapped in capsules: those are fat enough that the UR5's and TIAGo's start configurations
-    are inside d_s and the rows then fight every task (the UR5's floor test ran > 10 min)."""
+    not wrapped in capsules: capsules around meshes can be fat enough to put a robot's start
+    configuration inside d_s, and the rows then fight every task."""
     if isinstance(shape, coal.Cylinder):
         return coal.Capsule(shape.radius, 2.0 * shape.halfLength)
     return shape
@@ -244,6 +245,15 @@ def robot_geometry(robot: RobotConfig, arm: ArmModel) -> RobotGeometry:
         geo = RobotGeometry(robot, arm)
         arm._collision_geometry = geo  # type: ignore[attr-defined]
     return geo
+
+
+def exempt_mask(geometry: RobotGeometry, exempt: tuple[str, ...]) -> BoolArray:
+    """True for the bodies an obstacle is checked against: all but those on its ``exempt`` links
+    ("ee": every body on the EE frame's joint)."""
+    ee_joint = geometry.arm.model.frames[geometry.arm.frame_id].parentJoint
+    return np.array(
+        [not (b.link in exempt or ("ee" in exempt and b.joint == ee_joint)) for b in geometry.bodies], dtype=bool
+    )
 
 
 def transform(M: pin.SE3) -> coal.Transform3s:

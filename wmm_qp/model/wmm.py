@@ -23,7 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._jit import jit
-from ..config import FloatArray, RobotConfig
+from .._typing import FloatArray
+from ..config import RobotConfig
 from .arm import ArmModel
 from .bases import Base, make_base
 

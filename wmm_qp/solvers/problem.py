@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import FloatArray
+from .._typing import FloatArray
 
 INF = 1e20  # what the backends get in place of ±inf
 

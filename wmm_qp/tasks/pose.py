@@ -16,7 +16,7 @@ import math
 import numpy as np
 import pinocchio as pin
 
-from ..config import FloatArray
+from .._typing import FloatArray
 
 
 def quat_to_matrix(q: FloatArray) -> FloatArray:

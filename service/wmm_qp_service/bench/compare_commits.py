@@ -34,19 +34,41 @@ import os
 import statistics
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 HERE = Path(__file__).resolve().parents[3]  # the source tree this module belongs to
+DEFAULT_PACKAGE_DIRS = ("", "sim", "service")  # where wmm_qp, wmm_qp_sim and wmm_qp_service live in a tree
+
+
+def package_dirs(tree: Path) -> list[Path]:
+    """The folders of ``tree`` that hold its packages: its pyproject.toml's
+    ``[tool.setuptools.packages.find] where`` (``.``, ``sim``, ``service`` if it says nothing)."""
+    try:
+        data = tomllib.loads((tree / "pyproject.toml").read_text())
+        where = data["tool"]["setuptools"]["packages"]["find"]["where"]
+        if isinstance(where, list) and all(isinstance(w, str) for w in where):
+            return [tree / w for w in where]
+    except (OSError, tomllib.TOMLDecodeError, KeyError, TypeError):
+        pass
+    return [tree / w for w in DEFAULT_PACKAGE_DIRS]
+
+
+def tree_env(tree: Path) -> dict[str, str]:
+    """This process's environment with ``PYTHONPATH`` set to ``tree``'s packages (and its configs not
+    overridden), so that a child imports *that* tree's code."""
+    env = dict(os.environ)
+    env.pop("WMM_QP_CONFIG_DIR", None)
+    env["PYTHONPATH"] = os.pathsep.join(str(p) for p in package_dirs(tree))
+    return env
 
 
 def run_tree(tree: Path, ticks: int, solvers: list[str], python: str = sys.executable) -> dict[str, Any]:
     """One ``wmm-qp bench`` controller run (track mode only) in ``tree``; its parsed JSON."""
-    env = dict(os.environ)
-    env.pop("WMM_QP_CONFIG_DIR", None)
-    env["PYTHONPATH"] = os.pathsep.join(str(tree / p) for p in ("", "sim", "service"))
+    env = tree_env(tree)
     argv = [python, "-m", "wmm_qp_service.cli", "bench", "--only", "controller", "--mode", "track",
             "--no-breakdown", "--ticks", str(ticks), "--max-seconds", "600", "--json"]  # fmt: skip
     for s in solvers:
@@ -92,13 +114,11 @@ def compare(old: Path, new: Path, rounds: int, ticks: int, solvers: list[str]) -
     return out
 
 
-class _Worker:
-    """A :mod:`._tick_worker` process of one tree."""
+class TickWorker:
+    """A :mod:`._tick_worker` process of one tree (this tree's worker script, that tree's ``wmm_qp``)."""
 
     def __init__(self, tree: Path, solver: str, python: str = sys.executable) -> None:
-        env = dict(os.environ)
-        env.pop("WMM_QP_CONFIG_DIR", None)
-        env["PYTHONPATH"] = os.pathsep.join(str(tree / p) for p in ("", "sim", "service"))
+        env = tree_env(tree)
         script = Path(__file__).with_name("_tick_worker.py")
         self.p = subprocess.Popen([python, "-P", str(script), solver], cwd=tree, env=env, text=True,
                                   stdin=subprocess.PIPE, stdout=subprocess.PIPE)  # fmt: skip
@@ -137,7 +157,7 @@ def interleave(old: Path, new: Path, blocks: int, ticks: int, solvers: list[str]
                            "loadavg_before": [round(x, 2) for x in os.getloadavg()]}  # fmt: skip
     for s in solvers:
         print(f"interleaved: {s}, {blocks} blocks of {size} ticks per tree", file=sys.stderr, flush=True)
-        workers = {"old": _Worker(old, s), "new": _Worker(new, s)}
+        workers = {"old": TickWorker(old, s), "new": TickWorker(new, s)}
         ns: dict[str, list[int]] = {"old": [], "new": []}
         pairs: list[float] = []
         try:

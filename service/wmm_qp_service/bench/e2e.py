@@ -1,4 +1,5 @@
-"""End-to-end over Zenoh: daemon + sim processes, each trigger and rate (``--only e2e``).
+"""End-to-end: daemon + sim processes over Zenoh, each trigger and rate, beside the embedded
+stack (one process: the control core in the sim's cycle) and the machine's floor (``--only e2e``).
 
 Per case (:data:`CASES`: the fixed-rate loop at 500 Hz and 1 kHz, the state-triggered loop at
 1 kHz, the sim's rate): start ``wmm-qp sim`` and ``wmm-qp serve --rate R --trigger T`` on
@@ -32,6 +33,22 @@ Figures per case:
   (:class:`~.machine.CpuMeter`: /proc CPU time over wall time): ``daemon``, ``sim`` and this
   recording client.
 - ``telemetry_lost``: gaps in the telemetry's seq (transport drops to the recording client).
+
+The embedded stack (``embedded.<rate>``, :data:`EMBEDDED_RATES`): ``wmm-qp sim --embedded
+--control-rate R`` alone, the same circle and recording client, the same figures (its state →
+command is the state's stamp → the command handed to the robot, in one thread: validation and
+the tick; ``state_transport_us`` is the hand-over, ``daemon_us`` the rest); ``cpu_pct`` names
+``embedded`` and ``client``; ``cycle``: the process's own cycle report (``--cycle-report``: its
+ticks, misses, the tick's work, the garbage collector's collections in the slack). At 500 Hz the
+core ticks every other cycle of the 1 kHz sim: half the states have no command of their own.
+
+``embedded_plain.<rate>``: the embedded stack without its cycle's cost cuts (``--plain-cycle``:
+the interpreter's own garbage collection, no spin before the deadline,
+the service thread at normal priority), in the same run: what the cuts buy.
+
+The floor (``floor.<rate>``): an empty loop at the sim's rate with the embedded loop's settings
+(the service config's spin, the sim's SCHED_FIFO priority), :func:`~.jitter.run_one`: the misses
+the machine makes whatever the work.
 """
 
 from __future__ import annotations
@@ -53,6 +70,12 @@ from .machine import CPU_HOW, CpuMeter, loadavg
 
 CASES: tuple[tuple[str, float], ...] = (("rate", 500.0), ("rate", 1000.0), ("state", 1000.0))
 """(trigger, rate [Hz]) of each case; the state-triggered loop runs at the sim's rate (1 kHz)."""
+EMBEDDED_RATES: tuple[float, ...] = (500.0, 1000.0)
+"""[Hz] the embedded stack's control rates (the sim's cycle is 1 kHz)."""
+PLAIN_RATES: tuple[float, ...] = (1000.0,)
+"""[Hz] the embedded stack without its cycle's cost cuts (``--plain-cycle``), beside it."""
+FLOOR_RATES: tuple[float, ...] = (1000.0,)
+"""[Hz] the empty loop's rates (the robot's cycle)."""
 SETPOINT_HZ = 100.0  # [Hz]
 STARTUP_TIMEOUT = 60.0  # [s]
 
@@ -80,11 +103,13 @@ def run_case(
     robot: RobotConfig | None = None,
     controller_file: Path | None = None,
     breakdown: bool = False,
+    plain: bool = False,
 ) -> dict[str, Any]:
     """One case: start the stack, track the circle for ``ticks`` ticks, measure, stop.
 
     Args:
-        trigger: the daemon's ``loop.trigger`` (``rate`` or ``state``).
+        trigger: the daemon's ``loop.trigger`` (``rate`` or ``state``), or ``embedded`` (one
+            process: ``wmm-qp sim --embedded``).
         rate_hz: [Hz] daemon rate.
         ticks: control ticks to measure (duration = ticks / rate_hz).
         log_dir: the processes' logs (None: a temporary folder).
@@ -94,11 +119,12 @@ def run_case(
         breakdown: the daemon times each stage of its ticks (``--breakdown``): the result gains
             ``breakdown`` (:meth:`~..tick_stages.TickStages.summary`, over the ticks that
             published a command, start-up included).
+        plain: the embedded stack without its cycle's cost cuts (``--plain-cycle``).
 
     Returns:
         The figures of the module docstring, plus the load average, exit codes and faults.
     """
-    from ..client import Client
+    from ..client import Client, NotReady
     from ..processes import Stack, isolated_config
     from ..protocol import StateMsg
     from ..streams import circle
@@ -114,12 +140,17 @@ def run_case(
         "logs": str(log_dir),
         "collision": False,
     }
-    args = ["--trigger", trigger] + ([] if controller_file is None else ["--controller-config", str(controller_file)])
+    embedded = trigger == "embedded"
+    args = [] if embedded else ["--trigger", trigger]
+    args += [] if controller_file is None else ["--controller-config", str(controller_file)]
     args += ["--no-collision"]  # the loop as its figures were taken (docs/benchmarks.md §5); rows: collision_default
     breakdown_file = log_dir / "breakdown.json"
-    if breakdown:
+    cycle_file = log_dir / "cycle.json"
+    if breakdown and not embedded:
         args += ["--breakdown", str(breakdown_file)]
-    stack = Stack(svc, rate_hz=rate_hz, log_dir=log_dir, extra_daemon_args=args,
+    if embedded:
+        args += ["--cycle-report", str(cycle_file)] + (["--plain-cycle"] if plain else [])
+    stack = Stack(svc, rate_hz=rate_hz, log_dir=log_dir, extra_daemon_args=args, embedded=embedded,
                   robot_file=None if robot is None else robot.path)  # fmt: skip
     svc = stack.svc
     info0 = info1 = None
@@ -131,13 +162,12 @@ def run_case(
     try:
         stack.start()
         with Client(svc, name="bench-e2e", telemetry=True) as c:
-            info = c.wait_for_daemon(STARTUP_TIMEOUT)
-            end = time.monotonic() + STARTUP_TIMEOUT
-            while info is not None and not info.status.state_ok and time.monotonic() < end:
-                time.sleep(0.1)
-                info = c.info()
-            st = c.wait_truth(5.0)
-            if info is None or not info.status.state_ok or st is None:
+            try:
+                info = c.wait_ready(STARTUP_TIMEOUT, state_timeout=STARTUP_TIMEOUT)
+            except NotReady:
+                info = None
+            st = c.wait_truth(5.0) if info is not None else None
+            if info is None or st is None:
                 return out | {"available": False, "reason": f"the stack did not come up (logs: {log_dir})"}
             out["controller"] = info.config.get("controller", {}).get("kind")
             out["solver"] = info.config.get("controller", {}).get("solver")
@@ -172,11 +202,13 @@ def run_case(
             states_raw, tel, truths = rec.states, rec.telemetry, rec.truth_by_seq()
     finally:
         out["exit_codes"] = stack.stop()
-    if breakdown:
-        try:
-            out["breakdown"] = json.loads(breakdown_file.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as e:
-            out["breakdown"] = {"available": False, "reason": f"{breakdown_file}: {e}"}
+    for key, wanted, path in (("breakdown", breakdown and not embedded, breakdown_file),
+                              ("cycle", embedded, cycle_file)):
+        if wanted:
+            try:
+                out[key] = json.loads(path.read_text(encoding="utf-8"))
+            except (OSError, ValueError) as e:
+                out[key] = {"available": False, "reason": f"{path}: {e}"}
     if info0 is None or info1 is None or not tel or not states_raw:
         return out | {"available": False, "reason": "no status or no telemetry during the window"}
     dec = msgspec.msgpack.Decoder(StateMsg)
@@ -255,12 +287,41 @@ def run(
     cases: tuple[tuple[str, float], ...] = CASES,
     robot: RobotConfig | None = None,
     controller_file: Path | None = None,
+    embedded_rates: tuple[float, ...] = EMBEDDED_RATES,
+    plain_rates: tuple[float, ...] = PLAIN_RATES,
+    floor_rates: tuple[float, ...] = FLOOR_RATES,
 ) -> dict[str, Any]:
-    """Every case in turn: {"available", "<trigger> <rate>": figures of :func:`run_case`}."""
+    """Every case in turn, in one run: {"available", "<trigger> <rate>": figures of
+    :func:`run_case` (the split stack), "embedded": {"<rate>": the same figures of the embedded
+    stack}, "embedded_plain": {"<rate>": the same without its cycle's cost cuts}, "floor":
+    {"<rate>": :func:`~.jitter.run_one` of the embedded loop's settings, empty}}."""
+    from wmm_qp_sim import load_sim_config
+
+    from ..config import load_service_config
+    from .jitter import run_one
+
     out: dict[str, Any] = {"available": True}
     for trigger, r in cases:
         print(f"e2e: {trigger} trigger, {r:g} Hz for {ticks} ticks ({ticks / r:.0f} s)", file=sys.stderr, flush=True)
         res = run_case(trigger, r, ticks, robot=robot, controller_file=controller_file)
         out[case_key(trigger, r)] = res
         out["available"] = out["available"] and bool(res.get("available"))
+    out["embedded"] = {}
+    for r in embedded_rates:
+        print(f"e2e: embedded, {r:g} Hz for {ticks} ticks ({ticks / r:.0f} s)", file=sys.stderr, flush=True)
+        res = run_case("embedded", r, ticks, robot=robot, controller_file=controller_file)
+        out["embedded"][f"{r:g}"] = res
+        out["available"] = out["available"] and bool(res.get("available"))
+    out["embedded_plain"] = {}
+    for r in plain_rates:
+        print(f"e2e: embedded without the cuts, {r:g} Hz for {ticks} ticks ({ticks / r:.0f} s)", file=sys.stderr,
+              flush=True)
+        res = run_case("embedded", r, ticks, robot=robot, controller_file=controller_file, plain=True)
+        out["embedded_plain"][f"{r:g}"] = res
+    sim_cfg, spin_us = load_sim_config(), load_service_config().loop.spin_us
+    out["floor"] = {}
+    for r in floor_rates:
+        n = min(ticks, int(60 * r))
+        print(f"e2e: the floor, an empty {r:g} Hz loop for {n} ticks ({n / r:.0f} s)", file=sys.stderr, flush=True)
+        out["floor"][f"{r:g}"] = run_one(n, r, spin_us, sim_cfg.rt_priority)
     return out

@@ -11,13 +11,13 @@ from wmm_qp.config import TASK_KINDS
 from wmm_qp.solvers import available_solvers
 
 from ..progress import ProgressLine
-from . import collision, controller, daemon, e2e, jitter, oneshot, pink_race, scaling, sim
+from . import collision, controller, daemon, e2e, jitter, oneshot, pink_race, scaling, sim, tick_compare
 from .machine import machine_info
 from .robot_files import loaded, shipped_robots
 from .stats import now_ns
 
 SECTIONS: tuple[str, ...] = ("controller", "oneshot", "pink", "scaling", "robots", "e2e", "daemon", "collisions",
-                             "collision_default", "jitter", "sim")
+                             "collision_default", "jitter", "sim", "tick")
 
 
 def run_robots(
@@ -78,6 +78,8 @@ def run_bench(
     cfg: w.ControllerConfig | None = None,
     controller_file: Path | None = None,
     physics: list[str] | None = None,
+    baseline_tree: Path | None = None,
+    rounds: int = 5,
 ) -> dict[str, Any]:
     """Every section (or ``only`` one); progress goes to stderr.
 
@@ -95,12 +97,14 @@ def run_bench(
             kinds, the other sections use its own (but "e2e": its daemon loads ``controller_file``).
         controller_file: the daemon's controller config in "e2e" (None: its default).
         physics: the plants of the "sim" section (None: every available one, side by side).
+        baseline_tree: the other source tree of the "tick" section, which runs only with one.
+        rounds: the "tick" section's rounds (one worker run per tree each).
 
     Returns:
         {"machine", "robot", "task", "ticks", "tick_us" {solver: {p50, p99, max}} (track mode),
         "controller", "oneshot", "pink", "pink_tick_us" {p50, p99}, "scaling", "robots", "e2e",
         "sim" {robot: {plant: {"step_us", "realtime_factor", ...}}}, "physics" (the sim's plants),
-        "targets"}.
+        "tick_compare" (:func:`.tick_compare.run`), "targets"}.
     """
     robot = w.load_robot_config() if robot is None else robot
     cfg = w.load_controller_config() if cfg is None else cfg
@@ -108,11 +112,14 @@ def run_bench(
     # the other sections time the controller as their figures were taken, without collision rows
     # (the paper's setting); what the default rows cost: collision_default
     cfg = cfg.with_(collision={"enabled": False})
+    tick_solver = solvers[0] if solvers else cfg.qp.solver  # "tick": one solver, the first asked or the config's
     solvers = solvers or available_solvers()
     modes = modes or list(controller.MODES)
     out: dict[str, Any] = {"machine": machine_info(), "robot": robot.name, "robot_file": str(robot.path),
                            "task": cfg.task.kind, "ticks": ticks, "rate_hz": cfg.rate_hz}  # fmt: skip
     sections = tuple(s for s in (SECTIONS if only is None else (only,)) if s not in (skip or ()))
+    if baseline_tree is None:  # "tick" compares this tree with another: nothing to time without one
+        sections = tuple(s for s in sections if s != "tick")
     bar = ProgressLine("bench")
     done = 0
 
@@ -174,6 +181,10 @@ def run_bench(
         out["physics"] = plants
         out["sim"] = sim.run(shipped_robots(), plants, min(ticks, 5000), max_seconds)
         done += 1
+    if "tick" in sections and baseline_tree is not None:
+        say(f"tick: the track-mode tick ({tick_solver}) of this tree and of {baseline_tree}, {rounds} rounds")
+        out["tick_compare"] = tick_compare.run(baseline_tree, tick_solver, ticks, rounds)
+        done += 1
     bar.done(f"done, {done}/{len(sections)} sections")
     out["targets"] = targets(out)
     return out
@@ -214,6 +225,30 @@ def targets(r: dict[str, Any]) -> dict[str, Any]:
         t["zenoh_1khz_misses_per_10k"] = khz["misses_per_10k"]
         t["zenoh_1khz_lt_10_misses_per_10k"] = khz["misses_per_10k"] < 10.0
     t |= issue15_targets(e)
+    t |= embedded_targets(e)
+    return t
+
+
+def embedded_targets(e: dict[str, Any]) -> dict[str, Any]:
+    """The embedded stack's targets against one e2e run: at 1 kHz, state → command p50 within
+    2× its own ``ctl.step`` p50 and p99 ≤ 1 ms; its misses below the split stack's at the same
+    rate (both triggers at 1 kHz), beside the floor's (an empty loop's)."""
+    t: dict[str, Any] = {}
+    emb = (e.get("embedded") or {}).get("1000")
+    if not (emb and emb.get("available")):
+        return t
+    lat, step = emb["state_to_cmd_us"], emb["step_us"]
+    t["embedded 1000: state_to_cmd_p50_us"] = lat["p50"]
+    t["embedded 1000: state_to_cmd_p50_le_2x_step_p50"] = lat["p50"] <= 2.0 * step["p50"]
+    t["embedded 1000: state_to_cmd_p99_le_1ms"] = lat["p99"] <= 1000.0
+    t["embedded 1000: misses_per_10k"] = emb["misses_per_10k"]
+    for key in ("rate 1000", "state 1000"):
+        c = e.get(key)
+        if c and c.get("available") and c.get("misses_per_10k") is not None:
+            t[f"embedded 1000: misses_below_{key.replace(' ', '_')}"] = emb["misses_per_10k"] < c["misses_per_10k"]
+    floor = (e.get("floor") or {}).get("1000")
+    if floor:
+        t["floor 1000: misses_per_10k"] = floor["misses_per_10k"]
     return t
 
 

@@ -37,8 +37,8 @@ import wmm_qp as w
 from wmm_qp.limits import braking_command, joint_motion_bounds, wheel_bounds, wheel_braking_command
 from wmm_qp.model.arm import mount_placement
 from wmm_qp.model.bases import make_base
-from wmm_qp.model.urdf import reduced_model
 from wmm_qp.solvers import INF, QPProblem, make_backend
+from wmm_qp.urdf import reduced_model
 
 from .stats import now_ns, summarize_ns
 from .trajectory import circle

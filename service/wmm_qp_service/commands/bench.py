@@ -4,7 +4,11 @@ Zenoh (issues 6 and 12, docs/benchmarks.md).
 
 ``--robot-config FILE`` picks the robot of every section but ``robots`` (which loops over the
 shipped robot files); ``--task KIND`` overrides the controller config's task kind (not in
-``e2e``, whose daemon loads ``--controller-config``; ``pink`` is position-only)."""
+``e2e``, whose daemon loads ``--controller-config``; ``pink`` is position-only).
+
+``--baseline-tree DIR`` (with ``--only tick``, or with every section) times the Gen3's track-mode
+tick of this source tree and of DIR's in the same run, in ``--rounds`` alternating rounds
+(:mod:`wmm_qp_service.bench.tick_compare`)."""
 
 from __future__ import annotations
 
@@ -12,6 +16,7 @@ import argparse
 import json
 import math
 import sys
+from pathlib import Path
 from typing import Any
 
 from wmm_qp.config import TASK_KINDS
@@ -21,7 +26,7 @@ from .common import add_config_arguments, add_physics_argument, load_configs, ph
 HELP = "measure per-tick controller time and the loop over Zenoh"
 
 _SECTIONS = ("controller", "oneshot", "pink", "scaling", "robots", "e2e", "daemon", "collisions", "collision_default",
-             "jitter", "sim")
+             "jitter", "sim", "tick")
 _MODES = ("hold", "track", "dm_cartesian", "dm_nullspace")
 
 
@@ -55,6 +60,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=30.0,
         help="wall-clock budget per timed pass [s] (default 30)",
     )
+    parser.add_argument(
+        "--baseline-tree", type=Path, default=None, metavar="DIR",
+        help="tick: another source tree of wmm-qp (e.g. git worktree add --detach /tmp/base main) whose track-mode "
+             "tick is timed beside this tree's, alternating worker runs; the tick section runs only with it",
+    )  # fmt: skip
+    parser.add_argument("--rounds", type=int, default=5,
+                        help="tick: rounds, each one worker run of --ticks ticks per tree (default 5)")  # fmt: skip
 
 
 def _clean(x: Any) -> Any:
@@ -109,20 +121,27 @@ def _print_report(r: dict[str, Any]) -> None:
         if isinstance(rows, dict):
             for n, row in rows.items():
                 print(f"scaling    {solver:9s} {n:>2s} arm joints ({row['n_vars']} vars) {_fmt(row['tick_us'])}")
-    for case, e in r.get("e2e", {}).items():
+    e2e = r.get("e2e", {})
+    cases = [(k, v) for k, v in e2e.items() if k not in ("embedded", "embedded_plain", "floor")]
+    cases += [(f"embedded {k}", v) for k, v in (e2e.get("embedded") or {}).items()]
+    cases += [(f"plain {k}", v) for k, v in (e2e.get("embedded_plain") or {}).items()]
+    for case, e in cases:
         if not isinstance(e, dict):
             continue
         if not e.get("available"):
             print(f"e2e        {case} Hz: {e.get('reason')}")
             continue
         print(
-            f"e2e        {case:>10s} Hz: achieved {e['achieved_hz']} Hz, {e['ticks']} ticks, "
+            f"e2e        {case:>13s} Hz: achieved {e['achieved_hz']} Hz, {e['ticks']} ticks, "
             f"misses {e['deadline_misses']} ({e['misses_per_10k']} / 10k, watchdog {e['watchdog_ticks']}), "
             f"tick/step p50 ×{e['tick_over_step_p50']}, applied at k+1 {e['applied_next_step']}, "
             f"overwritten {e['cmds_not_applied']}/{e['cmds_in_window']}, CPU % {e.get('cpu_pct')}"
         )
         for k in ("tick_us", "step_us", "state_to_cmd_us", "state_transport_us", "daemon_us", "cmd_to_applied_us"):
             print(f"           {k:18s} {_fmt(e[k])}")
+    for rate, f in (e2e.get("floor") or {}).items():
+        print(f"e2e        floor {rate:>7s} Hz: an empty loop, {f['scheduling']}: {f['deadline_misses']} deadline "
+              f"misses in {f['ticks']} ticks ({f['misses_per_10k']} per 10k), late {f['late_us']} µs")
     for case, e in r.get("daemon", {}).items():
         if not isinstance(e, dict):
             continue
@@ -153,6 +172,14 @@ def _print_report(r: dict[str, Any]) -> None:
             if plant in row:
                 c = row[plant]
                 print(f"sim {name:16s} {plant:9s} step {_fmt(c['step_us'])}  realtime x{c['realtime_factor']}")
+    if (t := r.get("tick_compare")) is not None:
+        if not t.get("available"):
+            print(f"tick       {t['reason']}")
+        else:
+            print(f"tick       {t['solver']} track p50: this {t['this_us_p50']:.1f} µs, "
+                  f"baseline {t['baseline_us_p50']:.1f} µs ({t['baseline_tree']}): "
+                  f"ratio this/baseline {t['ratio']:.3f} over {t['rounds']} rounds "
+                  f"(rounds' median {t['ratio_rounds_median']:.3f}); same numerics {t['same_run']}")  # fmt: skip
     print(f"targets    {r['targets']}")
 
 
@@ -175,6 +202,29 @@ def run(args: argparse.Namespace) -> int:
         if s not in available_solvers():
             print(f"wmm-qp bench: error: solver {s!r} is not installed", file=sys.stderr)
             return 2
+    if args.rounds < 1:
+        print("wmm-qp bench: error: --rounds must be at least 1", file=sys.stderr)
+        return 2
+    if args.baseline_tree is not None:
+        from wmm_qp_service.bench.compare_commits import HERE
+        from wmm_qp_service.bench.tick_compare import tree_problem
+
+        if args.only not in (None, "tick"):
+            print(f"wmm-qp bench: error: --baseline-tree applies to the tick section (--only tick, or no --only), "
+                  f"not to --only {args.only}", file=sys.stderr)  # fmt: skip
+            return 2
+        if (why := tree_problem(args.baseline_tree)) is not None:
+            print(f"wmm-qp bench: error: --baseline-tree {args.baseline_tree}: {why}; give a checkout of wmm-qp, "
+                  "e.g. git worktree add --detach /tmp/base main", file=sys.stderr)  # fmt: skip
+            return 2
+        if tree_problem(HERE) is not None:
+            print(f"wmm-qp bench: error: --baseline-tree needs this wmm-qp to run from a source tree (an editable "
+                  f"install), not from {HERE}", file=sys.stderr)  # fmt: skip
+            return 2
+    elif args.only == "tick":
+        print("wmm-qp bench: error: --only tick needs --baseline-tree DIR (the tree to time beside this one)",
+              file=sys.stderr)  # fmt: skip
+        return 2
     robot, cfg = load_configs(args)
     if args.physics is not None:
         physics_plant(args)  # not installed: one line, exit 2, before anything runs
@@ -195,6 +245,8 @@ def run(args: argparse.Namespace) -> int:
         cfg=cfg,
         controller_file=args.controller_config,
         physics=None if args.physics is None else [args.physics],
+        baseline_tree=None if args.baseline_tree is None else args.baseline_tree.resolve(),
+        rounds=args.rounds,
     )
     if args.json:
         json.dump(_clean(result), sys.stdout, indent=1)

@@ -130,3 +130,17 @@ def robot_service_config(args: argparse.Namespace) -> tuple[RobotConfig, Service
 
     robot = load_robot(args)  # a bad file: its one-line error first
     return robot, service_config(args)
+
+
+def embedded_rate(rate_hz: float) -> int:
+    """Robot cycles per control tick of an embedded core at ``rate_hz`` [Hz] in the default sim
+    config's cycle (``--embedded``).
+
+    Raises:
+        wmm_qp.ConfigError: the rate does not divide the sim's (one line, exit 2).
+    """
+    from wmm_qp_sim import load_sim_config
+
+    from ..embedded import decimation
+
+    return decimation(load_sim_config().rate_hz, rate_hz)

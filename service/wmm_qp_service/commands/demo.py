@@ -13,6 +13,11 @@ With ``--driver franka --robot-ip IP`` the scenario runs through a real robot's 
 (``wmm-qp driver franka``, started by the demo) against a robot already running at that address
 (a Franka FR3, or franky-sim) instead of a sim; ``violations`` are then the driver's referee
 (its ``sim/truth``), and the EE error is n/a (no ground truth).
+
+With ``--embedded`` the same scenario runs through one process, ``wmm-qp sim --embedded``: the
+control core in the sim's own cycle (``--rate`` is its control rate, dividing the sim's 1 kHz);
+``exit_codes`` and ``cpu_pct`` name ``embedded``. With ``--driver franka --embedded`` the one
+process is ``wmm-qp driver franka --embedded`` (the core in libfranka's cycle; ``driver``).
 """
 
 from __future__ import annotations
@@ -33,6 +38,7 @@ from .common import (
     add_physics_argument,
     add_robot_argument,
     add_scene_argument,
+    embedded_rate,
     load_robot,
     load_scene_arg,
     physics_plant,
@@ -57,6 +63,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--driver", choices=("franka",), default=None,
                         help="run the scenario through this real robot's driver instead of a sim "
                              "(needs --robot-ip; docs/drivers.md)")
+    parser.add_argument("--embedded", action="store_true",
+                        help="one process instead of two: the control core in the sim's own cycle "
+                             "(wmm-qp sim --embedded; --rate must divide the sim's rate), or with --driver "
+                             "in the driver's (wmm-qp driver franka --embedded)")
     parser.add_argument("--robot-ip", metavar="IP", default=None,
                         help="the address of the running robot the --driver drives (e.g. franky-sim's)")
     add_robot_argument(parser)
@@ -85,6 +95,8 @@ def run(args: argparse.Namespace) -> int:
     plant = physics_plant(args)
     ctl = w.load_controller_config(args.controller_config)
     ctl.weights_for(robot)
+    if args.embedded:
+        embedded_rate(args.rate)  # one that does not divide the sim's rate: one line, exit 2
     svc = isolated_config(robot=robot)
     log_dir = log_folder(args.logs, "demo")
     daemon_args = [] if args.controller_config is None else ["--controller-config",
@@ -92,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
     daemon_args += ["--no-collision"] if args.no_collision else []  # else the rows are the daemon's default: on
     stack = Stack(svc, rate_hz=args.rate, log_dir=log_dir, robot_file=robot.path,
                   scene_file=scene.path if args.scene is not None else None,
-                  extra_daemon_args=daemon_args, extra_sim_args=["--physics", plant])
+                  extra_daemon_args=daemon_args, extra_sim_args=["--physics", plant], embedded=args.embedded)
     from ..bench.machine import CPU_HOW, CpuMeter
     from ..readiness import NotReady
 
@@ -103,11 +115,14 @@ def run(args: argparse.Namespace) -> int:
     not_up = ""
     try:
         if args.driver is not None:
-            bar.update(f"starting the {args.driver} driver for {args.robot_ip} and the daemon (logs: {log_dir})")
+            bar.update(f"starting the {args.driver} driver for {args.robot_ip}"
+                       f"{' with the control core in its cycle' if args.embedded else ' and the daemon'} "
+                       f"(logs: {log_dir})")
             stack.start_driver(args.driver, args.robot_ip)
-            stack.start_daemon()
+            if not args.embedded:
+                stack.start_daemon()
         else:
-            bar.update(f"starting the sim and the daemon (logs: {log_dir})")
+            bar.update(f"starting the {'embedded sim' if args.embedded else 'sim and the daemon'} (logs: {log_dir})")
             stack.start()
         try:
             summary = _drive(svc, args.duration, bar, exited=stack.exited,
@@ -134,6 +149,7 @@ def run(args: argparse.Namespace) -> int:
     summary["cpu_pct"], summary["cpu_how"] = cpu, CPU_HOW
     summary["logs"] = str(log_dir)
     summary["physics"] = plant
+    summary["embedded"] = args.embedded
     summary["robot"] = {"name": robot.name, "file": str(robot.path), "n_arm": robot.n_arm,
                         "n_wheels": robot.n_wheels, "base_kind": robot.base.kind, "task": ctl.task.kind}
     summary |= verdict.json_fields()

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
+from typing import Any
 
 HELP = "drive a real robot behind the daemon's protocol (driver franka --robot-ip IP: a Franka FR3 via libfranka)"
 
@@ -23,6 +25,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--stale-timeout", type=float, default=None, metavar="S",
                    help="[s] commands older than this brake the arm to rest (default: configs/sim.toml's "
                         "stale_timeout, 0.025)")
+    e = p.add_argument_group("embedded mode: the control core in libfranka's cycle (no wmm-qp serve)")
+    e.add_argument("--embedded", action="store_true",
+                   help="host the control daemon's core in libfranka's 1 kHz cycle: each cycle reads the state, "
+                        "ticks and writes the velocities in one thread; Zenoh still carries setpoints, modes, "
+                        "obstacles, status, telemetry, info and the lease (clients talk to this process)")
+    e.add_argument("--controller-config", metavar="TOML", help="with --embedded: default configs/controller.toml")
+    e.add_argument("--control-rate", type=float, default=None, metavar="HZ",
+                   help="with --embedded: [Hz] the core's rate, dividing 1000 (default: 1000)")
+    e.add_argument("--controller", choices=("qp", "paper", "traditional"),
+                   help="with --embedded: controller kind (default: controller.toml's)")
+    e.add_argument("--task", choices=("position", "pose"),
+                   help="with --embedded: the EE task (default: controller.toml's task.kind)")
+    e.add_argument("--no-collision", action="store_true",
+                   help="with --embedded: no collision rows in the qp controller (default: on)")
+    e.add_argument("--scene", type=Path, default=None, metavar="FILE",
+                   help="with --embedded: the controller's obstacles and fence (default: configs/scenes/default.toml)")
+    e.add_argument("--wait-lease", action="store_true",
+                   help="with --embedded: when a daemon controls this robot, wait for its lease instead of "
+                        "refusing to start")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -46,11 +67,49 @@ def run(args: argparse.Namespace) -> int:
     if not 0.0 < stale <= 1.0:
         print("wmm-qp driver franka: error: --stale-timeout must be in (0, 1] s", file=sys.stderr)
         return 2
+    if args.embedded and args.control_rate is not None and not 0 < args.control_rate <= 1000.0:
+        print("wmm-qp driver franka: error: --control-rate must be in (0, 1000] Hz (the robot's cycle)",
+              file=sys.stderr)
+        return 2
     driver = FrankaDriver(svc, robot, stale_timeout=stale, referee=sim_cfg.referee)
-    code = driver.run(args.robot_ip, stop_on_signals())
+    if args.embedded:
+        code = _run_embedded(args, driver)
+        if code is None:
+            return 3
+    else:
+        for flag, given in (("--controller-config", args.controller_config), ("--control-rate", args.control_rate),
+                            ("--controller", args.controller), ("--task", args.task), ("--scene", args.scene),
+                            ("--no-collision", args.no_collision or None), ("--wait-lease", args.wait_lease or None)):
+            if given is not None:
+                print(f"wmm-qp driver franka: error: {flag} needs --embedded (without it the driver hosts no "
+                      f"controller: give it to wmm-qp serve)", file=sys.stderr)
+                return 2
+        code = driver.run(args.robot_ip, stop_on_signals())
     sh = driver.shaper
     violations = {k: n for k, n in driver.referee.counts.items() if n}
     last = f" (last: {sh.reason})" if sh.reason else ""
     print(f"wmm-qp driver franka: stopped at t = {driver.t:.3f} s (exit {code}), violations {violations}, "
           f"protective stops {sh.protective_stops}{last}, refused {dict(driver.refused)}", file=sys.stderr, flush=True)
+    return code
+
+
+def _run_embedded(args: argparse.Namespace, driver: Any) -> int | None:
+    """``driver franka --embedded``: the control core in libfranka's cycle; None: another daemon
+    holds the robot's lease (said on stderr; exit 3)."""
+    from ..cli_common import stop_on_signals
+    from ..daemon import LeaseHeld
+    from ..drivers.franka_embedded import FrankaEmbedded
+    from .common import load_scene_arg
+    from .serve import controller_config
+
+    emb = FrankaEmbedded(driver, controller_config(args), control_rate=args.control_rate, kind=args.controller,
+                         scene=load_scene_arg(args))
+    try:
+        code = emb.run(args.robot_ip, stop_on_signals(), wait_lease=args.wait_lease)
+    except LeaseHeld as e:
+        print(f"wmm-qp driver franka: error: {e}", file=sys.stderr, flush=True)
+        return None
+    t = emb.control.timing
+    print(f"wmm-qp driver franka: the embedded core ticked {t.ticks} times, {t.deadline_misses} deadline misses, "
+          f"faults {dict(emb.control.core.faults) or 'none'}", file=sys.stderr, flush=True)
     return code

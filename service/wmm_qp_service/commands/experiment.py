@@ -90,8 +90,8 @@ def _suffixed(path: Path, suffix: str) -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..experiments import circle, dm, log, push
-    from ..experiments.runner import make_setup
+    from ..experiments import circle, dm, log, push, runner
+    from ..experiments.setup import make_setup
 
     if args.realtime and args.name == "push" and (args.log is not None or args.plots is not None):
         return _fail("push --realtime writes no --log or --plots (the JSON has the metrics)")
@@ -148,105 +148,76 @@ def run(args: argparse.Namespace) -> int:
         result["wheel_units"] = args.wheel_units
     if args.name == "circle":
         result["radius"] = circle.RADIUS if args.radius is None else args.radius
-    if args.realtime and args.name == "push":
-        from ..experiments.realtime import run_push_realtime
-
-        rt_runs = run_push_realtime(setup, args.controller, args.solver, args.duration or push.DEFAULT_DM_DURATION,
-                                 slip=not args.no_slip, seed=args.seed, rate_hz=args.rate, progress=show_progress,
-                                 log_dir=args.process_logs, controller_file=args.controller_config)  # fmt: skip
-        result["realtime"] = {name: r.pop("realtime") for name, r in rt_runs.items()}
-        reasons = [r.pop("controller_reasons") for r in rt_runs.values()]
-        result |= rt_runs
-        result["box"] = {"mass": push.MASS, "mu": push.MU, "target": push.TARGET}
-        result["violations"] = {
-            k: sum(r["violations"].get(k, 0) for r in rt_runs.values()) for k in rt_runs["with_dm"]["violations"]
-        }
-        result["controller_reasons"] = {k: v for r in reasons for k, v in r.items()}
-        traces: dict[str, Any] = {}
-    elif args.realtime:
-        s = first
-        rt = _realtime(args, s, show_progress)
-        tr = rt.trace
-        result["realtime"] = rt.service
-        result["duration"] = float(tr.t[-1] - tr.t[0]) + 1.0 / rt.service["rate_hz"]
-        if args.name == "circle":
-            result |= circle.circle_metrics(tr)
-        else:
-            tag = f"{args.controller}_{args.direction}"
-            t_switch = rt.t_switch if rt.t_switch is not None else float(tr.t[-1])
-            result |= dm.dm_metrics(tr, s, args.direction, t_switch)
-        traces = {"": tr}
-        tag = f"{tag}_realtime"
-        if args.plots:
-            from ..experiments import plots
-
-            if args.name == "circle":
-                plots.plot_circle(tr, args.plots, tag)
-            else:
-                plots.plot_dm(tr, args.plots, tag)
-    elif args.name == "circle":
-        s = first
-        radius = circle.RADIUS if args.radius is None else args.radius
-        duration = args.duration or circle.DEFAULT_DURATION
-        strip = _strip(args, duration, elevation=-50.0)  # from above: the circle shows
-        tr = circle.run_circle(s, duration, progress=show_progress, radius=radius, observe=strip)
-        if strip is not None:
-            result["frames"] = [str(strip.save(args.frames / f"frames_circle{circle.plot_tag('', radius)}.png",
-                                               f"circle r = {radius:g} m, {robot.name}, MuJoCo"))]
-        result |= {"duration": float(tr.t[-1] + s.ctl_cfg.dt), **circle.circle_metrics(tr)}
-        traces = {"": tr}
-        if args.plots:
-            from ..experiments.plots import plot_circle
-
-            plot_circle(tr, args.plots, circle.plot_tag(tag, radius, args.wheel_units))
-    elif args.name == "dm":
-        s = first
-        duration = args.duration or dm.DEFAULT_DURATION
-        tr = dm.run_dm(s, args.direction, duration, progress=show_progress)
-        result |= {
-            "duration": duration,
-            **dm.dm_metrics(tr, s, args.direction, dm.cartesian_end(duration)),
-        }
-        traces = {"": tr}
-        tag = f"{args.controller}_{args.direction}"
-        if args.plots:
-            from ..experiments.plots import plot_dm
-
-            plot_dm(tr, args.plots, tag)
-    elif args.max_mass:
+    traces: dict[str, Any] = {}
+    if args.max_mass:
         from ..experiments.max_mass import max_mass
 
         result |= max_mass(setup, args.duration or push.DEFAULT_DM_DURATION, progress=show_progress)
         result["box"] = {"mu": push.MU, "target": push.TARGET}
-        traces = {}
-    else:
+    elif args.name == "push":
         dm_duration = args.duration or push.DEFAULT_DM_DURATION
-        scale = min(1.0, dm_duration / push.DEFAULT_DM_DURATION)
-        span = (push.GAP + push.TARGET) / push.PUSH_SPEED * scale  # [s] the push's frames
-        strips = {n: _strip(args, span) for n in ("with_dm", "without_dm")}
-        runs = push.run_push(setup, dm_duration, progress=show_progress,
-                             observe={n: v for n, v in strips.items() if v is not None})
-        if args.frames is not None:
-            result["frames"] = [str(v.save(args.frames / f"frames_push_{n}.png", f"push {n.replace('_', ' ')}, "
-                                           f"{robot.name}, MuJoCo")) for n, v in strips.items() if v is not None]
-        for name, (s, tr, i0) in runs.items():
-            result[name] = push.push_metrics(s, tr, i0)
+        if args.realtime:
+            runs, result["realtime"] = _push_realtime(args, setup, dm_duration, show_progress)
+        else:
+            scale = min(1.0, dm_duration / push.DEFAULT_DM_DURATION)
+            span = (push.GAP + push.TARGET) / push.PUSH_SPEED * scale  # [s] the push's frames
+            strips = {n: _strip(args, span) for n in push.RUNS}
+            runs = push.run_push(setup, dm_duration, progress=show_progress,
+                                 observe={n: v for n, v in strips.items() if v is not None})
+            if args.frames is not None:
+                result["frames"] = [str(v.save(args.frames / f"frames_push_{n}.png", f"push {n.replace('_', ' ')}, "
+                                               f"{robot.name}, MuJoCo")) for n, v in strips.items() if v is not None]
+        for name, (s, tr) in runs.items():
+            result[name] = push.push_metrics(s, tr)
         result["box"] = {"mass": push.MASS, "mu": push.MU, "target": push.TARGET}
+        traces = {name: tr for name, (_, tr) in runs.items()}
         result["violations"] = {
-            k: sum(r[1].violations[k] for r in runs.values()) for k in runs["with_dm"][1].violations
+            k: sum(tr.violations.get(k, 0) for tr in traces.values()) for k in traces["with_dm"].violations
         }
-        traces = {name: r[1] for name, r in runs.items()}
         if args.plots:
             from ..experiments.plots import plot_push
 
             s0 = runs["with_dm"][0]
             plot_push(
-                {n: (r[1], r[2]) for n, r in runs.items()},
+                {n: (tr, tr.start_of(push.PUSH)) for n, tr in traces.items()},
                 np.asarray(s0.W),
                 np.asarray(s0.robot.arm.torque_limit),
                 args.plots,
                 tag,
             )
+    else:
+        s = first
+        default = circle.DEFAULT_DURATION if args.name == "circle" else dm.DEFAULT_DURATION
+        duration = args.duration or default
+        radius = circle.RADIUS if args.radius is None else args.radius
+        if args.name == "circle":
+            scenario = circle.scenario(np.asarray(s.ctl_cfg.direction, dtype=float), duration, radius)
+        else:
+            scenario = dm.scenario(args.direction, duration)
+            tag = f"{args.controller}_{args.direction}"
+        if args.realtime:
+            rt = _realtime(args, s, scenario, args.name, show_progress)
+            tr = rt.trace
+            result["realtime"] = rt.service
+            result["duration"] = float(tr.t[-1] - tr.t[0]) + 1.0 / rt.service["rate_hz"]
+            tag = f"{tag}_realtime"
+        elif args.name == "circle":
+            strip = _strip(args, duration, elevation=-50.0)  # from above: the circle shows
+            tr = circle.run_circle(s, duration, progress=show_progress, radius=radius, observe=strip)
+            if strip is not None:
+                result["frames"] = [str(strip.save(args.frames / f"frames_circle{circle.plot_tag('', radius)}.png",
+                                                   f"circle r = {radius:g} m, {robot.name}, MuJoCo"))]
+            result["duration"] = float(tr.t[-1] + s.ctl_cfg.dt)
+            tag = circle.plot_tag(tag, radius, args.wheel_units)
+        else:
+            tr = runner.run(s, scenario, progress=show_progress)
+            result["duration"] = duration
+        result |= circle.circle_metrics(tr) if args.name == "circle" else dm.dm_metrics(tr, s, args.direction)
+        traces = {"": tr}
+        if args.plots:
+            from ..experiments import plots
+
+            (plots.plot_circle if args.name == "circle" else plots.plot_dm)(tr, args.plots, tag)
     if args.log is not None:
         for name, tr in traces.items():
             log.write_csv(tr, _suffixed(args.log, name) if name else args.log)
@@ -270,26 +241,35 @@ def _strip(args: argparse.Namespace, span: float, elevation: float = -10.0) -> A
     return Strip(span, elevation=elevation)
 
 
-def _realtime(args: argparse.Namespace, s: Any, show_progress: bool) -> Any:
-    """Run circle or dm through the daemon and the sim (a one-line error if they fail)."""
-    from ..experiments import circle, dm
+def _options(args: argparse.Namespace, name: str, s: Any, log_dir: Path | None) -> Any:
+    """The processes' options of one realtime run named ``name`` (its logs under ``log_dir``)."""
+    from ..experiments.stack import options
+
+    return options(name, s, args.controller, args.solver, not args.no_slip, args.seed, args.rate, log_dir,
+                   args.controller_config)
+
+
+def _realtime(args: argparse.Namespace, s: Any, scenario: Any, name: str, show_progress: bool) -> Any:
+    """Run circle or dm through the daemon and the sim."""
     from ..experiments.realtime import run_realtime
 
-    default = circle.DEFAULT_DURATION if args.name == "circle" else dm.DEFAULT_DURATION
-    return run_realtime(
-        args.name,
-        s,
-        args.controller,
-        args.solver,
-        args.duration or default,
-        direction=args.direction,
-        slip=not args.no_slip,
-        seed=args.seed,
-        rate_hz=args.rate,
-        progress=show_progress,
-        log_dir=args.process_logs,
-        controller_file=args.controller_config,
-    )
+    return run_realtime(s, scenario, _options(args, name, s, args.process_logs), progress=show_progress)
+
+
+def _push_realtime(args: argparse.Namespace, setup: Any, dm_duration: float,
+                   show_progress: bool) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The push's runs through the daemon and the sim, each on a fresh pair of processes (logs
+    under ``--process-logs``/<run>): ({run: (setup, trace)}, {run: the service-side figures})."""
+    from ..experiments import push
+    from ..experiments.realtime import run_realtime
+
+    runs, service = {}, {}
+    for name, scenario in push.scenarios(dm_duration).items():
+        s = setup()
+        opts = _options(args, f"push-{name}", s, None if args.process_logs is None else args.process_logs / name)
+        rt = run_realtime(s, scenario, opts, progress=show_progress)
+        runs[name], service[name] = (s, rt.trace), rt.service
+    return runs, service
 
 
 def _summary(result: dict[str, Any]) -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import Any
 
 HELP = "run the simulated robot (Zenoh)"
 
@@ -28,6 +29,32 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-truth", action="store_true",
                         help="publish no evaluation data on <robot>/sim/truth (ground truth, the referee's "
                              "counts): a robot that reports only what a real one does")
+    e = parser.add_argument_group("embedded mode: the control core in the sim's own cycle (docs/protocol.md)")
+    e.add_argument("--embedded", action="store_true",
+                   help="host the control daemon's core in the sim's step loop: each cycle reads the state, "
+                        "ticks and writes the command in one thread, no transport between them; Zenoh still "
+                        "carries setpoints, modes, obstacles, status, telemetry, info and the lease (no "
+                        "wmm-qp serve: clients talk to this process)")
+    e.add_argument("--controller-config", metavar="TOML", help="with --embedded: default configs/controller.toml")
+    e.add_argument("--control-rate", type=float, default=None, metavar="HZ",
+                   help="with --embedded: [Hz] the core's rate, dividing the sim's (default: the sim's rate; "
+                        "500 ticks every 2nd cycle of a 1 kHz sim)")
+    e.add_argument("--controller", choices=("qp", "paper", "traditional"),
+                   help="with --embedded: controller kind (default: controller.toml's)")
+    e.add_argument("--task", choices=("position", "pose"),
+                   help="with --embedded: the EE task (default: controller.toml's task.kind)")
+    e.add_argument("--no-collision", action="store_true",
+                   help="with --embedded: no collision rows in the qp controller (default: on)")
+    e.add_argument("--wait-lease", action="store_true",
+                   help="with --embedded: when a daemon controls this robot, wait for its lease instead of "
+                        "refusing to start")
+    e.add_argument("--cycle-report", metavar="JSON",
+                   help="with --embedded: write the cycle's figures (ticks, misses, tick work, the garbage "
+                        "collector's work in the slack) to this file at exit")
+    e.add_argument("--plain-cycle", action="store_true",
+                   help="with --embedded: without the cycle's cost cuts (the garbage collector in the slack "
+                        "only, the spin before each deadline, the service thread one level below the cycle's "
+                        "priority): to measure them (docs/benchmarks.md)")
     f = parser.add_argument_group("fault injection (reliability tests)")
     f.add_argument("--state-loss", type=float, default=0.0, metavar="P",
                    help="drop each state publication with probability P in [0, 1)")
@@ -60,6 +87,16 @@ def run(args: argparse.Namespace) -> int:
     if not 0 <= prio <= 99:
         print("wmm-qp sim: error: --rt-priority must be in [0, 99]", file=sys.stderr)
         return 2
+    if args.embedded:
+        return _run_embedded(args, robot, svc, scene, sim_cfg, prio)
+    for flag, given in (("--controller-config", args.controller_config), ("--control-rate", args.control_rate),
+                        ("--controller", args.controller), ("--task", args.task),
+                        ("--no-collision", args.no_collision or None), ("--wait-lease", args.wait_lease or None),
+                        ("--cycle-report", args.cycle_report), ("--plain-cycle", args.plain_cycle or None)):
+        if given is not None:
+            print(f"wmm-qp sim: error: {flag} needs --embedded (without it the sim hosts no controller: "
+                  f"give it to wmm-qp serve)", file=sys.stderr)
+            return 2
     node = SimNode(svc, sim_cfg, robot, seed=args.seed, ramp=not args.no_ramp,
                    state_loss=args.state_loss, state_delay=args.state_delay_ms * 1e-3, rt_priority=prio, scene=scene,
                    truth=not args.no_truth)
@@ -76,4 +113,45 @@ def run(args: argparse.Namespace) -> int:
           + (f"; steps per joint at its torque limit {st.drives['torque_limit']}, not following its command "
              f"{st.drives['tracking']}" if sim_cfg.physics.plant != "kinematic" and st.drives else ""),
           file=sys.stderr, flush=True)
+    return 0
+
+
+def _run_embedded(args: argparse.Namespace, robot: Any, svc: Any, scene: Any, sim_cfg: Any, prio: int) -> int:
+    """``wmm-qp sim --embedded``: the sim and the control core in one cycle (exit 3: another
+    daemon holds the robot's lease)."""
+    from ..cli_common import stop_on_signals
+    from ..daemon import LeaseHeld
+    from ..embedded.sim import EmbeddedSim
+    from .serve import controller_config
+
+    if args.state_loss or args.state_delay_ms:
+        print("wmm-qp sim: error: --state-loss and --state-delay-ms are faults of the transport between a sim and "
+              "a daemon: not with --embedded (no transport carries the state)", file=sys.stderr)
+        return 2
+    if args.control_rate is not None and not 0 < args.control_rate <= sim_cfg.rate_hz:
+        print(f"wmm-qp sim: error: --control-rate must be in (0, {sim_cfg.rate_hz:g}] Hz (the sim's rate)",
+              file=sys.stderr)
+        return 2
+    ctl_cfg = controller_config(args)  # a bad file: one line, exit 2
+    emb = EmbeddedSim(svc, sim_cfg, robot, ctl_cfg, control_rate=args.control_rate, kind=args.controller,
+                      scene=scene, seed=args.seed, ramp=not args.no_ramp, truth=not args.no_truth,
+                      rt_priority=prio, spin_s=svc.loop.spin_us * 1e-6, cuts=not args.plain_cycle)
+    core = emb.control.core
+    stop = stop_on_signals()
+    print(f"wmm-qp sim: {svc.prefix}/{svc.robot} at {sim_cfg.rate_hz:g} Hz, embedded control at "
+          f"{emb.control.timing.rate_hz:g} Hz ({core.kind}, {ctl_cfg.task.kind} task; {robot.n_arm} joints, "
+          f"{robot.base.kind} base with {robot.n_wheels} wheels; {sim_cfg.physics.plant} plant; scene {scene.path}: "
+          f"{len(scene.obstacles)} obstacles, {core.collision_summary()}; collision referee "
+          f"{'on' if emb.node.sim.collision is not None else 'off'}), listening on {svc.zenoh.sim_endpoint} and "
+          f"{svc.zenoh.daemon_endpoint}", file=sys.stderr, flush=True)
+    try:
+        st = emb.run(stop, wait_lease=args.wait_lease, report=args.cycle_report)
+    except LeaseHeld as e:
+        print(f"wmm-qp sim: error: {e}", file=sys.stderr, flush=True)
+        return 3
+    lp = emb.control.timing
+    p50, p99 = lp.percentiles_us(50.0, 99.0)
+    print(f"wmm-qp sim: stopped at t = {st.t:.3f} s, violations {st.violations}, {lp.ticks} ticks, "
+          f"{lp.deadline_misses} deadline misses, tick p50 {p50:.0f} µs p99 {p99:.0f} µs, faults "
+          f"{dict(core.faults) or 'none'}", file=sys.stderr, flush=True)
     return 0

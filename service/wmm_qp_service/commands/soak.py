@@ -1,4 +1,5 @@
-"""``wmm-qp soak``: sim + daemon + a teleop client for a long time; drift in time and memory."""
+"""``wmm-qp soak``: sim + daemon (or, with ``--embedded``, the one embedded process) + a teleop client
+for a long time; drift in time and memory."""
 
 from __future__ import annotations
 
@@ -12,7 +13,14 @@ from typing import Any
 
 from ..progress import ProgressLine
 from ..verdict import EXIT_CODES_HELP, judge
-from .common import add_collision_argument, add_physics_argument, add_robot_argument, load_robot, physics_plant
+from .common import (
+    add_collision_argument,
+    add_physics_argument,
+    add_robot_argument,
+    embedded_rate,
+    load_robot,
+    physics_plant,
+)
 
 HELP = "run sim + daemon + client for a long time and report drift in time and memory"
 
@@ -27,6 +35,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "temporary directory, kept and named on the verdict line)")
     parser.add_argument("--trigger", choices=("rate", "state"),
                         help="the daemon's loop.trigger (default: the service config's)")
+    parser.add_argument("--embedded", action="store_true",
+                        help="one process instead of two: the control core in the sim's own cycle "
+                             "(wmm-qp sim --embedded; --rate must divide the sim's rate)")
     add_robot_argument(parser)
     add_collision_argument(parser)
     add_physics_argument(parser)
@@ -50,6 +61,10 @@ def run(args: argparse.Namespace) -> int:
     if not 10.0 <= args.rate <= 2000.0:
         print("wmm-qp soak: error: --rate must be in [10, 2000] Hz", file=sys.stderr)
         return 2
+    if args.embedded and args.trigger is not None:
+        print("wmm-qp soak: error: --trigger is the split daemon's; with --embedded the robot's cycle is the clock",
+              file=sys.stderr)
+        return 2
     import numpy as np
 
     from ..bench.machine import CPU_HOW, CpuMeter
@@ -60,17 +75,19 @@ def run(args: argparse.Namespace) -> int:
 
     robot = load_robot(args)  # a bad file: one line, exit 2, before anything starts
     plant = physics_plant(args)
+    if args.embedded:
+        embedded_rate(args.rate)  # one that does not divide the sim's rate: one line, exit 2
     svc = isolated_config(robot=robot)
     log_dir = log_folder(args.logs, "soak")
     daemon_args = [] if args.trigger is None else ["--trigger", args.trigger]
     daemon_args += ["--no-collision"] if args.no_collision else []  # else the daemon's default: rows on
     stack = Stack(svc, rate_hz=args.rate, log_dir=log_dir, robot_file=robot.path, extra_daemon_args=daemon_args,
-                  extra_sim_args=["--physics", plant])
-    out: dict[str, Any] = {"physics": plant}
+                  extra_sim_args=["--physics", plant], embedded=args.embedded)
+    out: dict[str, Any] = {"physics": plant, "embedded": args.embedded}
     bar = ProgressLine("soak")
     up = False
     try:
-        bar.update(f"starting the sim and the daemon (logs: {log_dir})")
+        bar.update(f"starting the {'embedded sim' if args.embedded else 'sim and the daemon'} (logs: {log_dir})")
         stack.start()
         with Client(svc, name="soak") as c:
             try:
@@ -118,7 +135,8 @@ def run(args: argparse.Namespace) -> int:
         n = lp.ticks - loop0.ticks
         misses = lp.deadline_misses - loop0.deadline_misses
         loads = [x["load1"] for x in samples]
-        out = {"robot": robot.name, "physics": plant, "duration_s": args.duration, "rate_hz": args.rate,
+        out = {"robot": robot.name, "physics": plant, "embedded": args.embedded, "duration_s": args.duration,
+               "rate_hz": args.rate,
                "trigger": lp.trigger,
                "collision": final.status.collision, "collision_summary": final.status.collision_summary,
                "window_ticks": n, "window_misses": misses,

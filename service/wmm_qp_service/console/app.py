@@ -34,10 +34,13 @@ MODE_LABELS = {"hold": "Hold", "track": "Track", "dm_cartesian": "DM Cartesian",
 TRACKING_MODES = ("track", "dm_nullspace")
 
 
-def status_markdown(st: StatusMsg | None, truth: TruthMsg | None, source: str) -> str:
+def status_markdown(st: StatusMsg | None, truth: TruthMsg | None, source: str,
+                    gripper_width: float = math.nan) -> str:
     """The panel's status text: rate, deadline misses, safe stop, last fault, rejected and clamped
     counts (``clamped`` where the daemon reports it), the sim's violations, who holds the stream,
-    and with the sim's ground truth (``truth``; None: a robot without one) the EE's error."""
+    the gripper's measured opening (``gripper_width`` [m] from the robot's state; nan: no
+    gripper, no line), and with the sim's ground truth (``truth``; None: a robot without one) the
+    EE's error."""
     if st is None:
         return "**daemon**: no status yet"
     lp = st.loop
@@ -66,6 +69,8 @@ def status_markdown(st: StatusMsg | None, truth: TruthMsg | None, source: str) -
         + (" · **protective stop**" if st.protective_stop else ""),
         f"**DM** {st.dm:.3f} · **stream** {stream}",
     ]
+    if math.isfinite(gripper_width):
+        lines.append(f"**gripper** {1000 * gripper_width:.1f} mm open")
     if truth is not None and st.x_d:
         err = float(np.linalg.norm(np.asarray(truth.ee_true) - np.asarray(st.x_d)))
         lines.append(f"**EE** {_fmt(truth.ee_true)} · **target** {_fmt(st.x_d)} · error {1000 * err:.1f} mm")
@@ -237,7 +242,8 @@ class Console:
                 self.view.gizmo.position = np.asarray(st.x_d or st.x, float)
         info = attached.info
         self.robot_md.content = (f"attached to **{attached.robot_id}** · {info.base_kind} base, {info.n_arm} "
-                                 f"joints, {info.task} task  \nfile `{attached.robot.path}`")
+                                 f"joints, {info.task} task  \ndrawn: {self.view.drawn}  \n"
+                                 f"file `{attached.robot.path}`")
         if self.robot_dropdown.value != attached.robot_id:
             self.robot_dropdown.options = sorted({*self.robot_dropdown.options, attached.robot_id})
             self.robot_dropdown.value = attached.robot_id  # type: ignore[misc]
@@ -344,7 +350,8 @@ class Console:
                    if truth is not None and st.x_d else math.nan)
             self.series.add(time.monotonic() - self._t0, st.dm, err)
         if plots:
-            text = status_markdown(st, truth, self.link.source)
+            width = state.gripper_width if state is not None else math.nan
+            text = status_markdown(st, truth, self.link.source, width)
             if text != self.status_md.content:
                 self.status_md.content = text
             if len(self.series) >= 2:

@@ -107,6 +107,7 @@ class RobotView:
         self.has_meshes = bool(self.urdf.scene is not None and len(self.urdf.scene.geometry) > 0)
         self.viser_urdf = ViserUrdf(server, self.urdf, root_node_name="/robot/mount/urdf") if self.has_meshes else None
         self._link_frames: dict[str, Any] = {}
+        self._sticks = False
         if not self.has_meshes:
             self._add_primitives()
         self._add_base()
@@ -116,9 +117,11 @@ class RobotView:
             if name in self._joint_index:
                 self._cfg[self._joint_index[name]] = value
         self._last_q: FloatArray | None = None
-        # odometry, EE, trails
-        self.odom = s.add_frame("/odometry", axes_length=0.25, axes_radius=0.008)
-        s.add_label("/odometry/label", "odometry", position=(0.0, 0.0, 0.3))
+        # odometry (a fixed base has none: it would only hide the arm's foot), EE, trails
+        fixed = robot.base.kind == "fixed"
+        self.odom = s.add_frame("/odometry", axes_length=0.25, axes_radius=0.008, visible=not fixed)
+        if not fixed:
+            s.add_label("/odometry/label", "odometry", position=(0.0, 0.0, 0.3))
         self.ee_marker = s.add_icosphere("/ee", radius=0.02, color=EE)
         self.ee_trail, self.base_trail = Trail(), Trail(step=0.01)
         self._trail_nodes: dict[str, Any] = {}
@@ -163,6 +166,19 @@ class RobotView:
                 q = rpy_quat(np.array([math.pi / 2, 0.0, yaw]))
                 s.add_cylinder(f"/robot/wheel{k}", radius=R, height=0.05, color=(40, 40, 40), wxyz=q,
                                position=(x, y, self.floor_z + R))
+
+    @property
+    def drawn(self) -> str:
+        """How the arm is drawn and how many of its links: the URDF's meshes (the links with a
+        visual mesh that loaded), the robot file's collision shapes, or sticks."""
+        if self.has_meshes:
+            scene = self.urdf.scene
+            assert scene is not None
+            links = {scene.graph.transforms.parents[g] for g in scene.geometry}
+            return f"the URDF's meshes ({len(links)} links)"
+        if not self._sticks:
+            return f"the robot file's collision shapes ({len(self._link_frames)} links)"
+        return f"sticks ({len(self._link_frames)} links)"
 
     def has_meshes_of_base(self) -> bool:
         """The URDF draws the base itself (TIAGo: the URDF's root is on the floor with its wheels)."""

@@ -24,12 +24,14 @@ callback on Zenoh's thread that stamps it and wakes the loop — then applies th
 inputs (polled from Zenoh's channels, none blocking), runs the cycle, and publishes telemetry,
 status and replies after the command.
 
-A robot side that hosts the core in its own process and thread (an embedded mode, not built)
+A robot side that hosts the core in its own process and thread (the embedded mode,
+:mod:`wmm_qp_service.embedded`: ``wmm-qp sim --embedded``, ``wmm-qp driver franka --embedded``)
 replaces only the link: its cycle hands the state to :meth:`ControlCore.on_state` and takes the
-command from :class:`Cycle` in memory, while a :class:`ZenohService` still carries setpoints,
-modes, obstacles, status, telemetry, info and the lease. The core is not thread-safe: the
-service's inputs must reach it on the cycle's thread (as :meth:`ZenohService.apply` does here,
-between two cycles) or through a hand-over to it.
+command from :class:`Cycle` in memory (an in-process :class:`RobotLink`), while a service thread
+carries setpoints, modes, obstacles, status, telemetry, info and the lease over Zenoh with the
+same keys and messages. The core is not thread-safe: the service's inputs reach it on the
+cycle's thread (as :meth:`ZenohService.apply` does here, between two cycles; the embedded host
+hands them over in the cycle's slack).
 """
 
 from .command_stream import CommandStream

@@ -113,7 +113,12 @@ class CommandStream:
 
     def observe(self, msg: StateMsg, now: float) -> None:
         """An accepted state arrived at ``now`` [s]: if it applied a command of this stream, its
-        age is at most the time since that command was published."""
+        age is at most the time since that command was published. Not while the stream is broken:
+        the robot brakes by itself meanwhile, still naming the last command it applied, and the
+        time since that one says nothing of the link (it would fill the window with the stop's
+        length and fault the next stream as "state too old")."""
+        if self.broken:
+            return
         cs = msg.cmd_seq
         if cs >= max(0, self.start) and self._sent_seq[cs % SENT] == cs:  # this stream's only
             self._age[self._n_age % ROUND_TRIPS] = now - float(self._sent_t[cs % SENT])
@@ -194,8 +199,8 @@ class CommandStream:
         command against the previous one). The measured rates lag it by the state's age, and
         a late state would pull the bounds back and let two consecutive commands differ by
         more than A·Δt. The measured rates are used for the first command of a stream (to a
-        new sim instance, or after a break) and when the robot stopped following the stream
-        (a state that applied one of its commands shows a stale or a protective stop); a state
+        new sim instance, or after a break) and when the robot stopped following the stream (a
+        state that applied one of its commands shows a stale or a protective stop); a state
         from before the stream began does not count.
         """
         if not self.anchor_on_command or cmd is None or (msg is not None and self.left(msg)):

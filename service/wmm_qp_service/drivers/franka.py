@@ -30,12 +30,17 @@ The Franka Hand (a robot file with ``[gripper]``, as ``fr3.toml``): ``gripper`` 
 child process (:mod:`.franka_hand`: it holds the GIL through a whole gripper motion); the
 state's ``gripper_width`` is the width it last measured (nan without a hand).
 
-libfranka's errors: a ``ControlException`` (a reflex of the robot: a limit, a collision, a
-discontinuity) is reported as a protective stop (``protective_reason`` names it); the driver
-asks the robot to recover automatically and starts a new control, which follows only a new
-stream. A ``NetworkException`` (the connection is lost) ends the driver: it says so and exits 1.
+libfranka's errors: a ``ControlException`` (a reflex of the robot: a collision, a limit, a
+discontinuity) is a protective stop (``protective_reason`` ``robot: `` and libfranka's message);
+libfranka has ended the motion and the robot stays in its ``Reflex`` mode, its states still
+published (:mod:`.franka_link`). The first command of a new stream, the arm at rest, asks the
+robot to recover (libfranka's ``automatic_error_recovery``, then a new control) and, once it has,
+is followed; a refused recovery is reported in ``protective_reason`` and tried again on the
+next new stream (once per stream). A ``NetworkException`` (the connection is lost) ends the
+driver: it says so and exits 1.
 
-Only this module imports ``pylibfranka`` (at run time: ``pip install 'wmm-qp[franka]'``).
+``pylibfranka`` is imported at run time (``pip install 'wmm-qp[franka]'``) and called only by
+:mod:`.franka_link` and :mod:`.franka_hand`.
 """
 
 from __future__ import annotations
@@ -45,6 +50,7 @@ import math
 import sys
 import threading
 import time
+from collections.abc import Callable, Hashable
 from typing import Any
 
 import numpy as np
@@ -61,6 +67,7 @@ from ..protocol import CommandMsg, GripperMsg, StateMsg, TruthMsg, encode
 from ..transport import ROLE_SIM, open_session
 from ..validation import Validator
 from .franka_hand import FrankaHand
+from .franka_link import FrankaLink
 from .franka_stream import CommandShaper, StreamLimits
 
 DT = 1e-3
@@ -98,31 +105,67 @@ class FrankaDriver(LeaseGate):
         self.t = 0.0  # [s] the robot's time: the sum of its cycles
         self.seq = 0
         self._stopped = False  # the shaper was in a stale or protective stop at the last cycle
+        self.robot_error: str | None = None  # libfranka ended the motion (its message); None: it runs
+        self._recovery_stream: Hashable | None = None  # the stream that last asked the robot to recover
         self.validate_gripper = Validator(GripperMsg, svc.robot, svc.validation)
         g = robot.gripper
         self.hand = FrankaHand(g.width_max, g.speed_max, g.force_max) if g is not None else None
 
-    def on_command(self, data: bytes, q: np.ndarray, received: float) -> bool:
+    def on_command(self, data: bytes, q: np.ndarray, received: float,
+                   recover: Callable[[], str | None] | None = None) -> bool:
         """Validate a command, check its sender and hand it to the referee and the shaper.
 
         Args:
             data: the payload.
             q: [rad] the measured joint positions.
             received: [s] monotonic time of receipt.
+            recover: asks the robot to recover after libfranka ended the motion (None on
+                success, else why not); called by the first command of a new stream at rest.
 
         Returns:
             True when the shaper took it as its target.
         """
-        msg = self.admit(data, self.referee)
+        return self._obey(self.admit(data, self.referee), q, received, recover)
+
+    def on_command_msg(self, msg: CommandMsg, q: np.ndarray, received: float,
+                       recover: Callable[[], str | None] | None = None) -> bool:
+        """:meth:`on_command` for a command handed over in memory by a control core in this
+        process (``--embedded``): the same checks on the message itself, nothing decoded."""
+        checked = self.validate.checked(msg)
+        if checked is None:
+            self.refused["invalid"] += 1
+            return False
+        return self._obey(self.obey(checked, self.referee), q, received, recover)
+
+    def _obey(self, msg: CommandMsg | None, q: np.ndarray, received: float,
+              recover: Callable[[], str | None] | None) -> bool:
+        """An obeyed command (None: refused) to the referee, as received, then to the shaper."""
         if msg is None:
             return False
         rates = np.array(msg.arm_rates, dtype=float)
         self.referee.on_command(self.t, rates, np.zeros(0), self.shaper.v, np.zeros(0), period=msg.period,
                                 seq=msg.seq, received=received, step=DT, stream=msg.stream, sent=msg.stamp)
-        if not self.shaper.command(self.t, rates, (msg.lease, msg.stream), q):
+        stream = (msg.lease, msg.stream)
+        if self.robot_error is not None and not self._recover(stream, recover):
+            self.refused["firmware"] += 1
+            return False
+        if not self.shaper.command(self.t, rates, stream, q):
             self.refused["firmware"] += 1
             return False
         self.cmd_seq = msg.seq
+        return True
+
+    def _recover(self, stream: Hashable, recover: Callable[[], str | None] | None) -> bool:
+        """After libfranka ended the motion: whether the robot runs again for this command (the
+        first of a new stream at rest asks it to recover, once per stream)."""
+        if not self.shaper.releases(stream) or stream == self._recovery_stream:
+            return False
+        self._recovery_stream = stream
+        why = recover() if recover is not None else "no robot to recover"
+        if why is not None:
+            self.shaper.reason = f"robot: {self.robot_error}; recovery refused: {why}"
+            return False
+        self.robot_error = None
         return True
 
     def cycle(self, elapsed: float, q: np.ndarray) -> np.ndarray:
@@ -136,6 +179,18 @@ class FrankaDriver(LeaseGate):
             [rad/s] the joint velocities to write.
         """
         self.t += elapsed
+        return self.shape(q)
+
+    def shape(self, q: np.ndarray) -> np.ndarray:
+        """The second half of :meth:`cycle`, at the robot's time already advanced: judge the
+        positions, shape the next command.
+
+        Args:
+            q: [rad] the measured joint positions.
+
+        Returns:
+            [rad/s] the joint velocities to write.
+        """
         self.referee.check_positions(q)
         v = self.shaper.step(self.t, q)
         stopped = self.shaper.stale_stop or self.shaper.protective_stop
@@ -156,9 +211,12 @@ class FrankaDriver(LeaseGate):
         return True
 
     def fault(self, reason: str) -> None:
-        """libfranka refused the motion (a reflex): report a protective stop, restart from rest."""
+        """libfranka ended the motion (a reflex): a protective stop from rest until the robot
+        recovers on a new stream (:meth:`on_command`)."""
         self.shaper.reset(f"robot: {reason}")
-        self.referee.break_stream()
+        self.referee.break_stream(hard=False)  # the stopped stream's late commands: judged among themselves
+        self.robot_error = reason
+        self._recovery_stream = None
 
     def state_msg(self, q: np.ndarray, tau: np.ndarray, gripper_width: float = math.nan) -> StateMsg:
         """The wire message of this cycle's state (``v_arm``: the stream written, see the module docstring).
@@ -215,8 +273,8 @@ class FrankaDriver(LeaseGate):
             token = None
             try:
                 try:
-                    robot = fr.Robot(robot_ip, fr.RealtimeConfig.kIgnore)
-                    ctl = robot.start_joint_velocity_control(fr.ControllerMode.JointImpedance)
+                    link = FrankaLink(fr, fr.Robot(robot_ip, fr.RealtimeConfig.kIgnore))
+                    link.start()
                 except (fr.NetworkException, fr.FrankaException, RuntimeError) as e:
                     print(f"wmm-qp driver franka: error: cannot connect to the robot at {robot_ip}: {e}",
                           file=sys.stderr, flush=True)
@@ -226,7 +284,7 @@ class FrankaDriver(LeaseGate):
                 token = session.liveliness().declare_token(k.alive("sim"))
                 print(f"wmm-qp driver franka: {k.state.rsplit('/', 1)[0]} driving the robot at {robot_ip} "
                       f"(instance {self.instance})", file=sys.stderr, flush=True)
-                return self._loop(fr, robot, ctl, (sub, sub_gripper), lease_sub, (pub, pub_truth), stop, max_cycles,
+                return self._loop(fr, link, (sub, sub_gripper), lease_sub, (pub, pub_truth), stop, max_cycles,
                                   robot_ip)
             finally:
                 if self.hand is not None:
@@ -236,37 +294,62 @@ class FrankaDriver(LeaseGate):
                         with contextlib.suppress(Exception):
                             ent.undeclare()
 
-    def _loop(self, fr: Any, robot: Any, ctl: Any, subs: tuple[Any, Any], lease_sub: Any, pubs: tuple[Any, Any],
+    def recover(self, fr: Any, robot: Any, e: Exception, robot_ip: str) -> Any:
+        """A libfranka ``ControlException`` in the embedded cycle (a reflex of the robot): report a
+        protective stop, recover, start a new control (the caller dropped the aborted one first:
+        libfranka runs one control at a time). Returns the new control, or None (said on stderr:
+        the connection is lost, or the robot did not recover)."""
+        reason = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        print(f"wmm-qp driver franka: protective stop: {reason}", file=sys.stderr, flush=True)
+        self.fault(reason)
+        try:
+            robot.automatic_error_recovery()
+            return robot.start_joint_velocity_control(fr.ControllerMode.JointImpedance)
+        except fr.NetworkException as e2:
+            print(f"wmm-qp driver franka: error: lost the connection to the robot at {robot_ip}: {e2}",
+                  file=sys.stderr, flush=True)
+        except (fr.FrankaException, RuntimeError) as e2:
+            print(f"wmm-qp driver franka: error: the robot did not recover: {e2}", file=sys.stderr, flush=True)
+        return None
+
+    def _loop(self, fr: Any, link: FrankaLink, subs: tuple[Any, Any], lease_sub: Any, pubs: tuple[Any, Any],
               stop: threading.Event, max_cycles: int | None, robot_ip: str) -> int:
         sub, sub_gripper = subs
         pub, pub_truth = pubs
         n = 0
         finishing = False
+
+        def recover() -> str | None:
+            why = link.recover()
+            print("wmm-qp driver franka: the robot recovered (automatic error recovery, a new control)"
+                  if why is None else f"wmm-qp driver franka: the robot did not recover: {why}",
+                  file=sys.stderr, flush=True)
+            return why
+
         while True:
             try:
-                st, dur = ctl.readOnce()
+                st, elapsed = link.read()
                 q = np.array(st.q, dtype=float)
                 while (a := lease_sub.try_recv()) is not None:
                     self.on_lease(str(a.key_expr).rsplit("/", 1)[-1], a.kind == zenoh.SampleKind.PUT)
                 if not finishing:
                     while (c := sub.try_recv()) is not None:
                         try:
-                            self.on_command(c.payload.to_bytes(), q, time.monotonic())
+                            self.on_command(c.payload.to_bytes(), q, time.monotonic(), recover)
+                        except fr.NetworkException:
+                            raise
                         except Exception as e:  # never out of the control loop: the command is dropped
                             self.refused["error"] += 1
                             if self.refused["error"] <= 10:
                                 print(f"wmm-qp driver franka: a command dropped: {type(e).__name__}: {e}",
                                       file=sys.stderr, flush=True)
-                v = self.cycle(dur.to_sec(), q)
+                v = self.cycle(elapsed, q)
                 n += 1
                 if not finishing and (stop.is_set() or (max_cycles is not None and n >= max_cycles)):
                     finishing = True  # brake to rest, then finish the motion
                     self.shaper.halt()
-                cmd = fr.JointVelocities(v.tolist())
                 done = finishing and self.shaper.at_rest
-                if done:
-                    cmd.motion_finished = True
-                ctl.writeOnce(cmd)
+                link.write(v, finished=done)
                 if (g := sub_gripper.try_recv()) is not None:
                     self.on_gripper(g.payload.to_bytes())
                 width = self.hand.width if self.hand is not None else math.nan
@@ -283,16 +366,6 @@ class FrankaDriver(LeaseGate):
                 reason = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
                 print(f"wmm-qp driver franka: protective stop: {reason}", file=sys.stderr, flush=True)
                 self.fault(reason)
-                try:
-                    robot.automatic_error_recovery()
-                    ctl = robot.start_joint_velocity_control(fr.ControllerMode.JointImpedance)
-                except fr.NetworkException as e2:
-                    print(f"wmm-qp driver franka: error: lost the connection to the robot at {robot_ip}: {e2}",
-                          file=sys.stderr, flush=True)
-                    return 1
-                except (fr.FrankaException, RuntimeError) as e2:
-                    print(f"wmm-qp driver franka: error: the robot did not recover: {e2}", file=sys.stderr,
-                          flush=True)
-                    return 1
+                link.lose()
                 if finishing:
                     return 0

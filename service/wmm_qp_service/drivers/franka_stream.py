@@ -12,8 +12,9 @@ velocity tracker, below). Pure: no libfranka, no clock, no transport — the dri
 Firmware duties, as the simulated robot's (``sim/wmm_qp_sim/robot.py``) and docs/protocol.md's:
 
 - **stale commands**: no command for ``stale_timeout`` → the target becomes 0: the arm brakes,
-  jerk-limited, to rest (``stale_stop``); the next command of the stream resumes (the jump from
-  the braked rates is the shaper's to ramp);
+  jerk-limited, to rest (``stale_stop``). The stop ends the stream: its later commands (late on
+  the way, or from a sender that froze) are refused; a new stream resumes at once (the jump from
+  the braked rates is the shaper's to ramp), as the simulated robot's firmware does;
 - **protective stop**: a command past a velocity limit, or one from which a joint could not brake
   before its position limit, is refused; so is going on when the next cycle's state could not
   stop before a position limit. The arm brakes to rest, the stop is reported (``reason``), every
@@ -140,6 +141,11 @@ class CommandShaper:
         self.halted = True
         self.target = np.zeros_like(self.target)
 
+    def releases(self, stream: Hashable) -> bool:
+        """Whether a command of ``stream`` would end the protective stop: a new stream, the
+        output at rest (False outside a protective stop, and once halted)."""
+        return self.protective_stop and not self.halted and stream != self.stream and self.at_rest
+
     def command(self, t: float, rates: FloatArray, stream: Hashable, q: FloatArray) -> bool:
         """A command of the daemon, received at robot time ``t`` [s].
 
@@ -158,10 +164,13 @@ class CommandShaper:
             self.refused += 1
             return False
         if self.protective_stop:
-            if stream == self.stream or not self.at_rest:
+            if not self.releases(stream):
                 self.refused += 1
                 return False
             self.protective_stop = False  # a new stream, the robot at rest: recover
+        elif self.stale_stop and stream == self.stream:
+            self.refused += 1  # the stale stop ended this stream: only a new one resumes
+            return False
         if not np.isfinite(rates).all():
             self.refused += 1
             self._protect("a command with a non-finite rate")

@@ -49,6 +49,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
+from typing import Any, Generic, TypeVar
 
 import numpy as np
 import zenoh
@@ -66,6 +67,8 @@ from ..rate_loop import RateLoop, realtime_priority
 from ..transport import ROLE_SIM, open_session
 from ..validation import Validator
 
+P = TypeVar("P")
+
 COMMAND_QUEUE = 1024
 """Commands kept between two wake-ups of the step loop (the oldest dropped beyond): every one is
 judged as received, so none may be lost between the transport and the referee. 1024 holds a
@@ -73,7 +76,7 @@ second of commands at 1 kHz: a longer stall of the sim's process drops the oldes
 :attr:`CommandInbox.dropped`)."""
 
 
-class CommandInbox:
+class CommandInbox(Generic[P]):
     """Commands stamped on arrival (by Zenoh's callback thread), taken by the step loop in order.
 
     The stamp is the time the command reached this process: a command that arrived before the
@@ -86,12 +89,12 @@ class CommandInbox:
     """
 
     def __init__(self, depth: int = COMMAND_QUEUE, clock: Callable[[], float] = time.monotonic) -> None:
-        self._q: deque[tuple[float, bytes]] = deque(maxlen=depth)  # append, popleft: atomic under the GIL
+        self._q: deque[tuple[float, P]] = deque(maxlen=depth)  # append, popleft: atomic under the GIL
         self._clock = clock
         self.dropped = 0
 
-    def put(self, data: bytes) -> None:
-        """A command's payload arrived now (the producer's thread)."""
+    def put(self, data: P) -> None:
+        """A command's payload (or, in memory, the message) arrived now (the producer's thread)."""
         if len(self._q) == self._q.maxlen:
             self.dropped += 1
         self._q.append((self._clock(), data))
@@ -103,7 +106,7 @@ class CommandInbox:
         except IndexError:
             return math.inf
 
-    def take_until(self, t: float) -> list[tuple[float, bytes]]:
+    def take_until(self, t: float) -> list[tuple[float, P]]:
         """The pending commands that arrived at or before ``t`` [s], oldest first."""
         out = []
         while self._q and self._q[0][0] <= t:
@@ -183,7 +186,24 @@ class SimNode(LeaseGate):
 
         Returns the command for the pure model, or None (rejected or refused, counted).
         """
-        msg = self.admit(data, self.sim.referee)
+        return self._command(self.admit(data, self.sim.referee), received)
+
+    def accept_msg(self, msg: CommandMsg, received: float | None = None) -> SimCommand | None:
+        """:meth:`accept` for a command handed over in memory (a control core in this process,
+        ``wmm-qp sim --embedded``): the same checks on the message itself, nothing decoded.
+
+        Args:
+            msg: the command as its sender made it.
+            received: [s] monotonic time it was handed over (None: now).
+        """
+        checked = self.validate.checked(msg)
+        if checked is None:
+            self.refused["invalid"] += 1
+            return None
+        return self._command(self.obey(checked, self.sim.referee), received)
+
+    def _command(self, msg: CommandMsg | None, received: float | None) -> SimCommand | None:
+        """The pure model's command of an obeyed message (None: refused)."""
         if msg is None:
             return None
         self.cmd_seq = msg.seq
@@ -207,7 +227,8 @@ class SimNode(LeaseGate):
             self.sim.receive_superseded(c, dt)
         return commands[-1]
 
-    def advance(self, now: float, inbox: CommandInbox) -> SimState:
+    def advance(self, now: float, inbox: CommandInbox[Any],
+                accept: Callable[[Any, float], SimCommand | None] | None = None) -> SimState:
         """Run every step due by ``now`` [s] (step k is due at ``t0 + k·dt``; at least one), each
         receiving the commands that arrived before its end; returns the state after the last.
 
@@ -220,7 +241,10 @@ class SimNode(LeaseGate):
         Args:
             now: [s] monotonic time (the inbox's clock).
             inbox: the arrival-stamped commands.
+            accept: turns an inbox entry and its arrival time into the model's command (None:
+                :meth:`accept`, payloads; in memory: :meth:`accept_msg`).
         """
+        accept = accept or self.accept
         dt = self.cfg.dt
         due = max(1, int((now - self.t0) / dt + 1e-9) + 1 - self.steps)
         st: SimState | None = None
@@ -235,7 +259,7 @@ class SimNode(LeaseGate):
                     due -= idle
                     continue
             arrivals = inbox.take_until(math.inf if due == 1 else end)
-            commands = [c for t, data in arrivals if (c := self.accept(data, t)) is not None]
+            commands = [c for t, data in arrivals if (c := accept(data, t)) is not None]
             st = self.sim.step(self.take(commands, dt), dt)
             self.steps += 1
             self.caught_up += due > 1
@@ -310,7 +334,7 @@ class SimNode(LeaseGate):
         """Run until ``stop`` is set (or ``max_ticks``); returns the final state."""
         with open_session(self.svc, ROLE_SIM) as session:
             k = self.keys
-            inbox = CommandInbox(clock=time.monotonic)
+            inbox: CommandInbox[bytes] = CommandInbox(clock=time.monotonic)
 
             def on_command(sample: zenoh.Sample) -> None:  # Zenoh's thread: stamp and store only
                 inbox.put(sample.payload.to_bytes())

@@ -3,18 +3,30 @@
 Each runs on any robot description (``make_setup(..., robot=...)``; the default is the Gen3,
 whose runs are the paper's tables).
 
-One module per experiment, a shared in-process runner (:mod:`.runner`), the per-tick CSV log
-(:mod:`.log`) and plots (:mod:`.plots`). ``wmm-qp experiment`` drives them.
+One module per experiment, each defining its scenario once (:mod:`.scenario`: its phases, their
+references, a box to place) and its metrics; two drivers run a scenario and record the same
+per-tick :class:`Trace` (:mod:`.trace`): in process (:mod:`.runner`, deterministic) and in real
+time through the daemon and the sim over Zenoh (:mod:`.realtime`, :mod:`.stack`,
+:mod:`.recorder`). The per-tick CSV log (:mod:`.log`) and plots (:mod:`.plots`) read the trace.
+``wmm-qp experiment`` drives them.
 """
 
 from .circle import circle_metrics, run_circle
 from .dm import dm_metrics, run_dm
 from .log import columns, write_csv
 from .push import push_metrics, run_push
-from .runner import Setup, Trace, make_setup, run
+from .runner import run
+from .scenario import Anchor, Phase, Probe, Scenario, Target
+from .setup import Setup, make_setup
+from .trace import Trace
 
 __all__ = [
+    "Anchor",
+    "Phase",
+    "Probe",
+    "Scenario",
     "Setup",
+    "Target",
     "Trace",
     "circle_metrics",
     "columns",

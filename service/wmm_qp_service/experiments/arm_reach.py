@@ -32,8 +32,11 @@ import numpy as np
 
 import wmm_qp
 
-from .circle import DEFAULT_DURATION, circle
-from .runner import make_setup, run
+from . import circle
+from .circle import DEFAULT_DURATION
+from .runner import run
+from .scenario import Probe
+from .setup import make_setup
 
 TOL = 1e-3  # [m] max EE error of a circle the arm "draws"
 SETTLE = 1.0  # [s] the reference's velocity step at t = 0 (r·ω from rest) is not judged before this
@@ -49,18 +52,14 @@ def arm_only_circle(radius: float, duration: float = DEFAULT_DURATION) -> dict[s
     robot = wmm_qp.load_robot_config()
     fixed = dataclasses.replace(robot, base=wmm_qp.config.BaseConfig(kind="fixed", floor_z=robot.base.floor_z))
     s = make_setup("qp", slip=False, robot=fixed)
-    q_arm = np.array(s.robot.arm.start)
-    x0 = s.model.ee_position(np.zeros(3), q_arm)
+    x0 = s.model.ee_position(np.zeros(3), np.array(s.robot.arm.start))  # the circle's anchor
 
-    def reference(t: float, _st: Any, _cmd: Any) -> wmm_qp.Reference:
-        x_d, xd_d = circle(x0, t, radius)
-        return wmm_qp.Reference(mode=wmm_qp.Mode.TRACK, x_d=x_d, xd_d=xd_d)
+    def off(t: float, robot: Probe) -> bool:
+        t1 = t + s.ctl_cfg.dt  # the robot after tick t, at t + dt
+        return t1 >= SETTLE and bool(np.linalg.norm(circle.circle(x0, t1, radius)[0] - robot.ee_true()) > TOL)
 
-    def off(t: float, st: Any) -> bool:  # st: the state after tick t, at t + dt
-        t1 = t + s.ctl_cfg.dt
-        return t1 >= SETTLE and bool(np.linalg.norm(circle(x0, t1, radius)[0] - st.ee_true) > TOL)
-
-    tr = run(s, reference, duration, dm_direction=np.asarray(s.ctl_cfg.direction), stop=off)
+    sc = circle.scenario(np.asarray(s.ctl_cfg.direction, dtype=float), duration, radius)
+    tr = run(s, dataclasses.replace(sc, phases=(dataclasses.replace(sc.phases[0], done=off),)))
     err = np.linalg.norm(tr.ee_des - tr.ee_true, axis=1)
     over = len(tr.t) < round(duration / s.ctl_cfg.dt)
     return {

@@ -2,8 +2,10 @@
 
 x_d(t) = x0 + [r(cos ωt − 1), r sin ωt, 0], ω = π/20 rad/s, r = 0.25 m (the paper's; any
 radius with ``radius``), with its feed-forward velocity, TRACK mode, from the robot's start
-configuration (``arm.start``; the Gen3's is the paper's), base slip on. x0 is the true EE
-position at t = 0. Any robot: with the pose task the reference also holds the EE's start orientation (quat_d, ω_d = 0).
+configuration (``arm.start``; the Gen3's is the paper's), base slip on. x0 is the EE position
+the controller estimates at t = 0 (at rest there, the true one). Any robot: with the pose task
+the reference also holds the EE's start orientation (quat_d, ω_d = 0). One scenario
+(:func:`scenario`) for both drivers: in process (:func:`run_circle`) and in real time.
 """
 
 from __future__ import annotations
@@ -15,15 +17,18 @@ import numpy as np
 
 import wmm_qp
 from wmm_qp.config import FloatArray
-from wmm_qp.tasks import rotation_to_quat
 
-from .runner import ObserveFn, Setup, Trace, rms, run
+from .runner import ObserveFn, run
+from .scenario import Anchor, Phase, Scenario, Target
+from .setup import Setup
+from .trace import Trace
 
 RADIUS = 0.25  # [m] the paper's
 LARGE_RADIUS = 1.7  # [m] the large circle: ~2.27x the arm-alone largest (the paper: 0.25 vs 0.11 m); results.md §1
 OMEGA = math.pi / 20.0  # [rad/s]
 DEFAULT_DURATION = 40.0  # [s] one full circle
 BASE_MOVING = 1e-4  # [m/s] / [rad/s]: the base counts as moving above this commanded speed
+CIRCLE = "circle"  # the scenario's one phase
 
 
 def circle(x0: FloatArray, t: float, radius: float = RADIUS) -> tuple[FloatArray, FloatArray]:
@@ -42,28 +47,26 @@ def plot_tag(tag: str, radius: float, wheel_units: str = "rad") -> str:
     return tag + ("_rim" if wheel_units == "rim" else "")
 
 
+def scenario(direction: FloatArray, duration: float = DEFAULT_DURATION, radius: float = RADIUS) -> Scenario:
+    """The circle: one TRACK phase along the circle of ``radius`` [m] through the EE's position
+    at its start, with its feed-forward velocity (and, with the pose task, the EE's start
+    orientation held); ``direction`` is u of the DM the trace records."""
+
+    def target(t: float, start: Anchor) -> Target:
+        x_d, xd_d = circle(start.x, t, radius)
+        return Target(x_d, xd_d, start.quat)
+
+    return Scenario(CIRCLE, (Phase(CIRCLE, wmm_qp.Mode.TRACK, duration, target=target),), direction)
+
+
 def run_circle(
     setup: Setup, duration: float = DEFAULT_DURATION, progress: bool = True, radius: float = RADIUS,
     observe: ObserveFn | None = None,
 ) -> Trace:
-    """Run the circle of ``radius`` [m] and return its trace (``observe``: called with the sim
-    after every tick)."""
-    q_arm = np.array(setup.robot.arm.start)
-    x0 = setup.model.ee_position(np.zeros(3), q_arm)
-    quat_d = rotation_to_quat(setup.model.ee_pose(np.zeros(3), q_arm)[1]) if setup.controller.pose else None
-
-    def reference(t: float, _st: Any, _cmd: Any) -> wmm_qp.Reference:
-        x_d, xd_d = circle(x0, t, radius)
-        return wmm_qp.Reference(mode=wmm_qp.Mode.TRACK, x_d=x_d, xd_d=xd_d, quat_d=quat_d)
-
-    return run(
-        setup,
-        reference,
-        duration,
-        dm_direction=np.asarray(setup.ctl_cfg.direction),
-        progress="circle" if progress else None,
-        observe=observe,
-    )
+    """Run the circle of ``radius`` [m] in process and return its trace (``observe``: called
+    with the sim after every tick)."""
+    sc = scenario(np.asarray(setup.ctl_cfg.direction, dtype=float), duration, radius)
+    return run(setup, sc, progress=progress, observe=None if observe is None else {CIRCLE: observe})
 
 
 def circle_metrics(trace: Trace) -> dict[str, Any]:
@@ -102,3 +105,8 @@ def circle_metrics(trace: Trace) -> dict[str, Any]:
         "base_error_integral": {"x": float(integral[0]), "y": float(integral[1])},
         "violations": trace.violations,
     }
+
+
+def rms(a: FloatArray) -> float:
+    """Root mean square (0 for an empty array)."""
+    return float(np.sqrt(np.mean(np.square(a)))) if a.size else 0.0

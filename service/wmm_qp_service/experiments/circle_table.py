@@ -24,7 +24,8 @@ from pathlib import Path
 from typing import Any
 
 from .circle import DEFAULT_DURATION, RADIUS, circle_metrics, plot_tag, run_circle
-from .runner import Trace, make_setup
+from .setup import make_setup
+from .trace import Trace
 
 RUNS = (("traditional", "rad"), ("traditional", "rim"), ("paper", "rad"), ("qp", "rad"))
 # Table I of the paper: (proposed, traditional); RMS ratios 65.12 %, 45.77 %, 6.94 %

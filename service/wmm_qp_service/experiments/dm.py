@@ -8,57 +8,61 @@ controller knows). u = x (base, yaw-compensated frame) or u = z. Any robot: it s
 robot's ``arm.start``; with the pose task the null-space phase also holds the EE orientation of
 t = 5 s. The EE box is the controller config's (the paper's z ∈ [0.36, 0.56] m by default): on
 a robot whose start EE height lies outside it, the Cartesian phase has no active axis and stays
-still (``dm_metrics``' ``ee_box_holds_start`` says so).
+still (``dm_metrics``' ``ee_box_holds_start`` says so). One scenario (:func:`scenario`) for
+both drivers: in process (:func:`run_dm`) and in real time.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 import wmm_qp
 from wmm_qp.config import FloatArray
-from wmm_qp.tasks import rotation_to_quat
 
-from .runner import Setup, Trace, run
+from .runner import run
+from .scenario import Anchor, Phase, Scenario, Target
+from .setup import Setup
+from .trace import Trace
 
 CARTESIAN_END = 5.0  # [s]
 DEFAULT_DURATION = 20.0  # [s]
 DIRECTIONS = {"x": np.array([1.0, 0.0, 0.0]), "z": np.array([0.0, 0.0, 1.0])}
 PAPER_DM_FINAL = {"x": 5.88, "z": 4.031}  # the paper's final DM: Fig. 9 (x), its simulation (z)
+CARTESIAN, NULLSPACE = "dm_cartesian", "dm_nullspace"  # the phases' names
 
 
-def dm_reference(
-    model: wmm_qp.WmmModel, u: FloatArray, t_switch: float = CARTESIAN_END, pose: bool = False
-) -> Callable[[float, Any, Any], wmm_qp.Reference]:
-    """The DM scenario's reference function (Cartesian phase, then null space holding the EE;
-    with ``pose`` also its orientation)."""
-    hold: list[FloatArray] = []
-    quat: list[FloatArray | None] = []
+def cartesian_phase(u: FloatArray, duration: float = CARTESIAN_END) -> Phase:
+    """Cartesian-space enhancement along u for ``duration`` [s]: no setpoint, the controller
+    moves the EE along the Cartesian DM gradient inside its EE box (eqs. (16)–(17))."""
+    return Phase(CARTESIAN, wmm_qp.Mode.DM_CARTESIAN, duration, direction=u)
 
-    def reference(t: float, st: Any, _cmd: Any) -> wmm_qp.Reference:
-        if t < t_switch - 1e-9:
-            x = model.ee_position(st.base_odom, st.q_arm)
-            return wmm_qp.Reference(mode=wmm_qp.Mode.DM_CARTESIAN, x_d=x, direction=u)
-        if not hold:
-            hold.append(model.ee_position(st.base_odom, st.q_arm))
-            quat.append(rotation_to_quat(model.ee_pose(st.base_odom, st.q_arm)[1]) if pose else None)
-        return wmm_qp.Reference(mode=wmm_qp.Mode.DM_NULLSPACE, x_d=hold[0], direction=u, quat_d=quat[0])
 
-    return reference
+def _hold(_t: float, start: Anchor) -> Target:
+    return Target(start.x, np.zeros(3), start.quat)
+
+
+def phases(u: FloatArray, duration: float = DEFAULT_DURATION) -> tuple[Phase, Phase]:
+    """Both DM phases along u over ``duration`` [s]: Cartesian until :func:`cartesian_end`, then
+    the null space holding the EE where the controller estimates it at the switch (with the
+    pose task, its orientation too)."""
+    t_switch = cartesian_end(duration)
+    return (cartesian_phase(u, t_switch),
+            Phase(NULLSPACE, wmm_qp.Mode.DM_NULLSPACE, duration - t_switch, direction=u, target=_hold))
+
+
+def scenario(direction: str = "x", duration: float = DEFAULT_DURATION) -> Scenario:
+    """The DM experiment along ``direction`` ("x" or "z")."""
+    u = DIRECTIONS[direction]
+    return Scenario(f"dm {direction}", phases(u, duration), u)
 
 
 def run_dm(
     setup: Setup, direction: str = "x", duration: float = DEFAULT_DURATION, progress: bool = True
 ) -> Trace:
-    """Run both DM phases (the Cartesian phase is shortened when duration < 10 s)."""
-    u = DIRECTIONS[direction]
-    ref = dm_reference(setup.model, u, cartesian_end(duration), pose=setup.controller.pose)
-    return run(
-        setup, ref, duration, dm_direction=u, progress=f"dm {direction}" if progress else None
-    )
+    """Run both DM phases in process (the Cartesian phase is shortened when duration < 10 s)."""
+    return run(setup, scenario(direction, duration), progress=progress)
 
 
 def cartesian_end(duration: float) -> float:
@@ -66,8 +70,8 @@ def cartesian_end(duration: float) -> float:
     return CARTESIAN_END if duration >= 2 * CARTESIAN_END else duration / 4.0
 
 
-def dm_metrics(trace: Trace, setup: Setup, direction: str, t_switch: float) -> dict[str, Any]:
-    """Fig. 9 metrics (JSON keys of issue 5).
+def dm_metrics(trace: Trace, setup: Setup, direction: str) -> dict[str, Any]:
+    """Fig. 9 metrics (JSON keys of issue 5); the switch is the null-space phase's first tick.
 
     - ``dm_start``, ``dm_after_cartesian``, ``dm_final``: H2 along u (true joint angles).
     - ``z_after_cartesian``: [m] true EE height at the end of the Cartesian phase.
@@ -81,7 +85,7 @@ def dm_metrics(trace: Trace, setup: Setup, direction: str, t_switch: float) -> d
     - ``dm_max``: the largest DM of the run; ``dm_final_rate``: [1/s] the DM's mean rate of change
       over the last second (≈ 0: the ascent has settled).
     """
-    i5 = trace.at(t_switch)
+    i5 = trace.start_of(NULLSPACE)
     ns = slice(i5, None)
     drift = np.linalg.norm(trace.ee_true[ns] - trace.ee_true[i5], axis=1)
     m = setup.model

@@ -112,12 +112,14 @@ def best_dm(robot: wmm_qp.RobotConfig, u: FloatArray, z: float, starts: int = 20
 
 def cartesian_phase_height(direction: str) -> float:
     """[m] the true EE height at the end of the dm experiment's Cartesian phase (qp, default configs)."""
-    from .dm import CARTESIAN_END, dm_reference
-    from .runner import make_setup, run
+    from .dm import cartesian_phase
+    from .runner import run
+    from .scenario import Scenario
+    from .setup import make_setup
 
     s = make_setup("qp")
     u = DIRECTIONS[direction]
-    tr = run(s, dm_reference(s.model, u), CARTESIAN_END, dm_direction=u)
+    tr = run(s, Scenario(f"dm {direction}: cartesian", (cartesian_phase(u),), u))
     return float(tr.sim.state().ee_true[2]) if tr.sim is not None else float(tr.ee_true[-1, 2])
 
 

@@ -22,7 +22,7 @@ from wmm_qp_sim import SimCommand, SimRobot
 import wmm_qp as w
 
 from .circle import circle
-from .runner import make_setup
+from .setup import make_setup
 
 
 def run(delay: int, duration: float = 20.0) -> tuple[dict[str, int], float]:

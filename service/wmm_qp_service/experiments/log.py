@@ -11,7 +11,7 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
-from .runner import Trace
+from .trace import Trace
 
 
 def columns(n_arm: int, n_wheels: int) -> tuple[str, ...]:

@@ -15,7 +15,7 @@ from collections.abc import Callable
 from typing import Any
 
 from . import push
-from .runner import Setup
+from .setup import Setup
 
 LOWER = 5.0  # [kg] the bisection's bracket: a box this light is pushed (checked)
 UPPER = 80.0  # [kg] and one this heavy is not (checked)
@@ -24,8 +24,8 @@ TOLERANCE = 2.5  # [kg] the bisection stops when the bracket is this narrow
 
 def _pushed(setup_factory: Callable[[], Setup], run: str, mass: float, dm_duration: float) -> tuple[bool, float]:
     """(the box of ``mass`` [kg] moved the target distance, the DM at the push start)."""
-    s, tr, i0 = push.run_push(setup_factory, dm_duration, progress=False, mass=mass, runs=(run,))[run]
-    m = push.push_metrics(s, tr, i0)
+    s, tr = push.run_push(setup_factory, dm_duration, progress=False, mass=mass, runs=(run,))[run]
+    m = push.push_metrics(s, tr)
     return bool(m["completed"]), float(m["dm_at_push_start"])
 
 

@@ -9,7 +9,7 @@ import numpy as np
 
 from wmm_qp.exceptions import WmmQpError
 
-from .runner import Trace
+from .trace import Trace
 
 
 def _plt() -> Any:

@@ -12,6 +12,9 @@ DM enhancement (joint 4 limits). 165.8 N lies between: the push is near the arm'
 the paper's was. The paper's torque-sensor figures (weighted norm ≈ 7.5 N·m) imply a smaller
 force; a 26 kg box with such a force would move with or without DM in a quasi-static model.
 
+One scenario per run (:func:`scenarios`) for both drivers: in process (:func:`run_push`) and in
+real time, each run on a fresh robot.
+
 Any robot: the run starts at the robot's ``arm.start``, the box stands 1 cm ahead of its EE and
 reaches at least ``HEADROOM`` above the EE (:func:`box_at`; for the Gen3 that is the sim's
 0.6 m box). The mass and μ stay the ones calibrated for the Gen3 above, so on another robot the
@@ -21,15 +24,21 @@ run shows whether that arm can push this box, not the paper's claim.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 from wmm_qp_sim import BoxConfig
 
 import wmm_qp
+from wmm_qp.config import FloatArray
 
-from .dm import DIRECTIONS, cartesian_end, dm_reference
-from .runner import ObserveFn, Setup, Trace, concat, run
+from .dm import DIRECTIONS
+from .dm import phases as dm_phases
+from .runner import ObserveFn, run
+from .scenario import Anchor, Phase, Probe, Scenario, Target
+from .setup import Setup
+from .trace import Trace
 
 MASS = 26.0  # [kg]
 MU = 0.65  # [-]
@@ -41,6 +50,8 @@ DEFAULT_DM_DURATION = 20.0  # [s] DM enhancement before the push (with_dm)
 SETTLE = 2.0  # [s] after the reference stops
 HEADROOM = 0.1  # [m] the box's top is at least this far above the EE
 TIP_MARGIN = 2.0  # [-] the box is this many times deeper than the depth below which it tips (box_at)
+PUSH = "push"  # the push phase's name
+RUNS = ("with_dm", "without_dm")
 
 
 def box_at(ee_true: Any, mass: float = MASS) -> BoxConfig:
@@ -64,114 +75,78 @@ def box_at(ee_true: Any, mass: float = MASS) -> BoxConfig:
                      width=width)
 
 
-def _push_phase(setup: Setup, trace0: Trace | None, scale: float, progress: str | None,
-                mass: float = MASS, observe: ObserveFn | None = None) -> Trace:
-    m = setup.model
-    sim = trace0.sim if trace0 is not None else None
-    if sim is None:
-        from wmm_qp_sim import SimRobot
-
-        sim = SimRobot(m, setup.sim_cfg, seed=setup.seed, scene=setup.scene)
-        sim.reset()
-    st = sim.state()
-    x_start = m.ee_position(st.base_odom, st.q_arm)
-    sim.place_box(box_at(st.ee_true, mass))
-    # the box is an obstacle for every body but the EE's (the sim's referee checks it too)
-    set_obstacles = getattr(setup.controller, "set_obstacles", None)
-    scene_obstacles = setup.scene.obstacles if setup.scene is not None else ()
-    placed = [math.nan, 0.0]  # face x [m], tilt [rad] the controller last saw
-
-    def box_obstacle() -> None:
-        if set_obstacles is not None and sim.box is not None and (
-                abs(sim.box.face_x - placed[0]) > 1e-3 or abs(sim.box.tilt - placed[1]) > 1e-3):
-            placed[:] = [sim.box.face_x, sim.box.tilt]
-            box = sim.box_obstacle()
-            set_obstacles(scene_obstacles + ((box,) if box is not None else ()))
-
-    box_obstacle()
-    distance = GAP + TARGET + OVERSHOOT
+def push_phase(scale: float = 1.0, mass: float = MASS) -> Phase:
+    """The push: the box of ``mass`` [kg] placed ``GAP`` ahead of the true EE (:func:`box_at`),
+    then x_d moving from the EE's start position along +x at ``PUSH_SPEED / scale`` by gap +
+    target + overshoot and staying there for ``SETTLE * scale`` s; the phase ends when the box
+    has moved ``TARGET``."""
     speed = PUSH_SPEED / scale
-    t_move = distance / speed
-    duration = t_move + SETTLE * scale
+    t_move = (GAP + TARGET + OVERSHOOT) / speed
 
-    def reference(t: float, _st: Any, _cmd: Any) -> wmm_qp.Reference:
-        box_obstacle()  # where the box is now
+    def target(t: float, start: Anchor) -> Target:
         s = min(t, t_move)
         v = speed if t < t_move else 0.0
-        return wmm_qp.Reference(
-            mode=wmm_qp.Mode.TRACK,
-            x_d=x_start + np.array([speed * s, 0, 0]),
-            xd_d=np.array([v, 0.0, 0.0]),
-            direction=DIRECTIONS["x"],
-        )
+        return Target(start.x + np.array([speed * s, 0, 0]), np.array([v, 0.0, 0.0]))
 
-    def stop(_t: float, st: Any) -> bool:
-        return bool(st.box_displacement >= TARGET)
+    def box(ee_true: FloatArray) -> BoxConfig:
+        return box_at(ee_true, mass)
 
-    tr = run(
-        setup,
-        reference,
-        duration,
-        dm_direction=DIRECTIONS["x"],
-        stop=stop,
-        progress=progress,
-        sim=sim,
-        previous=trace0.last_command if trace0 is not None else None,
-        observe=observe,
-    )
-    return tr if trace0 is None else concat(trace0, tr)
+    def moved(_t: float, robot: Probe) -> bool:
+        return bool(robot.box_moved() >= TARGET)
+
+    return Phase(PUSH, wmm_qp.Mode.TRACK, t_move + SETTLE * scale, direction=DIRECTIONS["x"], target=target,
+                 box=box, done=moved)
+
+
+def scenarios(dm_duration: float = DEFAULT_DM_DURATION, mass: float = MASS,
+              runs: tuple[str, ...] = RUNS) -> dict[str, Scenario]:
+    """The push's runs: ``with_dm`` (the DM enhancement along x for ``dm_duration`` [s], then the
+    push) and ``without_dm`` (the push from the start configuration); a ``dm_duration`` below
+    20 s also speeds the push up in proportion (quasi-static: the forces do not depend on speed)."""
+    scale = min(1.0, dm_duration / DEFAULT_DM_DURATION)
+    u = DIRECTIONS["x"]
+    push = push_phase(scale, mass)
+    out = {"with_dm": Scenario("push: with dm", (*dm_phases(u, dm_duration), push), u),
+           "without_dm": Scenario("push: without dm", (push,), u)}
+    return {name: out[name] for name in runs}
 
 
 def run_push(
-    setup_factory: Any, dm_duration: float = DEFAULT_DM_DURATION, progress: bool = True,
-    mass: float = MASS, runs: tuple[str, ...] = ("with_dm", "without_dm"),
-    observe: dict[str, ObserveFn] | None = None,
-) -> dict[str, tuple[Setup, Trace, int]]:
-    """Both runs. Returns {"with_dm": (setup, trace, push_start_index), "without_dm": ...}.
+    setup_factory: Callable[[], Setup], dm_duration: float = DEFAULT_DM_DURATION, progress: bool = True,
+    mass: float = MASS, runs: tuple[str, ...] = RUNS, observe: dict[str, ObserveFn] | None = None,
+) -> dict[str, tuple[Setup, Trace]]:
+    """The runs in process, each with a fresh :class:`Setup`. Returns {"with_dm": (setup,
+    trace), "without_dm": ...}.
 
     Args:
         setup_factory: () → a fresh :class:`Setup` (each run gets its own controller).
-        dm_duration: [s] DM enhancement before the push; a value below 20 s also speeds the
-            push up in proportion (quasi-static: the forces do not depend on speed).
+        dm_duration: [s] DM enhancement before the push (:func:`scenarios`).
         mass: [kg] the box's mass.
         runs: which of the two runs.
         observe: per run, called with the sim after every tick of its push phase.
     """
-    scale = min(1.0, dm_duration / DEFAULT_DM_DURATION)
-    out: dict[str, tuple[Setup, Trace, int]] = {}
-    if "with_dm" in runs:
+    out: dict[str, tuple[Setup, Trace]] = {}
+    for name, sc in scenarios(dm_duration, mass, runs).items():
         s = setup_factory()
-        u = DIRECTIONS["x"]
-        pre = run(
-            s,
-            dm_reference(s.model, u, cartesian_end(dm_duration), pose=s.controller.pose),
-            dm_duration,
-            dm_direction=u,
-            progress="push: dm" if progress else None,
-        )
-        tr = _push_phase(s, pre, scale, "push: with dm" if progress else None, mass,
-                         (observe or {}).get("with_dm"))
-        out["with_dm"] = (s, tr, len(pre.t))
-    if "without_dm" in runs:
-        s = setup_factory()
-        tr = _push_phase(s, None, scale, "push: without dm" if progress else None, mass,
-                         (observe or {}).get("without_dm"))
-        out["without_dm"] = (s, tr, 0)
+        seen = (observe or {}).get(name)
+        out[name] = (s, run(s, sc, progress=progress, observe=None if seen is None else {PUSH: seen}))
     return out
 
 
-def push_metrics(setup: Setup, trace: Trace, i0: int) -> dict[str, Any]:
-    """Fig. 8 metrics of one run (JSON keys of issue 5).
+def push_metrics(setup: Setup, trace: Trace) -> dict[str, Any]:
+    """Fig. 8 metrics of one run, from its push phase's first tick on (JSON keys of issue 5).
 
     ``max_weighted_torque_norm`` is max_t ‖W τ(t)‖ [N·m] with the W of eq. (8);
     ``saturated_joint`` the 0-based index of the first joint that stalled the push (null if none);
-    ``box_tilt_deg`` [deg] how far the box leans at the end (0 unless a physics box tipped).
+    ``box_tilt_deg`` [deg] how far the box leans at the end (0 unless a physics box tipped; null
+    where the robot does not report it, in real time).
     """
+    i0 = trace.start_of(PUSH)
     tau = trace.tau[i0:]
     W = np.asarray(setup.W, dtype=float)
     stalled = trace.stalled_joint[i0:]
     first = np.flatnonzero(stalled >= 0)
-    distance = float(trace.sim.state().box_displacement) if trace.sim is not None else float("nan")
+    distance = float(trace.box_displacement_end)
     return {
         "completed": bool(distance >= TARGET - 1e-9),
         "distance": distance,
@@ -181,6 +156,6 @@ def push_metrics(setup: Setup, trace: Trace, i0: int) -> dict[str, Any]:
         "stall_ticks": int(first.size),
         "dm_at_push_start": float(trace.dm[i0]),
         "push_force": MU * MASS * 9.81,
-        "box_tilt_deg": math.degrees(trace.sim.box.tilt) if trace.sim is not None and trace.sim.box else 0.0,
+        "box_tilt_deg": math.degrees(trace.box_tilt_end) if math.isfinite(trace.box_tilt_end) else None,
         "violations": trace.violations,
     }

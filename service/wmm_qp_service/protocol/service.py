@@ -72,7 +72,9 @@ class LoopStats(msgspec.Struct, kw_only=True):
         ticks: ticks run.
         deadline_misses: ticks that started after their deadline.
         tick_p50_us, tick_p99_us, tick_max_us: [µs] work time per tick (recent window; max: ever).
-        trigger: ``rate`` (fixed-rate ticks) or ``state`` (a tick per new state, ``loop.trigger``).
+        trigger: ``rate`` (fixed-rate ticks) or ``state`` (a tick per new state, ``loop.trigger``),
+            or ``embedded`` (the core ticks in the robot's own cycle, ``--embedded``: a deadline
+            miss is a tick whose cycle started after its deadline).
         watchdog_ticks: (state trigger) ticks without a new state for 1.5 periods: the
             prediction path; each is also a deadline miss.
         overruns: ticks whose command came more than a period after their start (rate) or their

@@ -11,7 +11,8 @@ import math
 
 import numpy as np
 
-from ...config import BaseConfig, FloatArray
+from ..._typing import FloatArray
+from ...config import BaseConfig
 
 
 class Base:

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from ..exceptions import ConfigError
+from .exceptions import ConfigError
 
 PACKAGE_HINTS = {"example-robot-data": "pip install 'wmm-qp[robots]' (or: pip install example-robot-data)",
                  "franky_sim": "pip install franky-sim"}

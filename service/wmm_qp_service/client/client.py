@@ -1,23 +1,11 @@
-"""A small client API for the daemon: send setpoints and mode changes, read status and state,
-notice faults and resume after them.
+"""The client of one robot's daemon: the session's lifecycle, the commands (setpoints, modes,
+the box, the gripper, live obstacles) and the faults (notice them, resume deliberately).
 
-Example::
-
-    from wmm_qp_service.client import Client
-
-    with Client.for_robot("configs/robots/ur5_omni.toml") as c:   # or Client(robot="ur5_omni")
-        c.wait_for_daemon(timeout=5.0)
-        c.set_mode("track")
-        if not c.send_setpoint([0.65, 0.0, 0.49]):   # False: the daemon does not follow setpoints
-            c.resume("track")                        # after a fault: resume deliberately
-        print(c.info().status.loop)                  # query: status + config
-        st = c.latest_state()                        # the sim's last state (or None)
-        tr = c.latest_truth()                        # the sim's ground truth, referee (or None)
+What it reads and waits for is :class:`~.reader.Reader`'s.
 """
 
 from __future__ import annotations
 
-import contextlib
 import secrets
 import time
 from collections.abc import Callable, Sequence
@@ -25,62 +13,26 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
-import msgspec
 import zenoh
 
-from wmm_qp import ConfigError
-from wmm_qp.config import read_toml
-
-from .config import ServiceConfig, check_name, load_service_config
-from .keys import Keys
-from .protocol import (
-    BoxMsg,
-    GripperMsg,
-    InfoMsg,
-    ModeMsg,
-    ObstaclesMsg,
-    SetpointMsg,
-    StateMsg,
-    StatusMsg,
-    TelemetryMsg,
-    TruthMsg,
-    encode,
-)
-from .transport import ROLE_CLIENT, open_session
+from ..config import ServiceConfig, load_service_config
+from ..protocol import BoxMsg, GripperMsg, ModeMsg, ObstaclesMsg, SetpointMsg, StatusMsg, encode
+from ..transport import ROLE_CLIENT, open_session
+from .reader import Reader
+from .robot_id import robot_id
 
 FOLLOWING = ("track", "dm_nullspace")
 """The modes in which the daemon follows setpoints."""
 
 
-def robot_id(robot: str | Path, svc: ServiceConfig | None = None) -> str:
-    """The robot id of a robot file or of an id: a path (a :class:`~pathlib.Path`, or a string
-    ending in ``.toml``) gives the file's ``name`` (read without resolving its URDF; a file
-    without ``name`` gives ``svc``'s robot id), any other string is the id itself.
-
-    Raises:
-        ConfigError: the file is unreadable, or the name is not a key segment.
-    """
-    if isinstance(robot, Path) or robot.endswith(".toml"):
-        path = Path(robot)
-        name = read_toml(path).get("name")
-        if name is None:
-            return (svc or load_service_config()).resolved().robot
-        if not isinstance(name, str):
-            raise ConfigError(path, "name", f"must be a string, got {name!r}")
-        try:
-            return check_name(name, "name")
-        except ConfigError:
-            raise ConfigError(path, "name", f"must be a key segment (letters, digits, _ -), got {name!r}") from None
-    return check_name(robot, "robot")
-
-
-class Client:
+class Client(Reader):
     """A Zenoh client of one robot's daemon (use as a context manager).
 
-    Faults: the daemon's status (10 Hz) feeds :attr:`fault_active`, :meth:`resume_needed` and
-    the ``on_fault`` callback; :meth:`send_setpoint` returns False while the daemon does not
-    follow setpoints; :meth:`resume` is the deliberate act that makes it follow them again
-    after a fault (``watchdog.resume = "manual"``, docs/protocol.md "Faults in a client").
+    What it reads (the robot's streams, the daemon's queries, :meth:`~.reader.Reader.wait_ready`)
+    is :class:`~.reader.Reader`'s. Faults: the daemon's status (10 Hz) feeds :attr:`fault_active`,
+    :meth:`resume_needed` and the ``on_fault`` callback; :meth:`send_setpoint` returns False
+    while the daemon does not follow setpoints; :meth:`resume` is the deliberate act that makes
+    it follow them again after a fault (``watchdog.resume = "manual"``, docs/protocol.md "Faults in a client").
 
     Args:
         svc: service config (prefix, robot id, endpoints); None: ``configs/service.toml``. An
@@ -89,7 +41,7 @@ class Client:
         name: this client's name (its liveliness token is ``alive/<name>``). Its setpoints
             carry ``source = "<name>-<random>"`` (:attr:`source`): one operator holds the
             daemon's setpoint stream at a time.
-        telemetry: also subscribe to per-tick telemetry (see :meth:`telemetry`).
+        telemetry: also subscribe to per-tick telemetry (see :meth:`~.reader.Reader.telemetry`).
         robot: the robot to talk to, overriding ``svc``'s id: a robot id (``"ur5_omni"``) or a
             robot file (a :class:`~pathlib.Path` or a ``.toml`` path: its ``name``), as
             :func:`robot_id`.
@@ -105,23 +57,10 @@ class Client:
         svc = svc if svc is not None else load_service_config()
         if robot is not None:
             svc = svc.with_(robot=robot_id(robot, svc))
-        svc = svc.resolved()
-        self.svc = svc
+        super().__init__(svc.resolved(), telemetry)
         self.name = name
         self.source = f"{name}-{secrets.token_hex(4)}"
-        self.keys = Keys.of(svc.prefix, svc.robot)
-        self._want_telemetry = telemetry
         self._seq = 0
-        self.session: zenoh.Session | None = None
-        self._last_state: StateMsg | None = None
-        self._last_truth: TruthMsg | None = None
-        self._last_status: StatusMsg | None = None
-        self._status_count = 0  # statuses received
-        self._dec_state = msgspec.msgpack.Decoder(StateMsg)
-        self._dec_truth = msgspec.msgpack.Decoder(TruthMsg)
-        self._dec_status = msgspec.msgpack.Decoder(StatusMsg)
-        self._dec_tel = msgspec.msgpack.Decoder(TelemetryMsg)
-        self._dec_info = msgspec.msgpack.Decoder(InfoMsg)
         self.on_fault = on_fault
         self._fault_active = False  # as the last status said
         self._faults_seen = -1  # faults counted by the daemon at the last status (-1: none yet)
@@ -154,11 +93,7 @@ class Client:
                                                   reliability=zenoh.Reliability.RELIABLE)
         self._pub_gripper = s.declare_publisher(k.gripper, congestion_control=zenoh.CongestionControl.BLOCK,
                                                 reliability=zenoh.Reliability.RELIABLE)
-        self._sub_state = s.declare_subscriber(k.state, zenoh.handlers.RingChannel(1))
-        self._sub_truth = s.declare_subscriber(k.sim_truth, zenoh.handlers.RingChannel(1))
-        self._sub_status = s.declare_subscriber(k.status, zenoh.handlers.RingChannel(1))
-        self._sub_tel = (s.declare_subscriber(k.telemetry, zenoh.handlers.FifoChannel(100_000))
-                         if self._want_telemetry else None)
+        self._declare_subscribers(s)
         self._token = s.liveliness().declare_token(k.alive(self.name))
         return self
 
@@ -310,125 +245,3 @@ class Client:
         """Publish raw bytes on ``<prefix>/<robot>/<key>`` (tests of the validation)."""
         assert self.session is not None
         self.session.put(f"{self.keys.root}/{key}", payload)
-
-    # ------------------------------------------------------------------ reading
-    def daemon_alive(self, timeout: float = 0.5) -> bool:
-        """The daemon's liveliness token for this robot is present."""
-        assert self.session is not None
-        replies = self.session.liveliness().get(self.keys.alive("daemon"), timeout=timeout)
-        return any(r.ok is not None for r in replies)
-
-    def robots(self, timeout: float = 0.5) -> list[str]:
-        """``<prefix>/<robot>`` of every robot whose daemon this session can see (liveliness)."""
-        assert self.session is not None
-        prefix = self.svc.prefix.strip("/")
-        out = set()
-        for r in self.session.liveliness().get(f"{prefix}/*/alive/daemon", timeout=timeout):
-            if r.ok is not None:
-                out.add(str(r.ok.key_expr).removesuffix("/alive/daemon"))
-        return sorted(out)
-
-    def no_daemon_reason(self) -> str:
-        """Why no daemon answers: "no daemon for robot X" and the robots that are seen."""
-        seen = self.robots()
-        return (f"no daemon for robot {self.keys.root} (no liveliness token {self.keys.alive('daemon')}); "
-                f"daemons seen: {', '.join(seen) if seen else 'none'}")
-
-    def info(self, timeout: float = 2.0) -> InfoMsg | None:
-        """Query the daemon's status and configuration (None: no daemon answered)."""
-        assert self.session is not None
-        for reply in self.session.get(self.keys.info, timeout=timeout):
-            if reply.ok is not None:
-                try:
-                    return self._dec_info.decode(reply.ok.payload.to_bytes())
-                except msgspec.DecodeError:
-                    return None
-        return None
-
-    def wait_for_daemon(self, timeout: float = 10.0) -> InfoMsg | None:
-        """Query until the daemon answers (None after ``timeout`` [s]; then
-        :meth:`no_daemon_reason` says why). Queries are sent only while the daemon's liveliness
-        token is present, so a mistyped robot id costs no query time-outs."""
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            if not self.daemon_alive(timeout=min(0.5, max(0.05, end - time.monotonic()))):
-                time.sleep(0.05)
-                continue
-            info = self.info(timeout=min(1.0, max(0.1, end - time.monotonic())))
-            if info is not None:
-                return info
-            time.sleep(0.05)
-        return None
-
-    def latest_state(self) -> StateMsg | None:
-        """The robot's most recent state (kept from earlier calls when nothing new arrived)."""
-        s = self._sub_state.try_recv()
-        if s is not None:
-            with contextlib.suppress(msgspec.DecodeError):
-                self._last_state = self._dec_state.decode(s.payload.to_bytes())
-        return self._last_state
-
-    def latest_truth(self) -> TruthMsg | None:
-        """The sim's most recent evaluation data (``sim/truth``; None: none yet, or a robot that
-        publishes none). Nothing on the control path needs it."""
-        s = self._sub_truth.try_recv()
-        if s is not None:
-            with contextlib.suppress(msgspec.DecodeError):
-                self._last_truth = self._dec_truth.decode(s.payload.to_bytes())
-        return self._last_truth
-
-    def wait_truth(self, timeout: float = 5.0) -> TruthMsg | None:
-        """Wait for fresh evaluation data from the sim (None after ``timeout`` [s])."""
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            s = self._sub_truth.try_recv()
-            if s is not None:
-                with contextlib.suppress(msgspec.DecodeError):
-                    self._last_truth = self._dec_truth.decode(s.payload.to_bytes())
-                    return self._last_truth
-            time.sleep(0.005)
-        return None
-
-    def latest_status(self) -> StatusMsg | None:
-        """The daemon's most recent published status (it also feeds the fault bookkeeping:
-        :attr:`fault_active`, ``on_fault``)."""
-        s = self._sub_status.try_recv()
-        if s is not None:
-            with contextlib.suppress(msgspec.DecodeError):
-                self._last_status = st = self._dec_status.decode(s.payload.to_bytes())
-                self._status_count += 1
-                self._on_status(st)
-        return self._last_status
-
-    def wait_state(self, timeout: float = 5.0) -> StateMsg | None:
-        """Wait for a fresh state from the sim (None after ``timeout`` [s])."""
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            s = self._sub_state.try_recv()
-            if s is not None:
-                try:
-                    self._last_state = self._dec_state.decode(s.payload.to_bytes())
-                    return self._last_state
-                except msgspec.DecodeError:
-                    pass
-            time.sleep(0.005)
-        return None
-
-    def telemetry(self) -> list[TelemetryMsg]:
-        """Every telemetry message received since the last call (needs ``telemetry=True``)."""
-        out: list[TelemetryMsg] = []
-        if self._sub_tel is None:
-            return out
-        while (s := self._sub_tel.try_recv()) is not None:
-            with contextlib.suppress(msgspec.DecodeError):
-                out.append(self._dec_tel.decode(s.payload.to_bytes()))
-        return out
-
-    def alive(self, timeout: float = 1.0) -> list[str]:
-        """Names of the live nodes of this robot (daemon, sim, clients)."""
-        assert self.session is not None
-        names = []
-        for reply in self.session.liveliness().get(self.keys.alive_all, timeout=timeout):
-            if reply.ok is not None:
-                names.append(str(reply.ok.key_expr).rsplit("/", 1)[-1])
-        return sorted(names)

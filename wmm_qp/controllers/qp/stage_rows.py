@@ -1,0 +1,158 @@
+"""The rows of one tick's stages: every row source's, stacked in the sources' order.
+
+The stages never look inside one source: they ask this stack for the rows (relaxed for the arm
+alone, or for the stage solved again), for the rows to re-check and how to name one, and for why
+the task was cut. What differs between sources is what each declares (:class:`~wmm_qp.limits.rows.RowSource`):
+its :class:`~wmm_qp.limits.rows.Retry`, whether it is re-checked, whether it yields to the task.
+The dampers' rows (``Retry.TOGETHER``: the collision pairs, the fence) are pooled into one group,
+at the first damper source's place: relaxed together, reported together.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..._typing import BoolArray, FloatArray
+from ...limits.rows import Retry, Rows, RowSource
+from ...solvers import INF
+from ...types import Mode
+
+
+@dataclass(frozen=True, slots=True)
+class RowGroup:
+    """One source's rows this tick (the dampers': all damper sources' rows, pooled)."""
+
+    source: RowSource
+    rows: Rows
+
+
+class StageRows:
+    """The rows of one tick's stages (see the module docstring).
+
+    Args:
+        parts: (source, its rows this tick) in the sources' order; None: none this tick.
+        n_v: the length of v = [v_b; v_m].
+    """
+
+    def __init__(self, parts: list[tuple[RowSource, Rows | None]], n_v: int) -> None:
+        self.n_v = n_v
+        groups: list[RowGroup | None] = []
+        dampers: list[Rows] = []
+        first: RowSource | None = None
+        for source, rows in parts:
+            if rows is None:
+                continue
+            if source.retry is Retry.TOGETHER:
+                if first is None:
+                    first = source
+                    groups.append(None)  # the pool's place
+                dampers.append(rows)
+            else:
+                groups.append(RowGroup(source, rows))
+        self.dampers: Rows | None = None
+        """The dampers' rows this tick, pooled (None: no damper source)."""
+        if first is not None:
+            self.dampers = Rows.stack(dampers, n_v)
+            groups = [RowGroup(first, self.dampers) if g is None else g for g in groups]
+        self.groups = [g for g in groups if g is not None and g.rows.n]
+        self.n = sum(g.rows.n for g in self.groups)
+
+    def without_yielding(self, mode: Mode) -> StageRows | None:
+        """These rows without the sources that yield to the task in ``mode``; None: none does."""
+        kept = [g for g in self.groups if not g.source.yields_to_task(mode)]
+        if len(kept) == len(self.groups):
+            return None
+        out = object.__new__(StageRows)
+        out.n_v, out.dampers, out.groups, out.n = self.n_v, self.dampers, kept, sum(g.rows.n for g in kept)
+        return out
+
+    # ------------------------------------------------------------------ the stacked rows
+    def limits(self, brake: bool = False) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """(C, l, u) of every row, ±inf as the backends' ±INF; ``brake``: l relaxed as the stage
+        solved again when the rows exclude each other has them (``l_brake``)."""
+        if not self.groups:
+            return np.zeros((0, self.n_v)), np.zeros(0), np.zeros(0)
+        if len(self.groups) == 1:
+            r = self.groups[0].rows
+            C, l, u = r.C, r.l_brake if brake else r.l, r.upper()
+        else:
+            C = np.vstack([g.rows.C for g in self.groups])
+            l = np.concatenate([g.rows.l_brake if brake else g.rows.l for g in self.groups])
+            u = np.concatenate([g.rows.upper() for g in self.groups])
+        return C, np.maximum(l, -INF), np.minimum(u, INF)
+
+    def for_the_arm(self, n_wheels: int, held: FloatArray, lb: FloatArray,
+                    ub: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """(C_arm, l, u) of every row with the wheels held at ``held``, for the arm alone inside its
+        bounds lb ≤ v_m ≤ ub: each row's own bound (``damper``) relaxed to what the arm alone can
+        do, l ← min(damper, max C_arm v_m + C_w w) − C_w w, the upper bound moved by the wheels'
+        share, u ← u − C_w w (+INF stays)."""
+        C = self.groups[0].rows.C if len(self.groups) == 1 else np.vstack([g.rows.C for g in self.groups])
+        damper = np.concatenate([g.rows.damper for g in self.groups]) if len(self.groups) > 1 else \
+            self.groups[0].rows.damper
+        u = np.minimum(np.concatenate([g.rows.upper() for g in self.groups]), INF)
+        Ca, share = C[:, n_wheels:], C[:, :n_wheels] @ held
+        best = np.sum(np.where(Ca > 0.0, Ca * ub, Ca * lb), axis=1)
+        return Ca, np.minimum(damper, best + share) - share, np.where(u >= INF, INF, u - share)
+
+    # ------------------------------------------------------------------ when the rows exclude each other
+    @property
+    def relaxable(self) -> bool:
+        """Some rows can be relaxed further when the stage has no solution (dampers, or rows that
+        admit the braking command only once relaxed)."""
+        return any(g.source.retry is not Retry.KEEP for g in self.groups)
+
+    @property
+    def has_dampers(self) -> bool:
+        return any(g.source.retry is Retry.TOGETHER for g in self.groups)
+
+    def relax_together(self, lb: FloatArray, ub: FloatArray) -> FloatArray:
+        """The dampers relaxed together (:meth:`~wmm_qp.limits.rows.Rows.relax_together`, inside
+        the KEEP rows), then every ADMIT row relaxed to admit their joint command v_r too.
+
+        Returns:
+            v_r, or an empty array (no dampers: the braking command is the stage's reference).
+        """
+        dampers = [g for g in self.groups if g.source.retry is Retry.TOGETHER]
+        if not dampers:
+            return np.zeros(0)
+        keep = [g for g in self.groups if g.source.retry is Retry.KEEP]
+        if keep:
+            C_keep = np.vstack([g.rows.C for g in keep])
+            l_keep = np.maximum(np.concatenate([g.rows.l for g in keep]), -INF)
+            u_keep = np.minimum(np.concatenate([g.rows.upper() for g in keep]), INF)
+            ref = dampers[0].rows.relax_together(lb, ub, C_keep, l_keep, u_keep)
+        else:
+            ref = dampers[0].rows.relax_together(lb, ub)
+        for g in self.groups:
+            if g.source.retry is Retry.ADMIT:
+                r = g.rows
+                r.l_brake = np.array([min(float(r.l_brake[k]), float(r.C[k] @ ref)) for k in range(r.n)])
+        return ref
+
+    # ------------------------------------------------------------------ after the solve
+    def rechecked(self) -> BoolArray | None:
+        """Which stacked rows are re-checked whatever solved the stage (None: all)."""
+        if all(g.source.rechecked for g in self.groups):
+            return None
+        return np.concatenate([np.full(g.rows.n, g.source.rechecked) for g in self.groups])
+
+    def recheck_label(self, k: int) -> str:
+        """The k-th re-checked row, as a reason names it."""
+        for g in self.groups:
+            if g.source.rechecked:
+                if k < g.rows.n:
+                    return g.source.row_label(g.rows, k)
+                k -= g.rows.n
+        return ""
+
+    def cut_reason(self, v: FloatArray) -> str:
+        """Why the task was cut at the command v: the first source (in order) whose rows v sits on
+        says which, else the bounds cut it."""
+        for g in self.groups:
+            why = g.source.cut_reason(g.rows, v)
+            if why:
+                return why
+        return "the bounds cut the task (best effort)"

@@ -1,0 +1,170 @@
+"""The collision rows' candidate passes, compiled: every monitored pair the broad phase lets
+through, its distance appended to one candidate buffer.
+
+The buffer (:class:`~wmm_qp.limits.pair_search.Candidates`): per entry the signed distance d [m],
+the closest points P on the body and Q on the other side, the unit normal N from the other side to
+the body (base frame), ok (False: the compiled distances do not cover the pair, coal computes it),
+the body's index, the other side (a body ≥ 0, the floor −1, obstacle k −2 − k) and the pair's
+safety distance d_s [m]. Primitives come in arrays (:class:`~wmm_qp.limits.pair_search.Table`):
+kind 0 a swept segment [a0, a1] of radius r, 1 a box (centre c, rotation R, half extents h),
+2 anything else; ``centre`` and ``radii`` their bounding spheres.
+"""
+
+from __future__ import annotations
+
+import math
+
+from .._jit import jit
+from .._typing import BoolArray, FloatArray, IntArray
+from ._distance import box_plane, swept_box, swept_plane, swept_swept
+
+
+@jit
+def place_kernel(
+    Hj: FloatArray, joint: IntArray, kind: IntArray, a0: FloatArray, a1: FloatArray, c: FloatArray,
+    R: FloatArray, centre: FloatArray, o_a0: FloatArray, o_a1: FloatArray, o_c: FloatArray, o_R: FloatArray,
+    o_centre: FloatArray,
+) -> None:
+    """Every primitive k placed by its joint's homogeneous transform Hj[joint[k]] (the ``o_`` arrays)."""
+    for k in range(joint.shape[0]):
+        j = joint[k]
+        for r in range(3):
+            o_a0[k, r] = Hj[j, r, 3]
+            o_a1[k, r] = Hj[j, r, 3]
+            o_c[k, r] = Hj[j, r, 3]
+            o_centre[k, r] = Hj[j, r, 3]
+            for m in range(3):
+                o_a0[k, r] += Hj[j, r, m] * a0[k, m]
+                o_a1[k, r] += Hj[j, r, m] * a1[k, m]
+                o_c[k, r] += Hj[j, r, m] * c[k, m]
+                o_centre[k, r] += Hj[j, r, m] * centre[k, m]
+                acc = 0.0
+                for q in range(3):
+                    acc += Hj[j, r, q] * R[k, q, m]
+                o_R[k, r, m] = acc
+
+
+@jit
+def pair_one(
+    ka: IntArray, a0: FloatArray, a1: FloatArray, ra: FloatArray, ca: FloatArray, Ra: FloatArray, ha: FloatArray,
+    i: int, kb: IntArray, b0: FloatArray, b1: FloatArray, rb: FloatArray, cb: FloatArray, Rb: FloatArray,
+    hb: FloatArray, j: int, d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray, k: int,
+) -> None:
+    """Entry k ← the distance of A[i] to B[j] (ok False where coal must compute it)."""
+    ok[k] = True
+    if ka[i] == 0 and kb[j] == 0:
+        d[k] = swept_swept(a0[i], a1[i], ra[i], b0[j], b1[j], rb[j], P[k], Q[k], N[k])
+    elif ka[i] == 0 and kb[j] == 1:
+        d[k] = swept_box(a0[i], a1[i], ra[i], cb[j], Rb[j], hb[j], P[k], Q[k], N[k])
+        ok[k] = d[k] + ra[i] >= 0.0  # the segment itself inside the box: see swept_box
+    elif ka[i] == 1 and kb[j] == 0:
+        d[k] = swept_box(b0[j], b1[j], rb[j], ca[i], Ra[i], ha[i], Q[k], P[k], N[k])
+        N[k] = -N[k]
+        ok[k] = d[k] + rb[j] >= 0.0
+    else:
+        ok[k] = False
+
+
+@jit
+def pairs_kernel(
+    ka: IntArray, a0: FloatArray, a1: FloatArray, ra: FloatArray, ca: FloatArray, Ra: FloatArray, ha: FloatArray,
+    kb: IntArray, b0: FloatArray, b1: FloatArray, rb: FloatArray, cb: FloatArray, Rb: FloatArray, hb: FloatArray,
+    first: IntArray, second: IntArray, d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray,
+) -> None:
+    """Entry k ← the distance of A[first[k]] to B[second[k]], for every k."""
+    for k in range(first.shape[0]):
+        pair_one(ka, a0, a1, ra, ca, Ra, ha, first[k], kb, b0, b1, rb, cb, Rb, hb, second[k], d, P, Q, N, ok, k)
+
+
+@jit
+def plane_one(
+    kind: IntArray, a0: FloatArray, a1: FloatArray, r: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
+    i: int, normal: FloatArray, offset: float, d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray,
+    ok: BoolArray, k: int,
+) -> None:
+    """Entry k ← the distance of A[i] to the plane (ok False where coal must compute it)."""
+    ok[k] = True
+    if kind[i] == 0:
+        d[k] = swept_plane(a0[i], a1[i], r[i], normal, offset, P[k], Q[k], N[k])
+    elif kind[i] == 1:
+        d[k] = box_plane(c[i], R[i], h[i], normal, offset, P[k], Q[k], N[k])
+    else:
+        ok[k] = False
+
+
+@jit
+def self_pass(
+    kind: IntArray, a0: FloatArray, a1: FloatArray, r: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
+    centre: FloatArray, pairs: IntArray, pair_r: FloatArray, d_i: float, d_s: float,
+    d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray, body: IntArray, other: IntArray,
+    safety: FloatArray, n: int,
+) -> int:
+    """The robot's own pairs whose bounding spheres are within d_i (the broad phase), their
+    distances appended to the candidates from entry n; returns the new count."""
+    for k in range(pairs.shape[0]):
+        i, j = pairs[k, 0], pairs[k, 1]
+        x, y, z = centre[i, 0] - centre[j, 0], centre[i, 1] - centre[j, 1], centre[i, 2] - centre[j, 2]
+        if not math.sqrt(x * x + y * y + z * z) - pair_r[k] <= d_i:
+            continue
+        pair_one(kind, a0, a1, r, c, R, h, i, kind, a0, a1, r, c, R, h, j, d, P, Q, N, ok, n)
+        body[n], other[n], safety[n] = i, j, d_s
+        n += 1
+    return n
+
+
+@jit
+def plane_pass(
+    kind: IntArray, a0: FloatArray, a1: FloatArray, r: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
+    centre: FloatArray, radii: FloatArray, idx: IntArray, cull: bool, normal: FloatArray, offset: float,
+    d_i: float, code: int, d_s: float,
+    d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray, body: IntArray, other: IntArray,
+    safety: FloatArray, n: int,
+) -> int:
+    """The bodies ``idx`` against the plane normal·x = offset (free side ≤), appended from entry n
+    (the other side coded ``code``); with ``cull`` only those whose bounding sphere is within d_i."""
+    for t in range(idx.shape[0]):
+        i = idx[t]
+        if cull:
+            gap = offset - (normal[0] * centre[i, 0] + normal[1] * centre[i, 1] + normal[2] * centre[i, 2]) - radii[i]
+            if not gap <= d_i:
+                continue
+        plane_one(kind, a0, a1, r, c, R, h, i, normal, offset, d, P, Q, N, ok, n)
+        body[n], other[n], safety[n] = i, code, d_s
+        n += 1
+    return n
+
+
+@jit
+def solid_pass(
+    kind: IntArray, a0: FloatArray, a1: FloatArray, r: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
+    centre: FloatArray, radii: FloatArray,
+    okind: IntArray, o0: FloatArray, o1: FloatArray, orad: FloatArray, oc: FloatArray, oR: FloatArray,
+    oh: FloatArray, ocentre: FloatArray, oradii: FloatArray, checked: BoolArray, solid: IntArray,
+    d_i: float, d_s: float,
+    d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray, body: IntArray, other: IntArray,
+    safety: FloatArray, n: int,
+) -> int:
+    """Every checked body against every solid obstacle (placed in the base frame) within d_i: the
+    broad phase on the bodies' bounding spheres (against a box: the sphere's distance to the box
+    itself), appended from entry n (the other side coded −2 − the obstacle's index)."""
+    for o in range(okind.shape[0]):
+        for b in range(kind.shape[0]):
+            if not checked[o, b]:
+                continue
+            if okind[o] == 1:  # in the box's frame: the sphere's centre outside each slab
+                s2 = 0.0
+                for a in range(3):
+                    rel = (oR[o, 0, a] * (centre[b, 0] - oc[o, 0]) + oR[o, 1, a] * (centre[b, 1] - oc[o, 1])
+                           + oR[o, 2, a] * (centre[b, 2] - oc[o, 2]))
+                    e = max(abs(rel) - oh[o, a], 0.0)
+                    s2 += e * e
+                gap = math.sqrt(s2) - radii[b]
+            else:
+                x, y, z = centre[b, 0] - ocentre[o, 0], centre[b, 1] - ocentre[o, 1], centre[b, 2] - ocentre[o, 2]
+                gap = math.sqrt(x * x + y * y + z * z) - radii[b] - oradii[o]
+            if not gap <= d_i:
+                continue
+            pair_one(kind, a0, a1, r, c, R, h, b, okind, o0, o1, orad, oc, oR, oh, o, d, P, Q, N, ok, n)
+            body[n], other[n], safety[n] = b, -2 - solid[o], d_s
+            n += 1
+    return n

@@ -1,0 +1,319 @@
+"""The collision rows' candidate search: every monitored pair near enough to need a row, its
+distance, closest points and normal, each tick.
+
+Self pairs, the floor and the obstacles go through compiled passes (:mod:`._pair_passes`: a
+bounding-sphere broad phase, then the distances of swept spheres, boxes and planes of
+:mod:`._distance`) into one candidate buffer (:class:`Candidates`); coal fills the entries those
+do not cover (box–box, convex meshes, a capsule whose segment is inside a box). Everything is in
+the base frame: the bodies placed by the arm's joint placements, the obstacles by the base pose.
+Which rows the candidates become is :mod:`.collision`'s business.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+from .._typing import BoolArray, FloatArray, IntArray
+from ..config import CollisionParams, ShapeConfig
+from ..model.collision import RobotGeometry, bounding_sphere, coal_shape, exempt_mask, row_shape, shape_pose, transform
+from ._pair_passes import pairs_kernel, place_kernel, plane_pass, self_pass, solid_pass
+
+FLOOR = -1
+"""The other side of a candidate against the floor (``Candidates.other``; a body's index ≥ 0,
+obstacle k: −2 − k)."""
+
+
+class Table:
+    """Primitives in arrays, for the compiled distances (``_distance.py``): kind 0 a swept segment
+    [a0, a1] of radius r (sphere, capsule), 1 a box (centre c, rotation R, half extents h), 2 any
+    other shape (coal computes its distances); ``centre`` is each one's bounding-sphere centre."""
+
+    def __init__(self, n: int) -> None:
+        self.kind = np.full(n, 2, dtype=np.int64)
+        self.a0, self.a1, self.c, self.h, self.centre = (np.zeros((n, 3)) for _ in range(5))
+        self.r = np.zeros(n)
+        self.R = np.tile(np.eye(3), (n, 1, 1))
+
+    def set(self, k: int, shape: coal.CollisionGeometry, M: pin.SE3, centre: FloatArray) -> None:
+        """Entry k: ``shape`` at pose M (its frame's), bounding-sphere centre ``centre`` (shape frame)."""
+        self.c[k], self.R[k] = M.translation, M.rotation
+        self.centre[k] = M.act(centre)
+        if isinstance(shape, coal.Capsule):
+            self.kind[k], self.r[k] = 0, shape.radius
+            self.a0[k], self.a1[k] = M.act(np.array([0.0, 0.0, -shape.halfLength])), M.act(
+                np.array([0.0, 0.0, shape.halfLength]))
+        elif isinstance(shape, coal.Sphere):
+            self.kind[k], self.r[k] = 0, shape.radius
+            self.a0[k] = self.a1[k] = M.translation
+        elif isinstance(shape, coal.Box):
+            self.kind[k], self.h[k] = 1, shape.halfSide
+        else:
+            self.kind[k] = 2
+
+
+def place(Hj: FloatArray, joint: IntArray, local: Table, out: Table) -> None:
+    """``out`` ← every primitive of ``local`` placed by its joint's placement Hj[joint[k]] (4×4)."""
+    place_kernel(Hj, joint, local.kind, local.a0, local.a1, local.c, local.R, local.centre,
+                 out.a0, out.a1, out.c, out.R, out.centre)
+
+
+def _pair_distances(A: Table, first: IntArray, second: IntArray, B: Table, buf: tuple) -> tuple:
+    """Distances of A[first[k]] to B[second[k]] into buf = (d, p, q, n, ok) (ok False where coal
+    must compute it: box-box, meshes, a capsule whose segment is inside a box)."""
+    d, P, Q, N, ok = buf
+    pairs_kernel(A.kind, A.a0, A.a1, A.r, A.c, A.R, A.h, B.kind, B.a0, B.a1, B.r, B.c, B.R, B.h,
+                 np.asarray(first, dtype=np.int64), np.asarray(second, dtype=np.int64), d, P, Q, N, ok)
+    return d, P, Q, N, ok
+
+
+@dataclass
+class Obstacle:
+    """An obstacle as the search uses it (world frame; a plane's normal and offset apart).
+
+    Attributes:
+        name: its id (the rows' names).
+        shape: its coal geometry (a plane's half-space is built in the base frame when needed).
+        world: its pose in the world.
+        center, radius: [m] its row shape's bounding sphere (its frame; a plane: 0, inf).
+        plane: it is a plane.
+        checked: (bodies,) the bodies it is checked against (:func:`exempt_mask`).
+        checked_idx: their indices.
+        normal_w, offset_w: a plane's unit normal and offset [m] (world frame).
+        normal_b, offset_b: the same in the base frame, this tick (:meth:`place`).
+        velocity_w: [m/s] its velocity (world frame).
+    """
+
+    name: str
+    shape: coal.CollisionGeometry
+    world: pin.SE3
+    center: FloatArray
+    radius: float
+    plane: bool
+    checked: BoolArray
+    checked_idx: IntArray
+    normal_w: FloatArray = field(default_factory=lambda: np.zeros(3))
+    offset_w: float = 0.0
+    normal_b: FloatArray = field(default_factory=lambda: np.zeros(3))
+    offset_b: float = 0.0
+    velocity_w: FloatArray = field(default_factory=lambda: np.zeros(3))
+
+    @classmethod
+    def of(cls, s: ShapeConfig, geometry: RobotGeometry) -> Obstacle:
+        """The obstacle of a scene's (or a live message's) primitive."""
+        shape = coal_shape(s)
+        plane = s.kind == "plane"
+        center, radius = (np.zeros(3), math.inf) if plane else bounding_sphere(row_shape(shape))
+        mask = exempt_mask(geometry, s.exempt)
+        o = cls(s.name, shape, shape_pose(s), center, radius, plane, mask, np.flatnonzero(mask).astype(np.int64))
+        if plane:
+            o.normal_w, o.offset_w = np.asarray(s.normal, dtype=float), s.offset
+        if s.velocity is not None:
+            o.velocity_w = np.asarray(s.velocity, dtype=float)
+        return o
+
+    def place(self, Rb: FloatArray, tb: FloatArray) -> None:
+        """A plane's normal and offset in the base frame, the base at (Rb, tb) in the world:
+        n·p_w ≤ c ⇔ (Rbᵀ n)·p_b ≤ c − n·tb."""
+        self.normal_b, self.offset_b = Rb.T @ self.normal_w, self.offset_w - float(self.normal_w @ tb)
+
+
+@dataclass
+class Candidates:
+    """The candidate buffer: room for every monitored pair at once (self, floor, each obstacle
+    against every body); entries [0, n) are this tick's.
+
+    Attributes:
+        d: [m] signed distance (negative in penetration).
+        p_a, p_b: [m] the closest points on the body and on the other side (base frame).
+        normal: the unit normal n̂ from the other side to the body.
+        ok: False where coal had to compute the entry (filled in by the search anyway).
+        body: the body's index; other: the other side (a body ≥ 0, :data:`FLOOR`, obstacle k −2 − k).
+        safety: [m] the pair's safety distance d_s.
+        n: the number of entries this tick.
+    """
+
+    d: FloatArray
+    p_a: FloatArray
+    p_b: FloatArray
+    normal: FloatArray
+    ok: BoolArray
+    body: IntArray
+    other: IntArray
+    safety: FloatArray
+    n: int = 0
+
+    @classmethod
+    def room(cls, n: int) -> Candidates:
+        return cls(np.empty(n), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.ones(n, dtype=np.bool_),
+                   np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.empty(n))
+
+
+class PairSearch:
+    """Each tick, every monitored pair within the influence distance and its distance.
+
+    Args:
+        geometry: the robot's bodies and pairs (the arm's data: its joint placements are read).
+        params: d_i (``influence_distance``, the broad phase's reach), d_s and the floor margin.
+    """
+
+    def __init__(self, geometry: RobotGeometry, params: CollisionParams) -> None:
+        self.geo = geometry
+        self.p = params
+        self.obstacles: list[Obstacle] = []
+        self.shapes: tuple[ShapeConfig, ...] = ()  # the obstacles in force, as given to set_obstacles
+        self.moving = False  # an obstacle of the set has a velocity
+        self.base_rotation = np.eye(3)  # Rb of the last search (the world → base frame rotation's transpose)
+        self._names: dict[tuple[int, int], str] = {}
+        self._floor = coal.Halfspace(np.array([0.0, 0.0, 1.0]), geometry.floor_z)  # coal: n·p ≤ d is solid: z ≤ floor_z
+        self._identity = coal.Transform3s()
+        self._req = coal.DistanceRequest()
+        self._res = coal.DistanceResult()
+        bodies = geometry.bodies
+        joints = np.unique([b.joint for b in bodies]) if bodies else np.zeros(0, dtype=int)
+        where = {int(j): k for k, j in enumerate(joints)}
+        self._body_joint = np.array([where[b.joint] for b in bodies], dtype=int)  # index into _joint_ids
+        # the broad phase: each row shape's bounding sphere (a cylinder's capsule reaches past the
+        # cylinder's own sphere: culling on that would let a pair in already inside d_s)
+        self._radii = np.array([b.row_radius for b in bodies], dtype=float)
+        self._pairs = np.array(geometry.self_pairs, dtype=int).reshape(-1, 2)
+        self._pair_r = self._radii[self._pairs[:, 0]] + self._radii[self._pairs[:, 1]]
+        self._floor_idx = np.array(geometry.floor_bodies, dtype=int)
+        self._floor_n, self._floor_o = np.array([0.0, 0.0, -1.0]), -geometry.floor_z  # free: z ≥ floor_z
+        # the compiled path: each body's primitive in its joint's frame, placed each tick
+        self._shapes = Table(len(bodies))
+        for k, b in enumerate(bodies):
+            self._shapes.set(k, b.row, b.placement, b.row_center)
+        self.placed = Table(len(bodies))  # the bodies in the base frame, this tick
+        self.placed.kind[:] = self._shapes.kind
+        self.placed.r[:], self.placed.h[:] = self._shapes.r, self._shapes.h
+        self._Hj = np.tile(np.eye(4), (len(joints), 1, 1))
+        self._joint_ids = [int(j) for j in joints]
+        self._oMi = geometry.arm.data.oMi  # the proxy, once: fetching data.oMi costs ~1 µs each time
+        self._H_world = np.eye(4)[None].copy()  # world → base frame, refilled each tick
+        self._solid_joint = np.zeros(0, dtype=np.int64)
+        self._solid: tuple = (np.zeros(0, dtype=np.int64), Table(0), Table(0), np.zeros(0),
+                              np.zeros((0, len(bodies)), dtype=bool), [])
+        self.candidates = Candidates.room(self._pairs.shape[0] + self._floor_idx.shape[0])
+
+    def set_obstacles(self, obstacles: tuple[ShapeConfig, ...] | list[ShapeConfig]) -> None:
+        """Replace the obstacle set (atomically: the next tick sees the new set only).
+
+        The solid obstacles go into one table (world frame; a cylinder as the capsule that
+        contains it), placed in the base frame each tick in one compiled call; the planes apart."""
+        self.shapes = tuple(obstacles)
+        self._names = {}  # row names by pair (the obstacle indices change here)
+        obs = [Obstacle.of(s, self.geo) for s in obstacles]
+        solid = [k for k, o in enumerate(obs) if not o.plane]
+        world, placed = Table(len(solid)), Table(len(solid))
+        for r, k in enumerate(solid):
+            o = obs[k]
+            world.set(r, row_shape(o.shape), o.world, o.center)  # o.center, o.radius: of the row shape
+        placed.kind[:], placed.r[:], placed.h[:] = world.kind, world.r, world.h
+        checked = np.array([obs[k].checked for k in solid], dtype=bool).reshape(len(solid), len(self.geo.bodies))
+        radii = np.array([obs[k].radius for k in solid], dtype=float)
+        self._solid = (np.array(solid, dtype=np.int64), world, placed, radii, checked,
+                       [k for k, o in enumerate(obs) if o.plane])
+        self._solid_joint = np.zeros(len(solid), dtype=np.int64)  # every obstacle placed by the one H
+        self.obstacles = obs
+        n = self._pairs.shape[0] + self._floor_idx.shape[0] + len(obs) * len(self.geo.bodies)
+        self.candidates = Candidates.room(n)
+        self.moving = any(bool(o.velocity_w.any()) for o in obs)
+
+    def search(self, q_base: FloatArray) -> Candidates:
+        """Every pair the broad phase lets through at the state the arm's data was last computed
+        at (its joint placements current), the base at ``q_base`` [m, m, rad]: its distance,
+        closest points and normal in the candidates' first ``n`` entries."""
+        p, d_i = self.p, self.p.influence_distance
+        for k, j in enumerate(self._joint_ids):  # the joints that carry bodies: their placements
+            self._Hj[k] = self._oMi[j].homogeneous
+        place(self._Hj, self._body_joint, self._shapes, self.placed)
+        pl, c = self.placed, self.candidates
+        buf = (c.d, c.p_a, c.p_b, c.normal, c.ok, c.body, c.other, c.safety)
+        n = 0
+        if self._pairs.shape[0]:  # robot vs robot (base frame; the base's motion cancels)
+            n = self_pass(pl.kind, pl.a0, pl.a1, pl.r, pl.c, pl.R, pl.h, pl.centre, self._pairs, self._pair_r, d_i,
+                          p.safety_distance, *buf, n)
+        if self._floor_idx.shape[0]:  # robot vs the floor z = floor_z (the same plane in the base frame)
+            n = plane_pass(pl.kind, pl.a0, pl.a1, pl.r, pl.c, pl.R, pl.h, pl.centre, self._radii, self._floor_idx,
+                           True, self._floor_n, self._floor_o, d_i, FLOOR, p.floor_margin, *buf, n)
+        Rb = tb = None
+        if self.obstacles:  # robot vs obstacles, in the base frame at this base pose
+            cos, sin = math.cos(q_base[2]), math.sin(q_base[2])
+            Rb = np.array([[cos, -sin, 0.0], [sin, cos, 0.0], [0.0, 0.0, 1.0]])
+            tb = np.array([q_base[0], q_base[1], 0.0])
+            self.base_rotation = Rb
+            solid, world, placed, radii, checked, planes = self._solid
+            if solid.shape[0]:
+                H = self._H_world  # world → base frame
+                H[0, :3, :3], H[0, :3, 3] = Rb.T, -(Rb.T @ tb)
+                place(H, self._solid_joint, world, placed)
+                n = solid_pass(pl.kind, pl.a0, pl.a1, pl.r, pl.c, pl.R, pl.h, pl.centre, self._radii,
+                               placed.kind, placed.a0, placed.a1, placed.r, placed.c, placed.R, placed.h,
+                               placed.centre, radii, checked, solid, d_i, p.safety_distance, *buf, n)
+            for index in planes:
+                o = self.obstacles[index]
+                o.place(Rb, tb)
+                n = plane_pass(pl.kind, pl.a0, pl.a1, pl.r, pl.c, pl.R, pl.h, pl.centre, self._radii, o.checked_idx,
+                               False, o.normal_b, o.offset_b, d_i, -2 - index, p.safety_distance, *buf, n)
+        if n and not c.ok[:n].all():
+            self._coal_fill(n, Rb, tb)
+        c.n = n
+        return c
+
+    def _coal_fill(self, n: int, Rb: FloatArray | None, tb: FloatArray | None) -> None:
+        """The candidates the compiled distances left to coal (box-box, meshes, a capsule whose
+        segment is inside a box), computed by coal in place."""
+        c, bodies = self.candidates, self.geo.bodies
+        for k in np.flatnonzero(~c.ok[:n]).tolist():
+            body, other = int(c.body[k]), int(c.other[k])
+            if other >= 0:
+                got = self._coal(bodies[body].shape, self._T(body), bodies[other].shape, self._T(other))
+            elif other == FLOOR:
+                got = self._coal(bodies[body].shape, self._T(body), self._floor, self._identity)
+            else:
+                assert Rb is not None and tb is not None
+                o = self.obstacles[-2 - other]
+                if o.plane:  # coal's half-space, built when a body needs it
+                    o.shape = coal.Halfspace(-o.normal_b, -o.offset_b)  # coal: solid where n'·p ≤ d
+                    got = self._coal(bodies[body].shape, self._T(body), o.shape, self._identity)
+                else:
+                    Mo = pin.SE3(Rb.T @ o.world.rotation, Rb.T @ (o.world.translation - tb))
+                    got = self._coal(bodies[body].shape, self._T(body), o.shape, transform(Mo))
+            c.d[k], c.p_a[k], c.p_b[k], c.normal[k] = got
+
+    def name(self, body: int, other: int) -> str:
+        """A pair's name: "a/b" (bodies), "a/floor", "a/<obstacle id>"."""
+        key = (body, other)
+        name = self._names.get(key)
+        if name is None:
+            bodies = self.geo.bodies
+            rest = bodies[other].name if other >= 0 else "floor" if other == FLOOR else self.obstacles[-2 - other].name
+            name = self._names[key] = f"{bodies[body].name}/{rest}"
+        return name
+
+    def _T(self, i: int) -> coal.Transform3s:
+        """Body i's pose in the base frame as coal's (for the pairs coal computes)."""
+        b = self.geo.bodies[i]
+        return transform(self.geo.arm.data.oMi[b.joint] * b.placement if b.joint else b.placement)
+
+    def _coal(self, a: coal.CollisionGeometry, Ta: coal.Transform3s, b: coal.CollisionGeometry,
+              Tb: coal.Transform3s) -> tuple[float, FloatArray, FloatArray, FloatArray]:
+        res = self._res
+        res.clear()
+        d = coal.distance(a, Ta, b, Tb, self._req, res)
+        return float(d), np.asarray(res.getNearestPoint1()), np.asarray(res.getNearestPoint2()), _normal(res)
+
+
+def _normal(res: coal.DistanceResult) -> FloatArray:
+    """n̂ from body b to body a: −coal's normal (which points from the first shape to the second),
+    defined in penetration too."""
+    n = -np.asarray(res.normal, dtype=float)
+    nn = float(np.linalg.norm(n))
+    return n / nn if nn > 1e-12 else np.array([0.0, 0.0, 1.0])
+
+
