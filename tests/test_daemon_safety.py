@@ -475,9 +475,9 @@ def test_the_robots_own_stop_after_a_stall_is_no_state_age_for_the_next_stream(r
     mode(core, "track")
     t = track(core, plant, 0.0, 200, x0 + np.array([0.2, 0.0, 0.0]))
     t += 0.1  # the daemon stalled for 100 ms
-    core.on_state(plant.msg(), t)
-    assert core.tick(t) is None and core.stream_broken
-    for k in range(150):  # the robot brakes in its stale stop, 150 ms
+    core.on_state(plant.msg(), t)  # a state from before the robot's stop: the stream is braked
+    assert core.tick(t) is not None and core.last_fault.startswith("braking stream after a stall")
+    for k in range(150):  # the robot brakes in its stale stop, 150 ms: its state breaks the stream
         t += DT
         plant.v_arm, plant.wheels = 0.97 * plant.v_arm, 0.97 * plant.wheels
         if k == 149:

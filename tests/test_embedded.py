@@ -175,9 +175,11 @@ def test_a_control_rate_that_does_not_divide_the_robots_is_a_config_error() -> N
 
 # ---------------------------------------------------------------- watchdogs: a tick that overruns
 def test_a_tick_that_overruns_breaks_the_stream_and_the_robot_brakes_by_itself(host: Any) -> None:
-    """A tick that takes 60 ms: its command is not sent (too late), the robot lives through the
-    time it took, holding the last command, then braking in its own stale stop; the core sends
-    nothing until the robot rests, then holds until a mode message resumes. 0 violations."""
+    """A tick that takes 60 ms: its command is not sent (too late; the core would brake its stream
+    from the last command sent), the robot lives through the time it took, holding the last
+    command, then braking in its own stale stop; the next state shows that stop, so the stream
+    breaks and the core sends nothing until the robot rests, then holds until a mode message
+    resumes. 0 violations."""
     emb, clk = host()
     rec = Recorder(emb)
     core = emb.control.core
@@ -187,8 +189,8 @@ def test_a_tick_that_overruns_breaks_the_stream_and_the_robot_brakes_by_itself(h
     assert moving > 0.1  # the robot moves
     sent, n0 = len(rec.commands), len(rec.states)
     cycles(emb, clk, 30, rec)  # the slow tick is among these
-    assert dict(core.faults) == {"command stream broken": 1}
-    assert core.last_fault == "command stream broken (the tick took 60 ms: its command is too late)"
+    assert dict(core.faults) == {"braking stream after a stall": 1, "the robot stopped following the commands": 1}
+    assert core.last_fault == "the robot stopped following the commands (its command timeout)"
     assert emb.control.timing.deadline_misses == 1 and emb.node.caught_up >= 59  # the missed steps ran
     after = rec.states[n0:]
     stale = [s for s in after if s.stale_stop]
@@ -216,7 +218,7 @@ def test_a_slow_tick_inside_the_robots_timeout_is_sent_late_and_judged_legal(hos
     core = emb.control.core
     core.ctl = SlowOnce(core.ctl, clk, 300, 0.012)  # type: ignore[assignment]
     st = tracking(emb, clk, (0.15, 0.05, 0.0), 600)
-    assert "command stream broken" not in core.faults and not core.stream_broken
+    assert "braking stream after a stall" not in core.faults and not core.stream_broken
     assert emb.control.timing.deadline_misses >= 1 and emb.node.caught_up >= 10
     assert not st.stale_stop and violations(st) == 0, st.violations
 
