@@ -533,3 +533,29 @@ def test_after_its_own_stall_the_daemon_waits_for_the_robots_stop(robot: w.Robot
     a = np.asarray(robot.arm.acceleration_max) * DT
     assert np.all(np.abs(cmd.arm_rates) <= a * (1 + 1e-9))  # from rest, inside A·dt
     assert np.all(np.abs(cmd.wheel_speeds) <= robot.base.wheel_acceleration_max * DT * (1 + 1e-9))
+
+
+def test_a_lease_lost_while_braking_after_a_stall_sends_nothing(robot: w.RobotConfig) -> None:
+    """The daemon brakes its stream after its own stall; the sim then names another lease holder:
+    the braking ends with the stream (another daemon commands the robot), nothing goes out, and
+    taking the lease back waits for the robot at rest in its stop, as any lost lease does."""
+    core, plant = make(robot)
+    x0 = core.model.ee_position(plant.q_base, plant.q_arm)
+    mode(core, "track")
+    t = track(core, plant, 0.0, 100, x0 + np.array([0.2, 0.0, 0.0]))
+    t += 0.022  # a stall past the daemon's limit, inside the robot's timeout
+    core.on_state(plant.msg(), t)
+    tick(core, plant, t)
+    assert core.last_fault.startswith("braking stream after a stall") and core.stream.stalled
+    t += DT
+    core.on_state(plant.msg(lease="other-daemon"), t)
+    assert core.tick(t) is None and core.stream_broken and not core.stream.stalled
+    assert core.last_fault.startswith("lease lost")
+    plant.v_arm, plant.wheels = np.zeros(robot.n_arm), np.zeros(robot.n_wheels)
+    t += DT
+    core.on_state(plant.msg(lease="core", stale_stop=True), t)  # ours again, the robot at rest in its stop
+    start = core.stream_start
+    cmd = tick(core, plant, t)
+    a = np.asarray(robot.arm.acceleration_max) * DT
+    assert core.stream_start == core.seq > start and np.all(np.abs(cmd.arm_rates) <= a * (1 + 1e-9))  # from rest
+    assert core.mode == w.Mode.HOLD and core.resume_needed
