@@ -198,9 +198,10 @@ def test_a_hung_peer_is_noticed_and_the_stack_resumes(probe: object, peer: str) 
 @pytest.mark.integration
 @pytest.mark.slow
 def test_a_daemon_stalled_past_the_command_timeout_resumes_on_the_physics_plant(tmp_path: Path) -> None:
-    """The stall breaks the command stream; the daemon resumes once a state shows the robot at rest
-    in its stale stop, rates exactly 0: the sim reports its executed rates, not the physics' measured
-    ones (never exactly 0: the daemon waited for ever, and `demo` said the stack did not come up)."""
+    """The stall is noticed (the stream is braked; the robot, having stopped it, refuses it and the
+    stream breaks); the daemon resumes once a state shows the robot at rest in its stale stop, rates
+    exactly 0: the sim reports its executed rates, not the physics' measured ones (never exactly 0:
+    the daemon waited for ever, and `demo` said the stack did not come up)."""
     pytest.importorskip("mujoco", reason="the physics plant needs mujoco: pip install 'wmm-qp[physics]'")
     import signal
     import time
@@ -221,7 +222,7 @@ def test_a_daemon_stalled_past_the_command_timeout_resumes_on_the_physics_plant(
         p.until(lambda: p.first_state(lambda s: s.stale_stop, t0), timeout=10.0)  # the robot stopped itself
         stack.procs["daemon"].send_signal(signal.SIGCONT)
         i = p.until(lambda: (i := p.client.info()) is not None and i.status.state_ok and i.status.faults.get(
-            "command stream broken", 0) > 0 and i, timeout=20.0)
+            "braking stream after a stall", 0) > 0 and i, timeout=20.0)
         assert not i.status.safe_stop
         assert sum(p.violations().values()) == 0
     finally:
