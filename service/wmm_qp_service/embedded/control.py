@@ -258,7 +258,7 @@ class EmbeddedControl:
         self.tel_listened = bool(self.tel_every)
         self.queries_per_tick = lp.queries_per_tick
         self.kick: Callable[[], object] = lambda: None
-        self.wake_every = max(1, round(robot_rate_hz / 250.0))  # the service thread: every ~4 ms
+        self.wake_every = 1  # the service thread, every cycle: one state per publication burst
         self.cuts = cuts
         self.gc = SlackCollector(cuts)
         self.sent: Sent | None = None

@@ -6,10 +6,11 @@ threads only store the samples: no Python runs there, so no Zenoh callback takes
 the cycle): mode changes (FIFO), the latest setpoint and obstacle set (rings of 1), the robot
 side's own inputs (``sim/box``, ``gripper``), ``info`` queries; it forwards their payloads
 to the cycle's inbox as they are (the cycle validates and applies them in its slack). Its
-outputs are what the cycle hands over: the state (for observers only: batched, not express), the
-evaluation data, telemetry, status and ``info`` replies, encoded and published here. It holds the tokens
-``alive/daemon``, ``alive/sim`` and ``lease/<id>``. The cycle wakes it every few cycles, after
-the command; it wakes by itself every :data:`IDLE` at most. Where the robot's library holds the
+outputs are what the cycle hands over: the state (for observers only here, with the split sim's
+QoS), the evaluation data, telemetry, status and ``info`` replies, encoded and published here. It holds the tokens
+``alive/daemon``, ``alive/sim`` and ``lease/<id>``. The cycle wakes it after the command, every
+cycle (one state per pump); it wakes by itself every :data:`IDLE` at most. Where the robot's
+library holds the
 GIL while it waits for the robot (pylibfranka), no thread could run: the cycle then calls
 :meth:`ServiceThread.pump` itself in its slack (``threaded=False``).
 
@@ -76,9 +77,12 @@ class ServiceThread:
         self._inputs = [(kind, session.declare_subscriber(key, handler)) for kind, (key, handler) in inputs.items()
                         if kind in ("mode", "setpoint", "obstacles") or kind in robot_inputs]
         self._queryable = session.declare_queryable(keys.info, fifo(64))
-        # the state is for observers here (the core read it in memory): batched, not express (a
-        # burst of express states from one pump lost ~6 % of them to the congestion drop)
-        self._state = session.declare_publisher(keys.state, congestion_control=zenoh.CongestionControl.DROP)
+        # the state's QoS as the split sim's (express, drop, real-time priority), one state per
+        # pump: bursts of four express states lost ~6 % of them to the congestion drop; batched,
+        # a recorder once received a state on the truth's key under a load of 17
+        self._state = session.declare_publisher(keys.state, express=True,
+                                                congestion_control=zenoh.CongestionControl.DROP,
+                                                priority=zenoh.Priority.REAL_TIME)
         self._truth = (session.declare_publisher(keys.sim_truth, congestion_control=zenoh.CongestionControl.DROP)
                        if truth else None)
         self._status = session.declare_publisher(keys.status)
