@@ -13,6 +13,7 @@ from test_embedded import Clock, OverLimitOnce
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.drivers.franka import DT, FrankaDriver
 from wmm_qp_service.drivers.franka_embedded import FrankaEmbedded
+from wmm_qp_service.drivers.franka_link import FrankaLink
 from wmm_qp_service.protocol import CommandMsg, ModeMsg, SetpointMsg, StateMsg, encode
 
 import wmm_qp as w
@@ -51,10 +52,11 @@ class Duration:
 
 
 class RobotState:
-    def __init__(self, q: np.ndarray) -> None:
+    def __init__(self, q: np.ndarray, t: float) -> None:
         self.q = q.tolist()
         self.tau_ext_hat_filtered = [0.0] * 7
         self.O_F_ext_hat_K = [0.0] * 6
+        self.time = Duration(t)
 
 
 class FakeControl:
@@ -67,13 +69,22 @@ class FakeControl:
         self.late: dict[int, float] = {}
         self.finished = False
         self.on_read: Any = None  # called with the cycle's number before each read (a client's part)
+        self.t_robot = 0.0  # [s] the robot's time (its states' ``time``)
+
+    def link(self) -> FrankaLink:
+        """The driver's link to a robot whose control is this one."""
+        robot = type("FakeRobot", (), {"start_joint_velocity_control": lambda _self, _mode: self})()
+        link = FrankaLink(FakeFr, robot)
+        link.start()
+        return link
 
     def readOnce(self) -> tuple[RobotState, Duration]:
         if self.on_read is not None:
             self.on_read(len(self.written))
         dt = self.late.pop(len(self.written), DT)
         self.clk.t += dt
-        return RobotState(self.q), Duration(dt)
+        self.t_robot += dt
+        return RobotState(self.q, self.t_robot), Duration(dt)
 
     def writeOnce(self, cmd: FakeFr.JointVelocities) -> None:
         v = np.array(cmd.v)
@@ -126,7 +137,7 @@ def test_each_cycle_reads_ticks_and_writes_within_the_fr3s_limits(rig: Any) -> N
                                               x=target.tolist(), source="op"))
 
     ctl.on_read = client
-    assert emb.loop(FakeFr, None, ctl, threading.Event(), 1500, "fake") == 0  # then a clean stop
+    assert emb.loop(FakeFr, ctl.link(), threading.Event(), 1500, "fake") == 0  # then a clean stop
     assert ctl.finished and not ctl.written[-1].any()
     x = emb.control.core.model.ee_position(np.zeros(3), ctl.q)
     assert np.linalg.norm(x - target) < np.linalg.norm(x0 - target) / 2  # it tracked
@@ -147,7 +158,7 @@ def test_the_referee_judges_the_core_s_command_before_the_shaper_refuses_it(rig:
     robot = emb.driver.robot
     core = emb.control.core
     core.ctl = OverLimitOnce(core.ctl, 30, float(robot.arm.velocity_max[0]))  # type: ignore[assignment]
-    assert emb.loop(FakeFr, None, ctl, threading.Event(), 80, "fake") == 0
+    assert emb.loop(FakeFr, ctl.link(), threading.Event(), 80, "fake") == 0
     assert emb.driver.referee.counts["velocity"] == 1  # judged as received
     assert emb.driver.shaper.protective_stops == 1 and emb.driver.refused["firmware"] == 1  # refused
     assert np.all(np.abs(np.array(ctl.written)[:, 0]) <= robot.arm.velocity_max[0])  # never written
@@ -157,6 +168,6 @@ def test_the_referee_judges_the_core_s_command_before_the_shaper_refuses_it(rig:
 def test_a_cycle_late_for_the_robot_is_a_miss(rig: Any) -> None:
     emb, ctl, _ = rig(control_rate=500.0)
     ctl.late = {20: 3 * DT, 41: 3 * DT}  # cycle 20 ticks, cycle 41 does not
-    assert emb.loop(FakeFr, None, ctl, threading.Event(), 60, "fake") == 0
+    assert emb.loop(FakeFr, ctl.link(), threading.Event(), 60, "fake") == 0
     assert emb.control.decimation == 2 and emb.control.timing.ticks == 30
     assert emb.control.timing.deadline_misses == 1

@@ -294,23 +294,23 @@ class FrankaDriver(LeaseGate):
                         with contextlib.suppress(Exception):
                             ent.undeclare()
 
-    def recover(self, fr: Any, robot: Any, e: Exception, robot_ip: str) -> Any:
-        """A libfranka ``ControlException`` in the embedded cycle (a reflex of the robot): report a
-        protective stop, recover, start a new control (the caller dropped the aborted one first:
-        libfranka runs one control at a time). Returns the new control, or None (said on stderr:
-        the connection is lost, or the robot did not recover)."""
+    def reflex(self, e: Exception, link: FrankaLink) -> None:
+        """libfranka ended the motion (a ``ControlException``: a reflex of the robot): a protective
+        stop, said on stderr, and the aborted control given back (libfranka runs one control at a
+        time); the robot recovers on the first command of a new stream at rest (:meth:`recover`)."""
         reason = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
         print(f"wmm-qp driver franka: protective stop: {reason}", file=sys.stderr, flush=True)
         self.fault(reason)
-        try:
-            robot.automatic_error_recovery()
-            return robot.start_joint_velocity_control(fr.ControllerMode.JointImpedance)
-        except fr.NetworkException as e2:
-            print(f"wmm-qp driver franka: error: lost the connection to the robot at {robot_ip}: {e2}",
-                  file=sys.stderr, flush=True)
-        except (fr.FrankaException, RuntimeError) as e2:
-            print(f"wmm-qp driver franka: error: the robot did not recover: {e2}", file=sys.stderr, flush=True)
-        return None
+        link.lose()
+
+    @staticmethod
+    def recover(link: FrankaLink) -> str | None:
+        """libfranka's automatic error recovery and a new control (None), or why not; said on stderr."""
+        why = link.recover()
+        print("wmm-qp driver franka: the robot recovered (automatic error recovery, a new control)"
+              if why is None else f"wmm-qp driver franka: the robot did not recover: {why}",
+              file=sys.stderr, flush=True)
+        return why
 
     def _loop(self, fr: Any, link: FrankaLink, subs: tuple[Any, Any], lease_sub: Any, pubs: tuple[Any, Any],
               stop: threading.Event, max_cycles: int | None, robot_ip: str) -> int:
@@ -320,11 +320,7 @@ class FrankaDriver(LeaseGate):
         finishing = False
 
         def recover() -> str | None:
-            why = link.recover()
-            print("wmm-qp driver franka: the robot recovered (automatic error recovery, a new control)"
-                  if why is None else f"wmm-qp driver franka: the robot did not recover: {why}",
-                  file=sys.stderr, flush=True)
-            return why
+            return self.recover(link)
 
         while True:
             try:
@@ -363,9 +359,6 @@ class FrankaDriver(LeaseGate):
                       file=sys.stderr, flush=True)
                 return 1
             except fr.ControlException as e:
-                reason = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-                print(f"wmm-qp driver franka: protective stop: {reason}", file=sys.stderr, flush=True)
-                self.fault(reason)
-                link.lose()
+                self.reflex(e, link)
                 if finishing:
                     return 0

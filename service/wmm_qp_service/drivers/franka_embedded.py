@@ -16,10 +16,12 @@ The core's clock is the robot's: its time (the sum of libfranka's durations, the
 driver's stale timeout runs on) plus the wall time since this cycle's ``readOnce``. A robot whose
 cycles come slower than the wall's (franky-sim on a loaded host) is not a stalled controller to
 its watchdogs, while a tick that takes long within a cycle still shows. A cycle the core ticks in
-whose libfranka duration exceeds 1.5 robot cycles (the loop was late for the robot) is a deadline
-miss. Stopping (the arm brakes to rest, the motion is finished), a
-reflex of the robot (``ControlException``: a protective stop, recovered) and a lost connection
-are handled as :meth:`~.franka.FrankaDriver.run` handles them.
+whose robot time since the previous state exceeds 1.5 robot cycles (the loop was late for the
+robot) is a deadline miss. The robot's control is the split driver's :class:`~.franka_link.FrankaLink`:
+stopping (the arm brakes to rest, the motion is finished), a reflex of the robot
+(``ControlException``: a protective stop, the control given back, the robot recovered by the first
+command of a new stream at rest) and a lost connection are handled as
+:meth:`~.franka.FrankaDriver.run` handles them.
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ from ..embedded import EmbeddedControl
 from ..embedded.service import embedded_session
 from ..protocol import CommandMsg, StateMsg
 from .franka import DT, TRUTH_EVERY, FrankaDriver
+from .franka_link import FrankaLink
 
 LATE = 1.5
 """A cycle whose duration exceeds this many robot cycles was late for the robot (a miss)."""
@@ -70,6 +73,7 @@ class FrankaEmbedded:
                                        clock=self.clock, wall=wall, cuts=cuts)
         self.cycles = 0
         self._q = np.zeros(driver.robot.n_arm)
+        self._link: FrankaLink | None = None  # the robot's control, while the loop runs
         self._state: StateMsg | None = None
         self._ticked = False
         self._force = np.zeros(3)
@@ -80,9 +84,12 @@ class FrankaEmbedded:
 
     def _deliver(self, msg: CommandMsg) -> None:
         """The core's command, in memory: the referee, then the shaper, at this cycle's time."""
-        # the cycle recovered the robot when libfranka ended the motion (a new control runs):
-        # the first command of a new stream at rest resumes it, as on the split driver
-        self.driver.on_command_msg(msg, self._q, self.mono(), recover=lambda: None)
+        # after libfranka ended the motion, the first command of a new stream at rest recovers the
+        # robot, as on the split driver
+        self.driver.on_command_msg(msg, self._q, self.mono(), recover=self._recover)
+
+    def _recover(self) -> str | None:
+        return "no robot to recover" if self._link is None else self.driver.recover(self._link)
 
     def _on_input(self, kind: str, data: bytes) -> None:
         if kind == "gripper":
@@ -130,7 +137,7 @@ class FrankaEmbedded:
         truth = d.truth_msg(self._force) if d.seq % TRUTH_EVERY == 1 else None
         self.control.after(d.t, self._state, truth, self._ticked)
 
-    def loop(self, fr: Any, robot: Any, ctl: Any, stop: threading.Event, max_cycles: int | None,
+    def loop(self, fr: Any, link: FrankaLink, stop: threading.Event, max_cycles: int | None,
              robot_ip: str) -> int:
         """libfranka's cycle until ``stop`` (or ``max_cycles``), then brake and finish.
 
@@ -138,21 +145,19 @@ class FrankaEmbedded:
             0 after a clean stop; 1 when the connection was lost or the robot did not recover.
         """
         d = self.driver
+        self._link = link
         finishing = False
         while True:
             try:
-                st, dur = ctl.readOnce()
-                v = self.cycle(dur.to_sec(), np.array(st.q, dtype=float),
+                st, elapsed = link.read()
+                v = self.cycle(elapsed, np.array(st.q, dtype=float),
                                np.array(st.tau_ext_hat_filtered, dtype=float),
                                np.array(st.O_F_ext_hat_K, dtype=float)[:3], self.mono(), tick=not finishing)
                 if not finishing and (stop.is_set() or (max_cycles is not None and self.cycles >= max_cycles)):
                     finishing = True  # brake to rest, then finish the motion
                     d.shaper.halt()
-                cmd = fr.JointVelocities(v.tolist())
                 done = finishing and d.shaper.at_rest
-                if done:
-                    cmd.motion_finished = True
-                ctl.writeOnce(cmd)
+                link.write(v, finished=done)
                 self.after()
                 if done:
                     return 0
@@ -161,11 +166,7 @@ class FrankaEmbedded:
                       file=sys.stderr, flush=True)
                 return 1
             except fr.ControlException as e:
-                ctl = None  # give the aborted control back first: libfranka runs one control at a time
-                recovered = d.recover(fr, robot, e, robot_ip)
-                if recovered is None:
-                    return 1
-                ctl = recovered
+                d.reflex(e, link)
                 if finishing:
                     return 0
 
@@ -194,8 +195,8 @@ class FrankaEmbedded:
             if svc is None:
                 return 0
             try:
-                robot = fr.Robot(robot_ip, fr.RealtimeConfig.kIgnore)
-                ctl = robot.start_joint_velocity_control(fr.ControllerMode.JointImpedance)
+                link = FrankaLink(fr, fr.Robot(robot_ip, fr.RealtimeConfig.kIgnore))
+                link.start()
             except (fr.NetworkException, fr.FrankaException, RuntimeError) as e:
                 print(f"wmm-qp driver franka: error: cannot connect to the robot at {robot_ip}: {e}",
                       file=sys.stderr, flush=True)
@@ -207,7 +208,7 @@ class FrankaEmbedded:
                   f"{self.control.core.lease}", file=sys.stderr, flush=True)
             self.start()
             try:
-                return self.loop(fr, robot, ctl, stop, max_cycles, robot_ip)
+                return self.loop(fr, link, stop, max_cycles, robot_ip)
             finally:
                 self.control.stop()
                 if d.hand is not None:
