@@ -144,3 +144,39 @@ def embedded_rate(rate_hz: float) -> int:
     from ..embedded import decimation
 
     return decimation(load_sim_config().rate_hz, rate_hz)
+
+
+EMBEDDED_ONLY = (("--controller-config", "controller_config"), ("--control-rate", "control_rate"),
+                 ("--controller", "controller"), ("--task", "task"), ("--scene", "scene"),
+                 ("--no-collision", "no_collision"), ("--wait-lease", "wait_lease"),
+                 ("--cycle-report", "cycle_report"), ("--plain-cycle", "plain_cycle"))
+"""The flags of a robot process's embedded group (dest names): they mean something only with ``--embedded``."""
+
+
+def add_embedded_arguments(parser: argparse.ArgumentParser, title: str, embedded_help: str,
+                           rate_help: str) -> argparse._ArgumentGroup:
+    """The embedded group of a robot process (``wmm-qp sim``, ``wmm-qp driver``): ``--embedded`` and
+    the control core's own settings. Returns the group, for the caller's own additions."""
+    e = parser.add_argument_group(title)
+    e.add_argument("--embedded", action="store_true", help=embedded_help)
+    e.add_argument("--controller-config", metavar="TOML", help="with --embedded: default configs/controller.toml")
+    e.add_argument("--control-rate", type=float, default=None, metavar="HZ", help=rate_help)
+    e.add_argument("--controller", choices=("qp", "paper", "traditional"),
+                   help="with --embedded: controller kind (default: controller.toml's)")
+    e.add_argument("--task", choices=("position", "pose"),
+                   help="with --embedded: the EE task (default: controller.toml's task.kind)")
+    e.add_argument("--no-collision", action="store_true",
+                   help="with --embedded: no collision rows in the qp controller (default: on)")
+    e.add_argument("--wait-lease", action="store_true",
+                   help="with --embedded: when a daemon controls this robot, wait for its lease instead of "
+                        "refusing to start")
+    return e
+
+
+def embedded_only_given(args: argparse.Namespace, shared: tuple[str, ...] = ()) -> str | None:
+    """The first embedded-only flag given without ``--embedded`` (None: none); ``shared``: flags the
+    command also takes without it (e.g. the sim's ``--scene``)."""
+    for flag, dest in EMBEDDED_ONLY:
+        if flag not in shared and getattr(args, dest, None) not in (None, False):
+            return flag
+    return None

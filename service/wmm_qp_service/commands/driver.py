@@ -12,7 +12,7 @@ HELP = "drive a real robot behind the daemon's protocol (driver franka --robot-i
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from ..cli_common import add_service_arguments
-    from .common import add_robot_argument
+    from .common import add_embedded_arguments, add_robot_argument
 
     sub = parser.add_subparsers(dest="driver", metavar="ROBOT", required=True)
     p = sub.add_parser("franka", help="a Franka FR3 through libfranka's joint velocity interface (1 kHz)",
@@ -25,33 +25,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--stale-timeout", type=float, default=None, metavar="S",
                    help="[s] commands older than this brake the arm to rest (default: configs/sim.toml's "
                         "stale_timeout, 0.025)")
-    e = p.add_argument_group("embedded mode: the control core in libfranka's cycle (no wmm-qp serve)")
-    e.add_argument("--embedded", action="store_true",
-                   help="host the control daemon's core in libfranka's 1 kHz cycle: each cycle reads the state, "
-                        "ticks and writes the velocities in one thread; Zenoh still carries setpoints, modes, "
-                        "obstacles, status, telemetry, info and the lease (clients talk to this process)")
-    e.add_argument("--controller-config", metavar="TOML", help="with --embedded: default configs/controller.toml")
-    e.add_argument("--control-rate", type=float, default=None, metavar="HZ",
-                   help="with --embedded: [Hz] the core's rate, dividing 1000 (default: 1000)")
-    e.add_argument("--controller", choices=("qp", "paper", "traditional"),
-                   help="with --embedded: controller kind (default: controller.toml's)")
-    e.add_argument("--task", choices=("position", "pose"),
-                   help="with --embedded: the EE task (default: controller.toml's task.kind)")
-    e.add_argument("--no-collision", action="store_true",
-                   help="with --embedded: no collision rows in the qp controller (default: on)")
+    e = add_embedded_arguments(
+        p, "embedded mode: the control core in libfranka's cycle (no wmm-qp serve)",
+        "host the control daemon's core in libfranka's 1 kHz cycle: each cycle reads the state, ticks and writes "
+        "the velocities in one thread; Zenoh still carries setpoints, modes, obstacles, status, telemetry, info "
+        "and the lease (clients talk to this process)",
+        "with --embedded: [Hz] the core's rate, dividing 1000 (default: 1000)")
     e.add_argument("--scene", type=Path, default=None, metavar="FILE",
                    help="with --embedded: the controller's obstacles and fence (default: configs/scenes/default.toml)")
-    e.add_argument("--wait-lease", action="store_true",
-                   help="with --embedded: when a daemon controls this robot, wait for its lease instead of "
-                        "refusing to start")
-
 
 def run(args: argparse.Namespace) -> int:
     from wmm_qp_sim import load_sim_config
 
     from ..cli_common import stop_on_signals
     from ..drivers.franka import FrankaDriver
-    from .common import robot_service_config
+    from .common import embedded_only_given, robot_service_config
 
     if args.robot_config is None:
         from wmm_qp.config import default_config_dir
@@ -77,13 +65,10 @@ def run(args: argparse.Namespace) -> int:
         if code is None:
             return 3
     else:
-        for flag, given in (("--controller-config", args.controller_config), ("--control-rate", args.control_rate),
-                            ("--controller", args.controller), ("--task", args.task), ("--scene", args.scene),
-                            ("--no-collision", args.no_collision or None), ("--wait-lease", args.wait_lease or None)):
-            if given is not None:
-                print(f"wmm-qp driver franka: error: {flag} needs --embedded (without it the driver hosts no "
-                      f"controller: give it to wmm-qp serve)", file=sys.stderr)
-                return 2
+        if (flag := embedded_only_given(args)) is not None:
+            print(f"wmm-qp driver franka: error: {flag} needs --embedded (without it the driver hosts no "
+                  f"controller: give it to wmm-qp serve)", file=sys.stderr)
+            return 2
         code = driver.run(args.robot_ip, stop_on_signals())
     sh = driver.shaper
     violations = {k: n for k, n in driver.referee.counts.items() if n}

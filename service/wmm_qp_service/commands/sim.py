@@ -11,7 +11,7 @@ HELP = "run the simulated robot (Zenoh)"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from ..cli_common import add_service_arguments
-    from .common import add_physics_argument, add_robot_argument, add_scene_argument
+    from .common import add_embedded_arguments, add_physics_argument, add_robot_argument, add_scene_argument
 
     add_service_arguments(parser)
     add_robot_argument(parser)
@@ -29,25 +29,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-truth", action="store_true",
                         help="publish no evaluation data on <robot>/sim/truth (ground truth, the referee's "
                              "counts): a robot that reports only what a real one does")
-    e = parser.add_argument_group("embedded mode: the control core in the sim's own cycle (docs/protocol.md)")
-    e.add_argument("--embedded", action="store_true",
-                   help="host the control daemon's core in the sim's step loop: each cycle reads the state, "
-                        "ticks and writes the command in one thread, no transport between them; Zenoh still "
-                        "carries setpoints, modes, obstacles, status, telemetry, info and the lease (no "
-                        "wmm-qp serve: clients talk to this process)")
-    e.add_argument("--controller-config", metavar="TOML", help="with --embedded: default configs/controller.toml")
-    e.add_argument("--control-rate", type=float, default=None, metavar="HZ",
-                   help="with --embedded: [Hz] the core's rate, dividing the sim's (default: the sim's rate; "
-                        "500 ticks every 2nd cycle of a 1 kHz sim)")
-    e.add_argument("--controller", choices=("qp", "paper", "traditional"),
-                   help="with --embedded: controller kind (default: controller.toml's)")
-    e.add_argument("--task", choices=("position", "pose"),
-                   help="with --embedded: the EE task (default: controller.toml's task.kind)")
-    e.add_argument("--no-collision", action="store_true",
-                   help="with --embedded: no collision rows in the qp controller (default: on)")
-    e.add_argument("--wait-lease", action="store_true",
-                   help="with --embedded: when a daemon controls this robot, wait for its lease instead of "
-                        "refusing to start")
+    e = add_embedded_arguments(
+        parser, "embedded mode: the control core in the sim's own cycle (docs/protocol.md)",
+        "host the control daemon's core in the sim's step loop: each cycle reads the state, ticks and writes the "
+        "command in one thread, no transport between them; Zenoh still carries setpoints, modes, obstacles, "
+        "status, telemetry, info and the lease (no wmm-qp serve: clients talk to this process)",
+        "with --embedded: [Hz] the core's rate, dividing the sim's (default: the sim's rate; 500 ticks every 2nd "
+        "cycle of a 1 kHz sim)")
     e.add_argument("--cycle-report", metavar="JSON",
                    help="with --embedded: write the cycle's figures (ticks, misses, tick work, the garbage "
                         "collector's work in the slack) to this file at exit")
@@ -67,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
 
     from ..cli_common import stop_on_signals
     from ..drivers.sim_node import SimNode
-    from .common import load_scene_arg, robot_service_config
+    from .common import embedded_only_given, load_scene_arg, robot_service_config
 
     robot, svc = robot_service_config(args)
     scene = load_scene_arg(args)
@@ -89,14 +77,10 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if args.embedded:
         return _run_embedded(args, robot, svc, scene, sim_cfg, prio)
-    for flag, given in (("--controller-config", args.controller_config), ("--control-rate", args.control_rate),
-                        ("--controller", args.controller), ("--task", args.task),
-                        ("--no-collision", args.no_collision or None), ("--wait-lease", args.wait_lease or None),
-                        ("--cycle-report", args.cycle_report), ("--plain-cycle", args.plain_cycle or None)):
-        if given is not None:
-            print(f"wmm-qp sim: error: {flag} needs --embedded (without it the sim hosts no controller: "
-                  f"give it to wmm-qp serve)", file=sys.stderr)
-            return 2
+    if (flag := embedded_only_given(args, shared=("--scene",))) is not None:
+        print(f"wmm-qp sim: error: {flag} needs --embedded (without it the sim hosts no controller: "
+              f"give it to wmm-qp serve)", file=sys.stderr)
+        return 2
     node = SimNode(svc, sim_cfg, robot, seed=args.seed, ramp=not args.no_ramp,
                    state_loss=args.state_loss, state_delay=args.state_delay_ms * 1e-3, rt_priority=prio, scene=scene,
                    truth=not args.no_truth)
