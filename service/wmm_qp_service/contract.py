@@ -131,8 +131,11 @@ def _at_rest(st: StateMsg) -> bool:
     return not np.any(st.v_arm) and not np.any(st.wheel_speeds)
 
 
-def _moving(c: Controller, joint: int, rate: float, ramp: float = 0.3) -> None:
-    """A new stream that ramps ``joint`` from rest to ``rate`` [rad/s] over ``ramp`` [s] and holds it."""
+def _moving(c: Controller, joint: int | None, rate: float, ramp: float = 0.3) -> int:
+    """With the lease, a new stream that ramps ``joint`` (None: the last) from rest to ``rate``
+    [rad/s] over ``ramp`` [s] and holds it. Returns the joint."""
+    c.hold_lease()
+    joint = c.robot.n_arm - 1 if joint is None else joint
     c.new_stream()
     t0 = time.monotonic()
     while (t := time.monotonic() - t0) < ramp + 0.1:
@@ -141,6 +144,7 @@ def _moving(c: Controller, joint: int, rate: float, ramp: float = 0.3) -> None:
         c.send(v)
         c.drain()
         time.sleep(c.period)
+    return joint
 
 
 def _resting(c: Controller, seconds: float) -> StateMsg:
@@ -256,9 +260,7 @@ def check_brakes_when_stale(c: Controller, stale_timeout: float, joint: int | No
         stale_timeout: [s] the driver's command timeout.
         rate: [rad/s] the joint's speed before the commands stop.
     """
-    c.hold_lease()
-    j = c.robot.n_arm - 1 if joint is None else joint
-    _moving(c, j, rate)
+    j = _moving(c, joint, rate)
     st = c.drain()
     if st is None or abs(st.v_arm[j]) < 0.5 * rate:
         raise ContractError(f"joint {j + 1} did not follow {rate} rad/s: {Controller._brief(st)}")
@@ -281,9 +283,7 @@ def check_stale_ends_the_stream(c: Controller, stale_timeout: float, joint: int 
         stale_timeout: [s] the driver's command timeout.
         rate: [rad/s] the joint's speed before the commands stop.
     """
-    c.hold_lease()
-    j = c.robot.n_arm - 1 if joint is None else joint
-    _moving(c, j, rate)
+    j = _moving(c, joint, rate)
     brake = rate / float(c.robot.arm.acceleration_max[j])
     st0 = c.until(lambda st: st.stale_stop and _at_rest(st), stale_timeout + brake + 2 * SLACK,
                   "the robot at rest in its stale stop")
