@@ -181,12 +181,7 @@ class Validator(Generic[M]):
         try:
             if not isinstance(msg, self.cls):
                 raise Rejected(Reject.SCHEMA, f"{type(msg).__name__}, expected {self.cls.__name__}")
-            if msg.v != PROTOCOL_VERSION:  # type: ignore[attr-defined]
-                raise Rejected(Reject.VERSION, f"version {msg.v}, expected {PROTOCOL_VERSION}")  # type: ignore[attr-defined]
-            if msg.robot != self.robot:  # type: ignore[attr-defined]
-                raise Rejected(Reject.ROBOT, f"robot {msg.robot!r}, expected {self.robot!r}")  # type: ignore[attr-defined]
-            _finite("stamp", [msg.stamp])  # type: ignore[attr-defined]
-            self._check_fields(msg)
+            self._check_message(msg)
         except Rejected as e:
             self.rejected[e.reason.value] += 1
             self.last_rejection = f"{self.cls.__name__}: {e}"
@@ -227,13 +222,21 @@ class Validator(Generic[M]):
             raise Rejected(Reject.DECODE, str(e)) from None
         except Exception as e:  # never let anything escape into the loop
             raise Rejected(Reject.DECODE, f"{type(e).__name__}: {e}") from None
+        self._check_message(msg)
+        return msg
+
+    def _check_message(self, msg: msgspec.Struct) -> None:
+        """The checks of a decoded (or never encoded) message: version, robot id, stamp, fields.
+
+        Raises:
+            Rejected: with the reason.
+        """
         if msg.v != PROTOCOL_VERSION:  # type: ignore[attr-defined]
             raise Rejected(Reject.VERSION, f"version {msg.v}, expected {PROTOCOL_VERSION}")  # type: ignore[attr-defined]
         if msg.robot != self.robot:  # type: ignore[attr-defined]
             raise Rejected(Reject.ROBOT, f"robot {msg.robot!r}, expected {self.robot!r}")  # type: ignore[attr-defined]
         _finite("stamp", [msg.stamp])  # type: ignore[attr-defined]
         self._check_fields(msg)
-        return msg
 
     def _check_fields(self, msg: msgspec.Struct) -> None:
         lim = self.limits
