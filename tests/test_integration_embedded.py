@@ -43,7 +43,9 @@ def test_one_process_serves_every_client_and_holds_the_lease(tmp_path: Path) -> 
             x0 = np.array(c.info().status.x)
             stream_circle(c, x0, 3.0)
             tel: list[Any] = c.telemetry()
-            assert tel and {m.status for m in tel} <= {"ok", "damped"}
+            # it tracked; a deadline fault on a loaded host may brake it (safe_stop), never an error status
+            statuses = {m.status for m in tel}
+            assert "ok" in statuses and statuses <= {"ok", "damped", "safe_stop"}, statuses
             assert all(m.state_seq >= 0 for m in tel[-50:])  # every command from a fresh state
             r = cli("status", "--json", *_service_args(stack.svc), timeout=60.0)
             assert r.returncode == 0, r.stderr
