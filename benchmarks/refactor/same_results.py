@@ -33,7 +33,8 @@ Progress: one line per command on stderr. Verdict: ``PASS n commands equal`` or 
 naming the first command that differs, its first differing JSON path and both values, on stdout;
 exit 0 (PASS), 1 (FAIL), 2 (bad arguments: one line). ``--out F.json``: every command's result
 (equal or its differences, with the largest absolute and relative difference, the numbers
-compared, both trees' times), the skipped keys and the excluded runs with why.
+compared, both trees' times), the skipped keys and the excluded runs with why; rewritten after
+every command (verdict ``RUNNING`` until the end), so that a run cut short leaves what it compared.
 """
 
 from __future__ import annotations
@@ -47,6 +48,7 @@ import sys
 import tempfile
 import time
 import tomllib
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -250,9 +252,11 @@ def select(patterns: list[str] | None) -> list[Run]:
 
 
 def compare_trees(before: Tree, after: Tree, runs: list[Run], jobs: int, timeout: float, fail_fast: bool,
-                  recheck: int = 0, python: str = sys.executable) -> list[Verdict]:  # fmt: skip
+                  recheck: int = 0, python: str = sys.executable,
+                  progress: Callable[[list[Verdict]], None] | None = None) -> list[Verdict]:  # fmt: skip
     """Run each command in both trees (``jobs`` at a time, in list order) and judge it as both finish;
-    then run each command whose JSON differs ``recheck`` times more in the before tree (is it noise?)."""
+    then run each command whose JSON differs ``recheck`` times more in the before tree (is it noise?).
+    ``progress`` is called with the verdicts so far after each command and each recheck."""
     verdicts: list[Verdict] = []
     with ThreadPoolExecutor(max_workers=jobs) as pool:
         pending: list[tuple[Run, Future[Output], Future[Output]]] = [
@@ -265,6 +269,8 @@ def compare_trees(before: Tree, after: Tree, runs: list[Run], jobs: int, timeout
             what = f"equal ({v.numbers} numbers)" if v.equal else "DIFFERS: " + v.reason()
             print(f"[{k + 1}/{len(runs)}] {r.name}: {what}; {v.before.seconds:.0f} s / {v.after.seconds:.0f} s",
                   file=sys.stderr, flush=True)  # fmt: skip
+            if progress is not None:
+                progress(verdicts)
             if fail_fast and not v.equal:
                 for _, b, a in pending[k + 1 :]:
                     b.cancel()
@@ -279,6 +285,8 @@ def compare_trees(before: Tree, after: Tree, runs: list[Run], jobs: int, timeout
                     "the before tree reproduces its own values there")  # fmt: skip
                 print(f"[recheck] {v.run.name}: {recheck} more runs in the before tree: {what}", file=sys.stderr,
                       flush=True)  # fmt: skip
+                if progress is not None:
+                    progress(verdicts)
     return verdicts
 
 
@@ -298,6 +306,21 @@ def verdict_line(verdicts: list[Verdict], total: int) -> str:
                 f"too); first: {bad[0].reason()}")  # fmt: skip
     return (f"FAIL {len(bad)} of {total} commands differ, {len(noisy)} of them noisy (the before tree differs from "
             f"itself there too); first not noisy: {real[0].reason()}")  # fmt: skip
+
+
+def write_report(path: Path, trees: dict[str, Tree], runs: list[Run], verdicts: list[Verdict], line: str,
+                 t0: float, load0: tuple[float, float, float]) -> None:  # fmt: skip
+    """The ``--out`` report, replaced whole (written after every command, so a killed run leaves its part)."""
+    report = {"verdict": line.split()[0], "verdict_line": line, "before": str(trees["--before"].root),
+              "after": str(trees["--after"].root), "tolerance": TOL, "skipped_keys": SKIPPED_KEYS,
+              "excluded": [{"command": c, "why": w} for c, w in EXCLUDED], "commands_selected": len(runs),
+              "wall_s": round(time.monotonic() - t0, 1), "loadavg_start": [round(x, 2) for x in load0],
+              "loadavg_now": [round(x, 2) for x in os.getloadavg()], "commands": [v.report() for v in verdicts],
+              "key_names": sorted(set().union(*(key_names(o.doc) for v in verdicts
+                                                for o in (v.before, v.after))))}  # fmt: skip
+    tmp = path.with_name(path.name + ".part")
+    tmp.write_text(json.dumps(report, indent=1) + "\n")
+    tmp.replace(path)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -336,20 +359,19 @@ def main(argv: list[str] | None = None) -> int:
     except UsageError as e:
         print(f"same_results.py: error: {e}", file=sys.stderr)
         return 2
-    t0 = time.monotonic()
+    t0, load0 = time.monotonic(), os.getloadavg()
     print(f"{len(runs)} commands in {trees['--before'].root} and {trees['--after'].root}, {args.jobs} at a time",
           file=sys.stderr, flush=True)  # fmt: skip
+
+    def save(verdicts: list[Verdict], line: str = "") -> None:
+        if args.out is not None:
+            line = line or f"RUNNING {len(verdicts)} of {len(runs)} commands compared"
+            write_report(args.out, trees, runs, verdicts, line, t0, load0)
+
     verdicts = compare_trees(trees["--before"], trees["--after"], runs, args.jobs, args.timeout, args.fail_fast,
-                             args.recheck)  # fmt: skip
+                             args.recheck, progress=save)  # fmt: skip
     line = verdict_line(verdicts, len(runs))
-    if args.out is not None:
-        report = {"verdict": line.split()[0], "verdict_line": line, "before": str(trees["--before"].root),
-                  "after": str(trees["--after"].root), "tolerance": TOL, "skipped_keys": SKIPPED_KEYS,
-                  "excluded": [{"command": c, "why": w} for c, w in EXCLUDED],
-                  "wall_s": round(time.monotonic() - t0, 1), "commands": [v.report() for v in verdicts],
-                  "key_names": sorted(set().union(*(key_names(o.doc) for v in verdicts
-                                                    for o in (v.before, v.after))))}  # fmt: skip
-        args.out.write_text(json.dumps(report, indent=1) + "\n")
+    save(verdicts, line)
     print(line, flush=True)
     return 0 if line.startswith("PASS") else 1
 
