@@ -36,16 +36,27 @@ def test_other_exit_codes_or_a_command_without_json_fail() -> None:
     assert sr.verdict_line([], 1) == "FAIL only 0 of 1 commands ran"
 
 
+def out2(vx: float, position: int) -> sr.Output:
+    o = out(vx)
+    o.doc["violations"]["position"] = position
+    return o
+
+
 def test_a_difference_the_before_tree_shows_on_rerun_is_called_noisy() -> None:
     noisy = sr.judge(RUN, out(0.0039083677), out(0.0039083655))
     noisy.reruns = [out(0.0039083677), out(0.0039083655)]  # the before tree alone moves there too
-    assert noisy.noisy and "[noisy: a rerun of the before tree gave 0.0039083655]" in noisy.reason()
+    assert noisy.noise == "noisy" and "noisy here: a rerun of the before tree gave 0.0039083655" in noisy.reason()
     real = sr.judge(RUN, out(0.0039), out(0.0040))
     real.reruns = [out(0.0039), out(0.0039)]
-    assert not real.noisy and "gave its value again in 2 reruns" in real.reason()
-    line = sr.verdict_line([noisy, real], 2)
-    assert line.startswith("FAIL 2 of 2 commands differ, 1 of them noisy") and "first not noisy: circle_qp" in line
-    assert "all noisy" in sr.verdict_line([noisy], 1)
+    assert real.noise == "not noisy" and "gave this value again in 2 reruns" in real.reason()
+    partly = sr.judge(RUN, out2(0.0039083677, 0), out2(0.0039083655, 3))  # the count is the change's doing
+    partly.reruns = [out2(0.0039083655, 0)]
+    assert partly.noise == "partly noisy" and "differs from itself at 1 of 2 differing paths" in partly.reason()
+    line = sr.verdict_line([noisy, partly, real], 3)
+    assert line.startswith("FAIL 3 of 3 commands differ (1 not noisy, 1 partly noisy, 1 noisy); first not noisy: ")
+    assert sr.verdict_line([noisy, partly], 2).startswith("FAIL 2 of 2 commands differ (1 partly noisy, 1 noisy); "
+                                                          "first partly noisy: circle_qp")  # fmt: skip
+    assert sr.verdict_line([sr.judge(RUN, out(0.0039), out(0.0040))], 1).startswith("FAIL 1 of 1 commands differ; ")
 
 
 def test_the_run_list_has_unique_names_placeholders_and_no_realtime_run() -> None:

@@ -25,15 +25,18 @@ the process's memory lies: with address randomisation off (``setarch -R``) a tre
 exactly, but the same code in another folder gives other bits, and with it on the qp circle's
 ``base_velocity.vx.max`` took 0.0039083655146607875 and 0.003908367681559331 m/s in two runs of
 one tree (2.2e-9 apart). So each command whose JSON differs is run ``--recheck`` more times in the
-before tree alone; a difference at a path where those reruns differ from the first run too is
-"noisy", and the verdict says how many differing commands are noisy and names the first that is
-not. The verdict itself stays the 1e-9 comparison.
+before tree alone, and is "noisy", "partly noisy" or "not noisy" as those reruns differ from the
+before tree's first run at all, some or none of the paths where the after tree differs; the FAIL
+line counts them and names the first command that is not noisy (else partly, else noisy). Two
+reruns can miss noise: "not noisy" is evidence, not proof. The verdict itself stays the 1e-9
+comparison.
 
 Progress: one line per command on stderr. Verdict: ``PASS n commands equal`` or ``FAIL ...``
 naming the first command that differs, its first differing JSON path and both values, on stdout;
 exit 0 (PASS), 1 (FAIL), 2 (bad arguments: one line). ``--out F.json``: every command's result
 (equal or its differences, with the largest absolute and relative difference, the numbers
-compared, both trees' times), the skipped keys and the excluded runs with why.
+compared, both trees' times), the skipped keys and the excluded runs with why; rewritten after
+every command (verdict ``RUNNING`` until the end), so that a run cut short leaves what it compared.
 """
 
 from __future__ import annotations
@@ -47,6 +50,7 @@ import sys
 import tempfile
 import time
 import tomllib
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -193,10 +197,19 @@ class Verdict:
                     values.setdefault(d.path, []).append(d.after)
         return values
 
+    def noisy_share(self) -> tuple[int, int]:
+        """(how many of the differing paths also differ between runs of the before tree alone, how many differ)."""
+        paths = {d.path for d in self.diffs}
+        return len(paths & set(self.rerun_values())), len(paths)
+
     @property
-    def noisy(self) -> bool:
-        """Every path that differs also differs between runs of the before tree alone (its reruns)."""
-        return bool(self.diffs) and {d.path for d in self.diffs} <= set(self.rerun_values())
+    def noise(self) -> str:
+        """What the reruns say: "unchecked" (none), "noisy" (the before tree differs from itself at every
+        differing path), "partly noisy" (at some) or "not noisy" (at none: the change's doing)."""
+        if not self.reruns or not self.diffs:
+            return "unchecked"
+        k, n = self.noisy_share()
+        return "noisy" if k == n else "partly noisy" if k else "not noisy"
 
     def reason(self) -> str:
         """Why it is not equal (first cause), "" if it is."""
@@ -209,9 +222,12 @@ class Verdict:
         line = f"{self.run.name}: {self.diffs[0]}{more}"
         if not self.reruns:
             return line
+        k, n = self.noisy_share()
         if again := self.rerun_values().get(self.diffs[0].path):
-            return f"{line} [noisy: a rerun of the before tree gave {again[0]!r}]"
-        return f"{line} [the before tree gave its value again in {len(self.reruns)} reruns]"
+            here = f"noisy here: a rerun of the before tree gave {again[0]!r}"
+        else:
+            here = f"the before tree gave this value again in {len(self.reruns)} reruns"
+        return f"{line} [{here}; {self.noise}: the before tree differs from itself at {k} of {n} differing paths]"
 
     def report(self) -> dict[str, Any]:
         a, r = max_deviation(self.diffs)
@@ -221,7 +237,8 @@ class Verdict:
                 "first_differences": [{"path": d.path, "before": d.before, "after": d.after}
                                       for d in self.diffs[:SHOWN_DIFFERENCES]],
                 "exit_code": {"before": self.before.rc, "after": self.after.rc},
-                "recheck": {"reruns": len(self.reruns), "noisy": self.noisy,
+                "recheck": {"reruns": len(self.reruns), "noise": self.noise,
+                            "noisy_paths": self.noisy_share()[0],
                             "before_rerun_values": dict(list(self.rerun_values().items())[:SHOWN_DIFFERENCES])},
                 "seconds": {"before": round(self.before.seconds, 1),
                             "after": round(self.after.seconds, 1)}}  # fmt: skip
@@ -250,9 +267,11 @@ def select(patterns: list[str] | None) -> list[Run]:
 
 
 def compare_trees(before: Tree, after: Tree, runs: list[Run], jobs: int, timeout: float, fail_fast: bool,
-                  recheck: int = 0, python: str = sys.executable) -> list[Verdict]:  # fmt: skip
+                  recheck: int = 0, python: str = sys.executable,
+                  progress: Callable[[list[Verdict]], None] | None = None) -> list[Verdict]:  # fmt: skip
     """Run each command in both trees (``jobs`` at a time, in list order) and judge it as both finish;
-    then run each command whose JSON differs ``recheck`` times more in the before tree (is it noise?)."""
+    then run each command whose JSON differs ``recheck`` times more in the before tree (is it noise?).
+    ``progress`` is called with the verdicts so far after each command and each recheck."""
     verdicts: list[Verdict] = []
     with ThreadPoolExecutor(max_workers=jobs) as pool:
         pending: list[tuple[Run, Future[Output], Future[Output]]] = [
@@ -265,6 +284,8 @@ def compare_trees(before: Tree, after: Tree, runs: list[Run], jobs: int, timeout
             what = f"equal ({v.numbers} numbers)" if v.equal else "DIFFERS: " + v.reason()
             print(f"[{k + 1}/{len(runs)}] {r.name}: {what}; {v.before.seconds:.0f} s / {v.after.seconds:.0f} s",
                   file=sys.stderr, flush=True)  # fmt: skip
+            if progress is not None:
+                progress(verdicts)
             if fail_fast and not v.equal:
                 for _, b, a in pending[k + 1 :]:
                     b.cancel()
@@ -275,10 +296,11 @@ def compare_trees(before: Tree, after: Tree, runs: list[Run], jobs: int, timeout
                      for v in verdicts if v.diffs and not v.before.error and not v.after.error]  # fmt: skip
             for v, futures in again:
                 v.reruns = [f.result() for f in futures]
-                what = "noisy: the before tree differs from itself there too" if v.noisy else (
-                    "the before tree reproduces its own values there")  # fmt: skip
-                print(f"[recheck] {v.run.name}: {recheck} more runs in the before tree: {what}", file=sys.stderr,
-                      flush=True)  # fmt: skip
+                k, n = v.noisy_share()
+                print(f"[recheck] {v.run.name}: {recheck} more runs in the before tree: {v.noise}, it differs from "
+                      f"itself at {k} of the {n} differing paths", file=sys.stderr, flush=True)  # fmt: skip
+                if progress is not None:
+                    progress(verdicts)
     return verdicts
 
 
@@ -289,15 +311,28 @@ def verdict_line(verdicts: list[Verdict], total: int) -> str:
         return f"PASS {total} commands equal"
     if not bad:
         return f"FAIL only {len(verdicts)} of {total} commands ran"
-    noisy = [v for v in bad if v.noisy]
-    real = [v for v in bad if not v.noisy]
-    if not noisy:
+    kinds = ("not noisy", "unchecked", "partly noisy", "noisy")  # the first command named: the first kind found
+    by = {kind: [v for v in bad if v.noise == kind] for kind in kinds}
+    if len(by["unchecked"]) == len(bad):
         return f"FAIL {len(bad)} of {total} commands differ; first: {bad[0].reason()}"
-    if not real:
-        return (f"FAIL {len(bad)} of {total} commands differ, all noisy (the before tree differs from itself there "
-                f"too); first: {bad[0].reason()}")  # fmt: skip
-    return (f"FAIL {len(bad)} of {total} commands differ, {len(noisy)} of them noisy (the before tree differs from "
-            f"itself there too); first not noisy: {real[0].reason()}")  # fmt: skip
+    counts = ", ".join(f"{len(by[kind])} {kind}" for kind in kinds if by[kind])
+    kind = next(kind for kind in kinds if by[kind])
+    return f"FAIL {len(bad)} of {total} commands differ ({counts}); first {kind}: {by[kind][0].reason()}"
+
+
+def write_report(path: Path, trees: dict[str, Tree], runs: list[Run], verdicts: list[Verdict], line: str,
+                 t0: float, load0: tuple[float, float, float]) -> None:  # fmt: skip
+    """The ``--out`` report, replaced whole (written after every command, so a killed run leaves its part)."""
+    report = {"verdict": line.split()[0], "verdict_line": line, "before": str(trees["--before"].root),
+              "after": str(trees["--after"].root), "tolerance": TOL, "skipped_keys": SKIPPED_KEYS,
+              "excluded": [{"command": c, "why": w} for c, w in EXCLUDED], "commands_selected": len(runs),
+              "wall_s": round(time.monotonic() - t0, 1), "loadavg_start": [round(x, 2) for x in load0],
+              "loadavg_now": [round(x, 2) for x in os.getloadavg()], "commands": [v.report() for v in verdicts],
+              "key_names": sorted(set().union(*(key_names(o.doc) for v in verdicts
+                                                for o in (v.before, v.after))))}  # fmt: skip
+    tmp = path.with_name(path.name + ".part")
+    tmp.write_text(json.dumps(report, indent=1) + "\n")
+    tmp.replace(path)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -336,20 +371,19 @@ def main(argv: list[str] | None = None) -> int:
     except UsageError as e:
         print(f"same_results.py: error: {e}", file=sys.stderr)
         return 2
-    t0 = time.monotonic()
+    t0, load0 = time.monotonic(), os.getloadavg()
     print(f"{len(runs)} commands in {trees['--before'].root} and {trees['--after'].root}, {args.jobs} at a time",
           file=sys.stderr, flush=True)  # fmt: skip
+
+    def save(verdicts: list[Verdict], line: str = "") -> None:
+        if args.out is not None:
+            line = line or f"RUNNING {len(verdicts)} of {len(runs)} commands compared"
+            write_report(args.out, trees, runs, verdicts, line, t0, load0)
+
     verdicts = compare_trees(trees["--before"], trees["--after"], runs, args.jobs, args.timeout, args.fail_fast,
-                             args.recheck)  # fmt: skip
+                             args.recheck, progress=save)  # fmt: skip
     line = verdict_line(verdicts, len(runs))
-    if args.out is not None:
-        report = {"verdict": line.split()[0], "verdict_line": line, "before": str(trees["--before"].root),
-                  "after": str(trees["--after"].root), "tolerance": TOL, "skipped_keys": SKIPPED_KEYS,
-                  "excluded": [{"command": c, "why": w} for c, w in EXCLUDED],
-                  "wall_s": round(time.monotonic() - t0, 1), "commands": [v.report() for v in verdicts],
-                  "key_names": sorted(set().union(*(key_names(o.doc) for v in verdicts
-                                                    for o in (v.before, v.after))))}  # fmt: skip
-        args.out.write_text(json.dumps(report, indent=1) + "\n")
+    save(verdicts, line)
     print(line, flush=True)
     return 0 if line.startswith("PASS") else 1
 
