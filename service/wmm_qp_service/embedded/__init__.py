@@ -5,7 +5,9 @@ control callback).
 
 - :mod:`.link` — :class:`InProcessLink`, the :class:`~..daemon.RobotLink` in memory;
 - :mod:`.control` — :class:`EmbeddedControl`, the core and its cycle inside a robot's cycle,
-  the slack after the command (inputs, hand-overs, the garbage collector); no Zenoh;
+  the slack after the command (inputs, hand-overs); no Zenoh;
+- :mod:`.collector` — :class:`SlackCollector`, Python's garbage collector in the slack only;
+- :mod:`.timing` — :class:`CycleTiming` (the status's loop figures) and :func:`decimation`;
 - :mod:`.service` — :class:`ServiceThread`, the Zenoh side on its own thread (setpoints, modes,
   obstacles, status, telemetry, ``info``, the state for clients, the lease), and
   :func:`embedded_session`;
@@ -15,8 +17,10 @@ The Franka driver's ``--embedded`` (:mod:`..drivers.franka`) hosts the same cont
 libfranka's cycle.
 """
 
-from .control import CycleTiming, EmbeddedControl, SlackCollector, Telemetry, decimation, telemetry_msg
+from .collector import SlackCollector
+from .control import EmbeddedControl, Telemetry, telemetry_msg
 from .link import InProcessLink
+from .timing import CycleTiming, decimation
 
 __all__ = ["CycleTiming", "EmbeddedControl", "InProcessLink", "SlackCollector", "Telemetry", "decimation",
            "telemetry_msg"]

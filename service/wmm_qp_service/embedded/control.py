@@ -22,7 +22,6 @@ Nothing here imports Zenoh: tests drive it with a fake clock.
 
 from __future__ import annotations
 
-import gc
 import math
 import sys
 import time
@@ -40,101 +39,17 @@ from ..daemon import ControlCore, Cycle, FaultLog, Sent
 from ..daemon.reports import NAN3
 from ..daemon.watchdog import say
 from ..protocol import ModeMsg, ObstaclesMsg, SetpointMsg, StateMsg, TelemetryMsg, TruthMsg
-from ..rate_loop import LoopTiming
 from ..validation import Validator
+from .collector import SlackCollector
 from .link import InProcessLink
+from .timing import CycleTiming, decimation
 
 OUTBOX = 4096
 """Messages waiting for the service thread at most (the oldest dropped beyond: a stalled
 service thread costs clients messages, never the cycle time)."""
 
-# The interpreter's thread switch interval stays its default (5 ms): a short one (0.2 ms) made
-# the cycle hand the GIL to the service thread in the middle of its ticks; in an interleaved A/B
-# under load it missed more deadlines at 1 kHz in each of three rounds (818.9, 724.5, 1129.6 per
-# 10,000 against 326.8, 535.6, 264.5; benchmarks/results/embedded/ab_switch_interval.json).
-
-
-class CycleTiming(LoopTiming):
-    """The status's loop figures of a core that ticks in a robot's cycle.
-
-    The robot side paces the loop (its clock, or libfranka's ``readOnce``); this only records
-    each tick's work (:meth:`record`) and the ticks whose cycle started after its deadline
-    (:meth:`miss`). Its ``trigger`` is ``"embedded"``.
-    """
-
-    trigger = "embedded"
-
-    def start(self) -> float:
-        self.t0 = self.tick_start = self._clock()
-        return self.t0
-
-    def wait(self) -> float:
-        raise NotImplementedError("the robot side paces an embedded core")
-
-    def miss(self) -> None:
-        """This tick's cycle started after its deadline (the previous cycle overran)."""
-        self.deadline_misses += 1
-        self.overruns += 1
-
-
-class SlackCollector:
-    """Python's cyclic garbage collector kept off the command's path.
-
-    At :meth:`start` everything allocated so far (the model, the compiled kernels, the configs)
-    is collected once and frozen (``gc.freeze``: never scanned again) and automatic collection is
-    disabled, for every thread of the process; :meth:`slack` then collects the young generation
-    after the command, when its allocations passed the interpreter's threshold (generation 1
-    every 10th time, generation 2 every 100th), so a collection never lands inside a tick.
-
-    Args:
-        enabled: False: the interpreter's own collection, anywhere.
-
-    Attributes:
-        collections: per generation, the collections run in the slack.
-        max_us, total_us: [µs] the longest one and their sum.
-    """
-
-    def __init__(self, enabled: bool = True) -> None:
-        self.enabled = enabled
-        self.threshold = max(1, gc.get_threshold()[0])
-        self.collections = [0, 0, 0]
-        self.max_us = 0.0
-        self.total_us = 0.0
-        self._n = 0
-        self._was_enabled = True
-
-    def start(self) -> None:
-        if not self.enabled:
-            return
-        self._was_enabled = gc.isenabled()
-        gc.collect()
-        gc.freeze()
-        gc.disable()
-
-    def slack(self) -> None:
-        """Collect now if the young generation is due (never raises)."""
-        if not self.enabled or gc.get_count()[0] < self.threshold:
-            return
-        self._n += 1
-        gen = 2 if self._n % 100 == 0 else 1 if self._n % 10 == 0 else 0
-        t = time.perf_counter_ns()
-        gc.collect(gen)
-        us = (time.perf_counter_ns() - t) * 1e-3
-        self.collections[gen] += 1
-        self.total_us += us
-        self.max_us = max(self.max_us, us)
-
-    def stop(self) -> None:
-        if not self.enabled:
-            return
-        gc.unfreeze()
-        if self._was_enabled:
-            gc.enable()
-
-    def report(self) -> dict[str, Any]:
-        """What the collector did (the cycle report's ``gc``)."""
-        return {"enabled": self.enabled, "collections": list(self.collections),
-                "max_us": round(self.max_us, 1), "total_us": round(self.total_us, 1)}
+# The interpreter's thread switch interval stays its default (5 ms): a short one makes the cycle
+# hand the GIL to the service thread in the middle of its ticks (docs/benchmarks.md §5.5).
 
 
 class Telemetry(NamedTuple):
@@ -177,21 +92,6 @@ def telemetry_msg(robot: str, p: Telemetry) -> TelemetryMsg:
         ee_error=p.ee_error, wheel_speeds=cmd.wheel_speeds.tolist(), arm_rates=cmd.arm_rates.tolist(),
         status=cmd.status.value, dm=float(cmd.dm), task_error=float(cmd.task_error), tick_us=p.tick_us,
         step_us=p.step_us, state_seq=p.state_seq, state_rx=p.state_rx, cmd_stamp=p.sent.stamp)
-
-
-def decimation(robot_rate_hz: float, rate_hz: float) -> int:
-    """Robot cycles per control tick.
-
-    Raises:
-        wmm_qp.ConfigError: the control rate does not divide the robot's cycle rate.
-    """
-    ratio = robot_rate_hz / rate_hz
-    d = round(ratio)
-    if d < 1 or abs(ratio - d) > 1e-6:
-        raise w.ConfigError("<embedded>", "loop.rate_hz",
-                            f"{rate_hz:g} Hz must divide the robot's cycle rate {robot_rate_hz:g} Hz "
-                            f"(e.g. {robot_rate_hz:g} or {robot_rate_hz / 2:g}): the core ticks every n-th cycle")
-    return d
 
 
 class EmbeddedControl:
