@@ -1,4 +1,7 @@
-"""Shared fixtures: a sim + daemon stack on loopback with a unique prefix and ports."""
+"""Shared fixtures: a sim + daemon stack on loopback with a unique prefix and ports.
+
+The helpers the test modules share live in the package ``support`` (``tests/support/``); their
+asserts are rewritten like a test module's, so a failure in one shows its values."""
 
 from __future__ import annotations
 
@@ -6,6 +9,8 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
+
+pytest.register_assert_rewrite("support")
 
 
 @pytest.fixture

@@ -131,7 +131,7 @@ def test_inspect_defaults_to_the_robots_start(capsys: pytest.CaptureFixture[str]
 
 
 def test_inspect_another_robot(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:  # type: ignore[no-untyped-def]
-    from service_robots import gen3_file, shipped
+    from support.service_robots import gen3_file, shipped
 
     code, out, _ = run(capsys, "inspect", "--json", "--robot-config", str(gen3_file(tmp_path, "fixed")))
     d = json.loads(out)
@@ -157,7 +157,7 @@ BAD_ROBOTS = {
 
 
 def bad_robot_file(folder, case: str):  # type: ignore[no-untyped-def]
-    from service_robots import gen3_text
+    from support.service_robots import gen3_text
 
     changes, key = BAD_ROBOTS[case]
     text = gen3_text(**changes)
@@ -219,7 +219,7 @@ ID_COMMANDS = {  # every command that talks to a robot over Zenoh, with its requ
 def test_every_command_takes_the_robot_id_from_the_robot_files_name(tmp_path, command: str) -> None:  # type: ignore[no-untyped-def]
     """--robot-config F with F's name X: the id is X, whatever configs/service.toml's robot says
     (a sim started with F and a client given F, or --robot X, meet on <prefix>/X); --robot wins."""
-    from service_robots import gen3_file
+    from support.service_robots import gen3_file
     from wmm_qp_service.cli import build_parser
     from wmm_qp_service.cli_common import service_config
     from wmm_qp_service.config import load_service_config
@@ -244,7 +244,7 @@ def test_every_command_takes_the_robot_id_from_the_robot_files_name(tmp_path, co
 
 def test_demo_and_soak_run_their_robot_under_its_files_name(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """demo and soak start their own sim and daemon: the robot file's name is their id too."""
-    from service_robots import gen3_file
+    from support.service_robots import gen3_file
     from wmm_qp_service.processes import isolated_config
 
     import wmm_qp as w

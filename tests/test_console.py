@@ -132,7 +132,7 @@ def test_the_view_draws_the_fr3_from_its_meshes_every_link_that_has_one_and_no_o
     """The FR3's URDF (franky-sim's package, a ``pkg://`` path) with its meshes; a fixed base has no
     odometry frame to draw over the arm's foot."""
     pytest.importorskip("franky_sim", reason="the FR3's URDF ships with franky-sim (pip install franky-sim)")
-    from console_helpers import urdf_mesh_links
+    from support.console_helpers import urdf_mesh_links
     from wmm_qp_service.console.view import RobotView
 
     fr3 = w.load_robot_config(w.default_config_dir() / "robots" / "fr3.toml")

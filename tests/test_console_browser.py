@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from console_helpers import (
+from support.console_helpers import (
     SHOTS_ENV,
     Drag,
     StatusLog,
@@ -159,7 +159,7 @@ def test_console_on_the_fr3_draws_its_meshes_and_its_gripper_buttons_move_franky
         pytest.skip(why)
     pytest.importorskip("pylibfranka", reason="needs pylibfranka (pip install 'wmm-qp[franka]')")
     pytest.importorskip("franky_sim", reason="needs franky-sim (pip install franky-sim)")
-    from franky_rig import FR3, GRIPPER, driver_stack, start_franky_sim
+    from support.franky_rig import FR3, GRIPPER, driver_stack, start_franky_sim
     from wmm_qp_service.client import Client
     from wmm_qp_service.processes import free_port
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from core_fixtures import Q0, config, model, random_arm_q
+from support.core_fixtures import Q0, config, model, random_arm_q
 
 import wmm_qp as w
 from wmm_qp.pseudoinverse import damping_factor, weight_matrix_diag, weighted_pinv

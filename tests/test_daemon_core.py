@@ -2,49 +2,16 @@
 
 from __future__ import annotations
 
-import itertools
 import math
 
 import numpy as np
 import pytest
+from support.daemon_drive import DT, Plant, max_step_ratio, rotated
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.daemon import ControlCore
-from wmm_qp_service.protocol import ModeMsg, SetpointMsg, StateMsg
+from wmm_qp_service.protocol import ModeMsg, SetpointMsg
 
 import wmm_qp as w
-
-DT = 0.002
-
-
-class Plant:
-    """Integrates commands exactly (executed = commanded) and makes StateMsgs."""
-
-    def __init__(self, model: w.WmmModel) -> None:
-        self.model = model
-        self.q_base = np.zeros(3)
-        self.q_arm = np.array(model.config.arm.start)
-        self.v_arm = np.zeros(model.n_arm)
-        self.wheels = np.zeros(model.n_wheels)
-        self.seq = 0
-        self.instance = "sim-A"
-        self.protective_stops = 0
-        self.refused: dict[str, int] = {}
-        self.cmd_seq = -1
-
-    def apply(self, cmd: w.Command) -> None:
-        self.v_arm, self.wheels = cmd.arm_rates.copy(), cmd.wheel_speeds.copy()
-        self.q_arm = self.q_arm + DT * self.v_arm
-        self.q_base = self.q_base + DT * (self.model.base.P(float(self.q_base[2])) @ self.wheels)
-
-    def msg(self, **kw: object) -> StateMsg:
-        self.seq += 1
-        d: dict[str, object] = dict(
-            robot="wmm", seq=self.seq, stamp=0.0, t=0.0, q_base=self.q_base.tolist(),
-            q_arm=self.q_arm.tolist(), v_arm=self.v_arm.tolist(), wheel_speeds=self.wheels.tolist(),
-            tau=[0.0] * self.model.n_arm, instance=self.instance, lease="core", cmd_seq=self.cmd_seq,
-            protective_stops=self.protective_stops, refused=dict(self.refused))
-        d.update(kw)
-        return StateMsg(**d)  # type: ignore[arg-type]
 
 
 @pytest.fixture(scope="module")
@@ -70,16 +37,6 @@ def run(core: ControlCore, plant: Plant, t: float, n: int,
         cmds.append(cmd)
         t += DT
     return t, cmds
-
-
-def max_step_ratio(robot: w.RobotConfig, cmds: list[w.Command]) -> float:
-    a = np.asarray(robot.arm.acceleration_max) * DT
-    wa = np.asarray(robot.base.wheel_acceleration_max) * DT
-    worst = 0.0
-    for p, q in itertools.pairwise(cmds):
-        worst = max(worst, float(np.max(np.abs(q.arm_rates - p.arm_rates) / a)),
-                    float(np.max(np.abs(q.wheel_speeds - p.wheel_speeds) / wa, initial=0.0)))
-    return worst
 
 
 def test_no_command_before_a_state(robot: w.RobotConfig) -> None:
@@ -157,7 +114,7 @@ def other_robots() -> list[object]:
 
 
 def load_other(name: str, folder) -> w.RobotConfig:  # type: ignore[no-untyped-def]
-    from service_robots import gen3_file, shipped
+    from support.service_robots import gen3_file, shipped
 
     if name.startswith("gen3_"):
         return w.load_robot_config(gen3_file(folder, name.removeprefix("gen3_")))
@@ -214,12 +171,6 @@ def orientation_error(core: ControlCore, plant: Plant, quat: np.ndarray) -> floa
 
     _, R = core.model.ee_pose(plant.q_base, plant.q_arm)
     return float(np.linalg.norm(tasks.orientation_error(tasks.quat_to_matrix(quat), R)))
-
-
-def rotated(quat: np.ndarray, axis: list[float], angle: float) -> np.ndarray:
-    from wmm_qp_service.smoother import quat_exp, quat_multiply
-
-    return quat_multiply(quat_exp(angle * np.asarray(axis) / np.linalg.norm(axis)), quat)
 
 
 def test_pose_task_hold_latches_the_ee_orientation(robot: w.RobotConfig) -> None:

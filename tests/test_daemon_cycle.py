@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_daemon_core import DT, Plant
+from support.daemon_drive import DT, Plant
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.daemon import ControlCore, Cycle, RobotLink
 from wmm_qp_service.protocol import CommandMsg, ModeMsg, StateMsg

@@ -13,10 +13,10 @@ import math
 
 import numpy as np
 import pytest
-from test_daemon_core import DT, Plant, max_step_ratio
+from support.daemon_drive import DT, Plant, max_step_ratio, mode, setpoint, tick
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.daemon import ControlCore, Daemon
-from wmm_qp_service.protocol import ModeMsg, SetpointMsg, StateMsg, TruthMsg
+from wmm_qp_service.protocol import StateMsg, TruthMsg
 
 import wmm_qp as w
 
@@ -30,24 +30,6 @@ def make(robot: w.RobotConfig, **watchdog: object) -> tuple[ControlCore, Plant]:
     svc = ServiceConfig().with_(watchdog=watchdog) if watchdog else ServiceConfig()
     core = ControlCore(svc, w.load_controller_config(), robot)
     return core, Plant(core.model)
-
-
-def mode(core: ControlCore, name: str) -> None:
-    core.on_mode(ModeMsg(robot="wmm", seq=1, stamp=0.0, mode=name))
-
-
-def setpoint(x: np.ndarray, stamp: float, source: str = "op") -> SetpointMsg:
-    return SetpointMsg(robot="wmm", seq=1, stamp=stamp, x=x.tolist(), source=source)
-
-
-def tick(core: ControlCore, plant: Plant, t: float) -> w.Command:
-    cmd = core.tick(t)
-    assert cmd is not None
-    core.seq += 1
-    core.sent(core.seq, t)
-    plant.apply(cmd)
-    plant.cmd_seq = core.seq
-    return cmd
 
 
 def track(core: ControlCore, plant: Plant, t: float, n: int, target: np.ndarray) -> float:

@@ -12,8 +12,7 @@ from collections import Counter
 
 import numpy as np
 import pytest
-from test_daemon_core import DT, Plant
-from test_daemon_safety import mode, setpoint, tick
+from support.daemon_drive import DT, Plant, mode, setpoint, tick
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.daemon import ControlCore
 from wmm_qp_service.protocol import SetpointMsg, StatusMsg
@@ -126,7 +125,7 @@ def test_a_fault_that_holds_nothing_is_not_active(robot: w.RobotConfig) -> None:
 
 # ---------------------------------------------------------------- orientation error
 def test_orientation_error_is_the_angle_to_the_target(robot: w.RobotConfig) -> None:
-    from test_daemon_core import rotated
+    from support.daemon_drive import rotated
 
     core, plant = make(robot, w.load_controller_config().with_(task={"kind": "pose"}))
     t = 0.0

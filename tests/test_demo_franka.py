@@ -14,7 +14,7 @@ import pytest
 pytest.importorskip("pylibfranka", reason="needs pylibfranka (pip install 'wmm-qp[franka]')")
 pytest.importorskip("franky_sim", reason="needs franky-sim (pip install franky-sim)")
 
-from franky_rig import FR3, start_franky_sim
+from support.franky_rig import FR3, start_franky_sim
 
 import wmm_qp as w
 

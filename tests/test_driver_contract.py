@@ -42,7 +42,7 @@ def franka_driver(tmp: Path) -> Iterator[Driver]:
     """``wmm-qp driver franka`` against franky-sim, each in its own process."""
     pytest.importorskip("pylibfranka", reason="needs pylibfranka (pip install 'wmm-qp[franka]')")
     pytest.importorskip("franky_sim", reason="needs franky-sim (pip install franky-sim)")
-    from franky_rig import FR3, driver_stack, start_franky_sim
+    from support.franky_rig import FR3, driver_stack, start_franky_sim
 
     robot = w.load_robot_config(FR3)
     sim = start_franky_sim(robot)

@@ -14,6 +14,8 @@ from typing import Any
 import msgspec
 import numpy as np
 import pytest
+from support.clocks import Clock
+from support.controllers import OverLimitOnce
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.embedded import EmbeddedControl, SlackCollector, decimation
 from wmm_qp_service.embedded.sim import EmbeddedSim
@@ -23,25 +25,6 @@ from wmm_qp_sim import load_sim_config
 from wmm_qp_sim.robot import SimState
 
 import wmm_qp as w
-
-WALL0 = 1.7e9  # [s] the fake wall clock's epoch
-
-
-class Clock:
-    """A fake monotonic clock; each read advances it 1 ns (a spin on it ends), sleeps jump."""
-
-    def __init__(self) -> None:
-        self.t = 100.0
-
-    def __call__(self) -> float:
-        self.t += 1e-9
-        return self.t
-
-    def sleep(self, s: float) -> None:
-        self.t += max(0.0, s)
-
-    def wall(self) -> float:
-        return WALL0 + self.t
 
 
 @pytest.fixture(scope="module")
@@ -248,24 +231,6 @@ def test_commands_applied_late_are_a_state_age_fault(host: Any) -> None:
 
 
 # ---------------------------------------------------------------- faults, the referee, the firmware
-class OverLimitOnce:
-    """A controller whose ``n``-th command asks joint 1 for twice its velocity limit."""
-
-    def __init__(self, ctl: w.Controller, n: int, v_max: float) -> None:
-        self.ctl, self.n, self.v_max, self.steps = ctl, n, v_max, 0
-
-    def step(self, state: w.RobotState, ref: w.Reference) -> w.Command:
-        self.steps += 1
-        cmd = self.ctl.step(state, ref)
-        if self.steps == self.n:
-            cmd.arm_rates = cmd.arm_rates.copy()
-            cmd.arm_rates[0] = 2.0 * self.v_max
-        return cmd
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self.ctl, name)
-
-
 def test_the_referee_judges_the_command_as_received_before_the_firmware_refuses_it(
         host: Any, robot: w.RobotConfig) -> None:
     emb, clk = host()

@@ -8,7 +8,7 @@ import json
 from pathlib import Path
 
 import pytest
-from core_fixtures import robot
+from support.core_fixtures import robot
 from wmm_qp_service.cli import main
 from wmm_qp_service.experiments.log import columns
 

@@ -78,7 +78,7 @@ def test_the_demo_in_physics_on_a_robot_file_the_suite_writes(tmp_path: Path) ->
     """A robot no file in the repository describes (the Gen3 on a differential drive, written
     here): its MuJoCo model is built from the file, the demo runs with the collision rows on (the
     default) and the referee counts nothing."""
-    from service_robots import gen3_file
+    from support.service_robots import gen3_file
 
     robot = gen3_file(tmp_path, base="diff_drive", name="gen3_diff_suite")
     out = subprocess.run([sys.executable, "-m", "wmm_qp_service.cli", "demo", "--duration", "6", "--physics",

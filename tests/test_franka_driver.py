@@ -1,5 +1,5 @@
 """``wmm-qp driver franka`` against franky-sim (a MuJoCo FR3 speaking libfranka's protocol,
-:mod:`franky_rig`): franky-sim runs in a child process of the test, the driver as ``wmm-qp
+:mod:`support.franky_rig`): franky-sim runs in a child process of the test, the driver as ``wmm-qp
 driver franka``; the test plays the daemon (it holds the control lease and publishes ``cmd`` at
 500 Hz) or runs ``wmm-qp serve`` and talks to it as a client.
 """
@@ -20,7 +20,7 @@ pytest.importorskip("pylibfranka", reason="needs pylibfranka (pip install 'wmm-q
 pytest.importorskip("franky_sim", reason="needs franky-sim (pip install franky-sim)")
 
 import zenoh
-from franky_rig import FR3, RECOVERIES, REFLEXES, driver_stack, start_franky_sim
+from support.franky_rig import FR3, RECOVERIES, REFLEXES, driver_stack, start_franky_sim
 from wmm_qp_service.keys import Keys
 from wmm_qp_service.processes import isolated_config
 from wmm_qp_service.protocol import CommandMsg, GripperMsg, StateMsg, TruthMsg, decode, encode
@@ -211,7 +211,7 @@ def test_serve_tracks_through_the_driver_and_resumes_after_the_robot_braked_in_i
 
 
 def test_a_libfranka_reflex_is_a_protective_stop_the_arm_brakes_and_a_mode_message_resumes(tmp_path: Path) -> None:
-    """wmm-qp serve + the driver + franky-sim with a reflex model (:class:`franky_rig.ReflexModel`):
+    """wmm-qp serve + the driver + franky-sim with a reflex model (:class:`support.franky_rig.ReflexModel`):
     while the arm tracks, the robot aborts the motion with a Cartesian reflex, reported over
     libfranka's protocol; libfranka raises its own ``ControlException`` in the driver. The driver
     reports a protective stop naming it, the daemon faults and holds, the arm stands still in

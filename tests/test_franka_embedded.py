@@ -9,7 +9,8 @@ from typing import Any
 
 import numpy as np
 import pytest
-from test_embedded import Clock, OverLimitOnce
+from support.clocks import Clock
+from support.controllers import OverLimitOnce
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.drivers.franka import DT, FrankaDriver
 from wmm_qp_service.drivers.franka_embedded import FrankaEmbedded

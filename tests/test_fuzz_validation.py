@@ -171,7 +171,7 @@ def test_huge_payload_is_rejected_before_decoding() -> None:
 def test_mutations_for_another_robot(tmp_path, base: str) -> None:  # type: ignore[no-untyped-def]
     """The templates and validators take the robot's sizes: the valid templates of a Gen3 on
     another base pass its validators, and whatever else passes has its lengths."""
-    from service_robots import gen3_file
+    from support.service_robots import gen3_file
 
     robot = w.load_robot_config(gen3_file(tmp_path, base))
     na, nw = robot.n_arm, robot.n_wheels

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from test_integration_service import TIMEOUT, ready, until
+from support.live import TIMEOUT, ready, until
 from wmm_qp_service.client import Client
 
 import wmm_qp as w

@@ -10,8 +10,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from test_integration_exclusive import cli
-from test_integration_service import TIMEOUT, until
+from support.live import TIMEOUT, cli, until
 from wmm_qp_service.client import Client
 from wmm_qp_service.processes import Stack, _service_args, free_port, isolated_config
 from wmm_qp_service.teleop import stream_circle

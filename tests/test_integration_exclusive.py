@@ -7,14 +7,12 @@ client publishing ``cmd`` itself, a status query for a mistyped robot id. No tim
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import time
 from typing import Any
 
 import numpy as np
 import pytest
-from test_integration_service import TIMEOUT, until
+from support.live import TIMEOUT, cli, until
 from wmm_qp_service.client import Client
 from wmm_qp_service.processes import Stack, _service_args, free_port
 from wmm_qp_service.protocol import CommandMsg, StateMsg, TruthMsg, encode
@@ -27,11 +25,6 @@ def ready(c: Client) -> Any:
     assert c.wait_for_daemon(3 * TIMEOUT) is not None, "daemon did not answer"  # a first start compiles
     return until(lambda: (i := c.info()) is not None and i.status.state_ok
                  and i.status.lease_holder == i.status.lease and i)
-
-
-def cli(*argv: str, timeout: float = 60.0) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "wmm_qp_service.cli", *argv], capture_output=True,
-                          text=True, timeout=timeout, stdin=subprocess.DEVNULL)
 
 
 def test_a_second_daemon_refuses_to_start_or_waits_for_the_lease(service_stack: Any) -> None:

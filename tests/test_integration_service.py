@@ -8,35 +8,17 @@ from __future__ import annotations
 
 import itertools
 import time
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 import pytest
+from support.live import TIMEOUT, ready, until
 from wmm_qp_service.client import Client
 from wmm_qp_service.protocol import ModeMsg, SetpointMsg, StateMsg, TelemetryMsg, TruthMsg, encode
 
 import wmm_qp as w
 
 pytestmark = pytest.mark.integration
-
-TIMEOUT = 30.0
-
-
-def until(pred: Callable[[], Any], timeout: float = TIMEOUT, period: float = 0.05) -> Any:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        v = pred()
-        if v:
-            return v
-        time.sleep(period)
-    raise AssertionError(f"condition not met within {timeout} s")
-
-
-def ready(c: Client) -> Any:
-    assert c.wait_for_daemon(3 * TIMEOUT) is not None, "daemon did not answer"  # a first start compiles
-    return until(lambda: (i := c.info()) is not None and i.status.state_ok and i)
-
 
 def test_stream_tracked_mode_change_smooth_and_malformed_rejected(service_stack: Any) -> None:
     stack = service_stack(500.0)
@@ -150,7 +132,7 @@ def test_a_stack_of_another_robot(tmp_path: Any, base: str) -> None:
     """The sim and the daemon of a Gen3 on another base (both given its robot file): the robot id
     is the file's name, the info reply names its joints and wheels, a state of the Mecanum robot's
     sizes is rejected (size), a setpoint is tracked, and the referee counts nothing."""
-    from service_robots import gen3_file
+    from support.service_robots import gen3_file
     from wmm_qp_service.processes import Stack, isolated_config
 
     path = gen3_file(tmp_path, base)
@@ -203,7 +185,7 @@ def test_a_sim_started_with_a_robot_file_is_found_under_its_name(tmp_path: Any) 
     import subprocess
     import sys
 
-    from service_robots import gen3_file
+    from support.service_robots import gen3_file
     from wmm_qp_service.cli import build_parser
     from wmm_qp_service.cli_common import service_config
     from wmm_qp_service.processes import free_port

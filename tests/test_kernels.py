@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from core_fixtures import Q0, config, model
+from support.core_fixtures import Q0, config, model
 
 import wmm_qp as w
 from wmm_qp import _jit

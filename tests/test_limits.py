@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
-from core_fixtures import robot
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from support.core_fixtures import robot
 
 import wmm_qp as w
 from wmm_qp.limits import braking_command, braking_velocity, joint_motion_bounds, wheel_bounds
@@ -142,7 +142,7 @@ def test_the_compiled_bounds_equal_the_numpy_formula(qs: list[float], vs: list[f
 @settings(max_examples=100, deadline=None)
 @given(st.lists(st.floats(min_value=-2.0, max_value=2.0), min_size=4, max_size=4))
 def test_the_controllers_bounds_on_the_wheels_are_the_wheel_bounds(speeds: list[float]) -> None:
-    from core_fixtures import config, model
+    from support.core_fixtures import config, model
 
     base = robot().base
     wh = np.array(speeds) * base.wheel_speed_max

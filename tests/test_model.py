@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from core_fixtures import Q0, model, random_arm_q, robot
+from support.core_fixtures import Q0, model, random_arm_q, robot
 
 from wmm_qp.model.wmm import rot_z
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from core_fixtures import Q0, config, model
+from support.core_fixtures import Q0, config, model
 from wmm_qp_service.cli import main
 from wmm_qp_service.experiments import circle
 

@@ -215,7 +215,7 @@ def test_keys_of_the_control_lease() -> None:
 @pytest.mark.parametrize("base, n_wheels", [("diff_drive", 2), ("fixed", 0)])
 def test_joint_and_wheel_vectors_have_the_robots_lengths(tmp_path, base: str, n_wheels: int) -> None:  # type: ignore[no-untyped-def]
     """A Gen3 on another base: its sizes are accepted, the Mecanum Gen3's are rejected (size)."""
-    from service_robots import gen3_file
+    from support.service_robots import gen3_file
 
     import wmm_qp as w
 
@@ -234,7 +234,7 @@ def test_joint_and_wheel_vectors_have_the_robots_lengths(tmp_path, base: str, n_
 
 def test_a_six_joint_robots_messages(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """The UR5 on an omni base (6 joints, 3 wheels): every joint vector has 6 entries."""
-    from service_robots import shipped
+    from support.service_robots import shipped
 
     robot = shipped("ur5_omni")
     na, nw = robot.n_arm, robot.n_wheels

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from core_fixtures import Q0, model
-from core_fixtures import config as _config
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
+from support.core_fixtures import Q0, model
+from support.core_fixtures import config as _config
 
 import wmm_qp as w
 from wmm_qp.pseudoinverse import weight_matrix_diag, weighted_pinv

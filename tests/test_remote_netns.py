@@ -17,7 +17,7 @@ import uuid
 from pathlib import Path
 
 import pytest
-from console_helpers import wait_for
+from support.console_helpers import wait_for
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
@@ -145,7 +145,7 @@ def test_console_drives_the_chosen_robot_through_a_tls_router_and_a_viewer_canno
         wait_for("the router up", lambda: "up" in (tmp_path / "router.log").read_text() or router.poll() is not None)
         assert router.poll() is None, (tmp_path / "router.log").read_text()
 
-        r = subprocess.run(["ip", "netns", "exec", console_ns, sys.executable, str(HERE / "remote_scenario.py"),
+        r = subprocess.run(["ip", "netns", "exec", console_ns, sys.executable, "-m", "support.remote_scenario",
                             prefix, str(remote / "operator" / "remote.json5"), str(remote / "viewer" / "remote.json5"),
                             str(tmp_path)], capture_output=True, text=True, timeout=600, env=env,
                            stdin=subprocess.DEVNULL)

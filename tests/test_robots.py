@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import pytest
-from core_fixtures import Q0
+from support.core_fixtures import Q0
 from wmm_qp_sim import SimCommand, SimRobot, load_sim_config
 
 import wmm_qp as w
@@ -333,10 +333,7 @@ OFFSET_XYZ, OFFSET_RPY = [0.02, -0.03, 0.15], [0.3, -0.2, 0.5]
 
 
 def _gen3_with(tmp_path: Path, name: str, **arm: str) -> Path:
-    import sys
-
-    sys.path.insert(0, str(Path(__file__).parent))
-    from service_robots import gen3_file
+    from support.service_robots import gen3_file
 
     return gen3_file(tmp_path, "omni", name=name, **arm)
 

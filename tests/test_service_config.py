@@ -47,10 +47,7 @@ def test_negative_z_min_is_allowed(tmp_path: Path) -> None:
 def test_the_robot_id_is_the_robot_files_name_unless_set(tmp_path: Path) -> None:
     """Each robot file has its own keys: an open robot id (no `robot` in service.toml, no
     --robot) is the robot description's name; one the service config sets is kept."""
-    import sys
-
-    sys.path.insert(0, str(Path(__file__).parent))
-    from service_robots import gen3_file
+    from support.service_robots import gen3_file
     from wmm_qp_service.config import ServiceConfig, default_robot_id
 
     import wmm_qp as w

@@ -21,7 +21,7 @@ from collections import deque
 
 import numpy as np
 import pytest
-from test_daemon_core import max_step_ratio
+from support.daemon_drive import max_step_ratio
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.daemon import ControlCore
 from wmm_qp_service.drivers.sim_node import CommandInbox, SimNode

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from console_helpers import service_args, wait_for
+from support.console_helpers import service_args, wait_for
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 

@@ -8,26 +8,10 @@ import itertools
 import threading
 
 import pytest
+from support.clocks import FakeClock
 from wmm_qp_service.rate_loop import Mailbox, StateLoop
 
 PERIOD = 1e-3
-
-
-class FakeClock:
-    """Advances a microsecond per read (so polling terminates) and by the slept time."""
-
-    def __init__(self) -> None:
-        self.t = 100.0
-        self.slept = 0.0
-
-    def __call__(self) -> float:
-        self.t += 1e-6
-        return self.t
-
-    def sleep(self, s: float) -> None:
-        assert s >= 0.0
-        self.slept += s
-        self.t += s
 
 
 class Source:

@@ -9,8 +9,8 @@ import math
 
 import numpy as np
 import pytest
-from test_daemon_core import Plant
-from test_trigger import FakeClock
+from support.clocks import FakeClock
+from support.daemon_drive import Plant
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.daemon import ControlCore
 from wmm_qp_service.protocol import ModeMsg

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from core_fixtures import Q0, config, model
+from support.core_fixtures import Q0, config, model
 
 import wmm_qp as w
 from wmm_qp.verify import check_command, verify_controller

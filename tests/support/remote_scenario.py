@@ -1,6 +1,7 @@
 """Run inside the console host's network namespace by tests/test_remote_netns.py: consoles
 reach two robot stacks through the router (TLS, the remote users' own credentials); prints one
-JSON line with what it saw. Usage: remote_scenario.py PREFIX OPERATOR_CFG VIEWER_CFG LOGDIR."""
+JSON line with what it saw. Usage, with tests/ on PYTHONPATH: python -m support.remote_scenario PREFIX
+OPERATOR_CFG VIEWER_CFG LOGDIR."""
 
 from __future__ import annotations
 
@@ -10,11 +11,12 @@ import time
 from pathlib import Path
 
 import numpy as np
-from console_helpers import Drag, console_process, wait_for
 from wmm_qp_service.config import load_service_config
 from wmm_qp_service.console.link import RouterClient as Client
 from wmm_qp_service.console.wire import move_gizmo
 from wmm_qp_service.processes import free_port
+
+from support.console_helpers import Drag, console_process, wait_for
 
 
 def track(c: Client) -> bool:
