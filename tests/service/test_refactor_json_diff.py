@@ -9,7 +9,7 @@ from typing import Any
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks" / "refactor"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks" / "refactor"))
 
 from json_diff import MISSING, TOL, Difference, differences, max_deviation
 

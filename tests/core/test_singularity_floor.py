@@ -25,7 +25,7 @@ FILES = {
     "ur5_omni": ROBOTS / "ur5_omni.toml",
     "panda_diffdrive": ROBOTS / "panda_diffdrive.toml",
     "tiago": ROBOTS / "tiago.toml",
-    "z1_omni": Path(__file__).resolve().parents[1] / "examples" / "z1_omni" / "z1_omni.toml",
+    "z1_omni": Path(__file__).resolve().parents[2] / "examples" / "z1_omni" / "z1_omni.toml",
 }
 TRACK_BOUND = 0.005  # [m] EE error (ground truth) of the tracking that follows a DM phase, in process
 SIGMA_TOL = 1e-4  # [m/rad] the damper holds the floor to first order per tick

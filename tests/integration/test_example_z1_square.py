@@ -24,7 +24,7 @@ import wmm_qp as w
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "z1_omni"
+EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "z1_omni"
 
 
 def _lines(stream: object, out: queue.Queue[str]) -> None:

@@ -9,12 +9,12 @@ from typing import Any
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks" / "refactor"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks" / "refactor"))
 
 import same_results as sr
 from results_runs import EXCLUDED, RUNS
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 RUN = next(r for r in RUNS if r.name == "circle_qp")
 
 

@@ -129,7 +129,7 @@ def test_the_repository_ships_no_working_secret() -> None:
             session_config(svc.with_(zenoh={"config": path}), ROLE_CLIENT)
         usrpwd = json.loads(zenoh.Config.from_file(str(path)).get_json("transport/auth/usrpwd"))
         assert usrpwd["password"] is None or usrpwd["password"].startswith(acl.FILE_PREFIX)
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     tracked = subprocess.run(["git", "ls-files", "configs"], cwd=root, capture_output=True, text=True,
                              check=True).stdout.split()
     assert tracked and not [f for f in tracked if f.endswith((".secret", ".txt"))]

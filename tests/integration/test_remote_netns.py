@@ -21,7 +21,7 @@ from support.console_helpers import wait_for
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
-HERE = Path(__file__).parent
+TESTS = Path(__file__).resolve().parents[1]  # the folder that holds the package support
 
 
 def _run(*cmd: str, check: bool = True) -> subprocess.CompletedProcess[str]:
@@ -120,7 +120,7 @@ def test_console_drives_the_chosen_robot_through_a_tls_router_and_a_viewer_canno
                     f'user: "{user}", password: "file:{user}.secret"'})
 
         py = [sys.executable, "-m", "wmm_qp_service.cli"]
-        path = os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")])
+        path = os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")])
         env = dict(os.environ, PYTHONUNBUFFERED="1", PYTHONPATH=path)
         prefix = f"wmmremote{tag}"
 

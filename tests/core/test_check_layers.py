@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 TOOL = ROOT / "tools" / "check_layers.py"
 PACKAGES = ("wmm_qp", "sim/wmm_qp_sim", "service/wmm_qp_service")
 

@@ -13,7 +13,7 @@ from wmm_qp_service.cli import main
 
 import wmm_qp as w
 
-REPO = Path(__file__).resolve().parents[1]  # this checkout (CI installs the packages, not the tree)
+REPO = Path(__file__).resolve().parents[2]  # this checkout (CI installs the packages, not the tree)
 
 
 def test_summarize_ns_percentiles() -> None:

@@ -17,7 +17,7 @@ import wmm_qp as w
 from wmm_qp.controllers.traditional import TraditionalController
 from wmm_qp.manipulability import dm_preference, dm_preference_gain
 
-CONTROLLER_TOML = Path(__file__).resolve().parents[1] / "configs" / "controller.toml"
+CONTROLLER_TOML = Path(__file__).resolve().parents[2] / "configs" / "controller.toml"
 
 
 def run_json(capsys: pytest.CaptureFixture[str], *argv: str) -> dict:

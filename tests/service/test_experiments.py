@@ -170,7 +170,7 @@ def test_bad_duration_is_a_clear_error(capsys: pytest.CaptureFixture[str]) -> No
 
 
 # Any robot (issue 12) ------------------------------------------------------------------------------
-ROBOTS = Path(__file__).resolve().parents[1] / "configs" / "robots"
+ROBOTS = Path(__file__).resolve().parents[2] / "configs" / "robots"
 
 
 @pytest.mark.parametrize(
