@@ -1,4 +1,4 @@
-"""Collision safety (issue 13): the dampers and the fence as hard rows, in closed loop with the
+"""Collision safety: the dampers and the fence as hard rows, in closed loop with the
 sim's independent collision referee — one test per constraint kind, each able to fail (the same
 drive without the rows collides)."""
 

@@ -145,7 +145,7 @@ def test_paper_controller_switches_to_damped_least_squares_below_the_threshold()
         assert (cmd.status == w.Status.DAMPED) == (key == "below")
 
 
-# Malformed input (issue 11, item 12) ---------------------------------------------------------
+# Malformed input (the review's attack: step raised on a state of the wrong shape) ----------------
 ROBOT_WHEELS = model().base.M.shape[1]  # the robot's own sizes, from the model and its config
 ROBOT_JOINTS = model().config.arm.acceleration_max.shape[0]
 FIELDS = {"q_base": 3, "q_arm": ROBOT_JOINTS, "v_arm": ROBOT_JOINTS, "wheel_speeds": ROBOT_WHEELS}

@@ -202,10 +202,10 @@ def _drive_to_limit_with_lagging_rates(anchor_on_command: bool, age_ticks: int, 
 
 
 def test_bounds_anchored_on_a_lagging_measured_rate_overshoot_anchored_on_the_command_do_not() -> None:
-    """Issue 11 item 9. A measured rate lags the command: the acceleration bound (which wins) then
-    lets each command drop A·dt below an old rate only, the joint brakes at a fraction of A and
-    passes the limit by ~0.1 rad whatever the latency margin; anchored on the last command it brakes
-    at A and the margin covers the lag."""
+    """The drill's pushed base, driven back past a joint limit. A measured rate lags the command:
+    the acceleration bound (which wins) then lets each command drop A·dt below an old rate only,
+    the joint brakes at a fraction of A and passes the limit by ~0.1 rad whatever the latency
+    margin; anchored on the last command it brakes at A and the margin covers the lag."""
     for age in (1, 2, 3):
         assert _drive_to_limit_with_lagging_rates(False, age, (age + 1) * 0.002) > 0.1
         assert _drive_to_limit_with_lagging_rates(True, age, (age + 1) * 0.002) <= 1e-12

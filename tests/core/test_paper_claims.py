@@ -1,4 +1,4 @@
-"""Issue 14: the paper's claims where they bite — the large circle, the traditional baseline's
+"""The paper's claims where they bite — the large circle, the traditional baseline's
 wheel units, and the qp controller's normalised null-space DM preference. Shortened runs."""
 
 from __future__ import annotations
@@ -142,7 +142,7 @@ def test_radius_is_checked(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def test_on_the_1m_circle_qp_moves_the_base_less_and_tracks_better(capsys: pytest.CaptureFixture[str]) -> None:
-    """Issue 14's claim on the whole 1.0 m circle (docs/results.md §1.1; ~7 s of CPU a run): the qp
+    """The claim on the whole 1.0 m circle (docs/results.md §1.1; ~7 s of CPU a run): the qp
     controller's RMS of every base velocity and its max EE error (ground truth) are below both
     traditional variants', with 0 violations. Before the damping priced the base's yaw (commit
     fca3669) its yaw RMS was 17x traditional (rad)'s, and this test failed."""

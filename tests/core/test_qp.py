@@ -430,7 +430,7 @@ def test_hold_without_a_target_holds_still() -> None:
     np.testing.assert_allclose(cmd.v, 0.0, atol=1e-12)
 
 
-# The EE box of DM_CARTESIAN, eq. (17), re-checked on every solver path (issue 11, item 14) ----
+# The EE box of DM_CARTESIAN, eq. (17), re-checked on every solver path (once relaxed, never re-checked) -
 def _box_edge_case() -> tuple[w.ControllerConfig, w.RobotState, w.Reference, np.ndarray]:
     """At rest at the paper's start, DM along z moves the EE down by dt·1.76 mm/s per tick; the box's
     floor sits half a tick's motion below it. The exact-task command (the paper's J# v_c, inside

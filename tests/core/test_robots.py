@@ -1,4 +1,4 @@
-"""Any robot (issue 12): the shipped robot files, the base kinds' P of eq. (3), the mount, the pose
+"""Any robot: the shipped robot files, the base kinds' P of eq. (3), the mount, the pose
 task (r = 6) and the differential drive's nonholonomy, each in closed loop with the sim's referee."""
 
 from __future__ import annotations
@@ -300,7 +300,7 @@ def test_diff_drive_never_slides_sideways_and_does_a_sideways_task_with_yaw_and_
     default, and on this drive the Panda's links 3 and 5 pass through each other, which the
     referee counts; with the rows on, the rows see the Panda's cylinders as the capsules that
     contain them, which put links 1 and 3 at −3.5 cm where the exact cylinders the referee checks
-    do not touch, and the task stops 4.6 cm short: open in issue 13.)"""
+    do not touch, and the task stops 4.6 cm short: open, a defect of the collision rows' capsules.)"""
     name = "panda_diffdrive.toml"
     ctl = controller(name)
     m = model(name)

@@ -51,7 +51,7 @@ def test_verify_catches_a_controller_without_the_braking_bound(monkeypatch: pyte
     assert verify_controller(ctl, model(), 150, 0).by_kind["position"] > 0
 
 
-# The EE box of DM_CARTESIAN, eq. (17) (issue 11, item 14) --------------------------------------
+# The EE box of DM_CARTESIAN, eq. (17) (the review's attack: relaxed, never re-checked) ----------
 BOX_LO, BOX_HI = config().ee_box_lower, config().ee_box_upper
 
 
@@ -114,7 +114,7 @@ def test_verify_catches_the_qp_without_its_ee_box_recheck(solver: str, monkeypat
     assert verify_controller(ctl, model(), 300, 0).by_kind["ee_box"] > 0
 
 
-# The command (issue 12): any robot, either task kind ------------------------------------------------
+# The command: any robot, either task kind ------------------------------------------------
 @pytest.mark.parametrize("robot_file, task", [("ur5_omni.toml", "pose"), ("tiago.toml", "position")])
 def test_verify_command_on_any_robot_and_task(robot_file: str, task: str, capsys: pytest.CaptureFixture[str]) -> None:
     import json

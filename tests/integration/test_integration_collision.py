@@ -1,4 +1,4 @@
-"""Collision safety through the service (issue 13): the real sim and daemon as processes on
+"""Collision safety through the service: the real sim and daemon as processes on
 loopback, live obstacles over Zenoh, setpoints beyond the fence and below the floor.
 
 Each test can fail: the same obstacle drive against a daemon without collision rows collides (the

@@ -1,4 +1,4 @@
-"""One robot, one controller, over real Zenoh (issue 11): the blind drill's attacks, replayed.
+"""One robot, one controller, over real Zenoh: the blind drill's attacks, replayed.
 
 Each test starts a real sim and daemon on loopback and attacks them the way the drill did: a
 second daemon for the same robot, a second sim under the same id bridged in by a client, a

@@ -139,9 +139,10 @@ def test_daemon_breakdown_over_zenoh(capsys: pytest.CaptureFixture[str]) -> None
 
 
 def test_jitter_section_the_empty_loop_at_both_rates(capsys: pytest.CaptureFixture[str]) -> None:
-    """The machine's floor (issue 15): the daemon's loop with no work, briefly; the counts are
-    consistent (no timing asserts): a tick that wakes more than a period late is a deadline miss
-    at the next wait (but the last tick's), and no tick starts before its deadline."""
+    """The machine's floor (what the end-to-end figures are read against): the daemon's loop with
+    no work, briefly; the counts are consistent (no timing asserts): a tick that wakes more than a
+    period late is a deadline miss at the next wait (but the last tick's), and no tick starts
+    before its deadline."""
     assert main(["bench", "--json", "--only", "jitter", "--ticks", "60"]) == 0
     out = json.loads(capsys.readouterr().out)
     j = out["jitter"]
@@ -177,7 +178,7 @@ def test_fastest_backend_breaks_a_p50_tie_by_p99() -> None:
     assert t["fastest_backend"] == "osqp" and t["fastest_p99_le_250us"] is False
 
 
-# Any robot (issue 12) ------------------------------------------------------------------------------
+# Any robot ------------------------------------------------------------------------------------------
 ROBOTS = w.default_robot_file().parent
 
 

@@ -1,4 +1,4 @@
-"""The daemon's safety logic (issue 11), driven through ControlCore with a fake clock.
+"""The daemon's safety logic , driven through ControlCore with a fake clock.
 
 Each test is an attack from the blind drill or the review, and what the daemon does now: one
 robot per key (instance latch), sim faults it reacts to, one operator per stream, setpoint

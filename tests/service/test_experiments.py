@@ -169,7 +169,7 @@ def test_bad_duration_is_a_clear_error(capsys: pytest.CaptureFixture[str]) -> No
     assert "duration" in capsys.readouterr().err
 
 
-# Any robot (issue 12) ------------------------------------------------------------------------------
+# Any robot ------------------------------------------------------------------------------------------
 ROBOTS = Path(__file__).resolve().parents[2] / "configs" / "robots"
 
 

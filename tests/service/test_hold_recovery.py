@@ -1,5 +1,5 @@
-"""Hold after a large displacement (issue 11, item 9): bounds (13) hold for the executed motion,
-and the recovery is smooth.
+"""Hold after a large displacement (the drill's pushed base): bounds (13) hold for the executed
+motion, and the recovery is smooth.
 
 The drill: the daemon in hold, the base pushed ~1 m off its target by foreign wheels-only
 commands (within the wheel limits), then the daemon's commands take over. It drove the base

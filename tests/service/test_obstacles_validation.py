@@ -1,4 +1,4 @@
-"""Live obstacles messages (issue 13): every malformed obstacle is rejected with the offending key
+"""Live obstacles messages: every malformed obstacle is rejected with the offending key
 named, the message as a whole (no partial sets), and the last accepted set stays in force.
 
 The validator is the only gate between the obstacles topic and the collision rows, so each case

@@ -1,4 +1,4 @@
-"""The sim as a robot protects itself (issue 11): firmware, stale stop, lease and instance.
+"""The sim as a robot protects itself: firmware, stale stop, lease and instance.
 
 Attacks from the blind drill, in-process: a client commanding joint rates past the limits or
 driving a joint into its stop, a command followed by silence, commands from a daemon that does
