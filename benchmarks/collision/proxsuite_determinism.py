@@ -22,7 +22,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests"))
 
-import test_collision as t
+from support import collision_robots as t
 from wmm_qp_sim import SimCommand, SimRobot, load_sim_config
 
 import wmm_qp as w

@@ -7,11 +7,11 @@ from __future__ import annotations
 import math
 from collections import Counter
 from dataclasses import replace
-from functools import cache
 from pathlib import Path
 
 import numpy as np
 import pytest
+from support.collision_robots import model, qp, start_x
 from wmm_qp_sim import SimCommand, SimRobot, load_sim_config
 
 import wmm_qp as w
@@ -19,14 +19,8 @@ from wmm_qp.config import default_config_dir
 from wmm_qp.scene import Scene, load_scene
 from wmm_qp.verify import CollisionJudge, verify_controller
 
-ROBOTS = default_config_dir() / "robots"
 D_S = w.load_controller_config().collision.safety_distance
 REFEREE = load_sim_config().referee.collision_distance
-
-
-@cache
-def model(name: str = "gen3_mecanum.toml") -> w.WmmModel:
-    return w.WmmModel(w.load_robot_config(ROBOTS / name))
 
 
 def run(
@@ -49,17 +43,6 @@ def run(
         reasons[cmd.reason.split(" at ")[0]] += 1
         sim.step(SimCommand(cmd.wheel_speeds, cmd.arm_rates, period=ctl.dt, seq=k), ctl.dt)
     return sim, reasons
-
-
-def qp(name: str = "gen3_mecanum.toml", **collision: object) -> w.Controller:
-    """The shipped QP controller with the collision rows on (``enabled=False`` turns them off)."""
-    cfg = w.load_controller_config().with_(collision={"enabled": True, **collision})
-    return w.make_controller("qp", model(name), cfg)
-
-
-def start_x(name: str = "gen3_mecanum.toml") -> np.ndarray:
-    m = model(name)
-    return m.ee_position(np.zeros(3), m.config.arm.start)
 
 
 def scene_file(tmp_path: Path, text: str, name: str = "scene.toml") -> Scene:
