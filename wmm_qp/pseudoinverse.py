@@ -53,7 +53,7 @@ def sigma_min(J: FloatArray) -> float:
     cubic; an SVD costs ~10× more per tick). Accurate to ~1e-8 absolute where σ_min ≥ 1e-3;
     next to the arm's straight pose the trigonometric form loses digits (errors up to ~4e-6 for
     σ_min in [1e-4, 1e-3) and ~7e-5 below, against the SVD on configurations near that pose:
-    tests/test_controllers.py) — all far below the 0.08 threshold it is compared with.
+    tests/core/test_controllers.py) — all far below the 0.08 threshold it is compared with.
     """
     if J.shape[0] != 3:
         return float(np.linalg.svd(J, compute_uv=False)[-1])

@@ -1,7 +1,7 @@
 """Fault scenarios against the real processes, each returning what it measured.
 
 Used by ``benchmarks/reliability/faults.py`` (which records the figures in
-docs/reliability.md) and by ``tests/test_reliability_faults.py`` (which asserts behaviour,
+docs/reliability.md) and by ``tests/integration/test_reliability_faults.py`` (which asserts behaviour,
 never timing). Latencies are measured with the publishers' own wall-clock stamps
 (``time.time()`` in the daemon's telemetry and status, in the sim's state): all processes run
 on one machine, so a latency is ``stamp of the first message showing the reaction −

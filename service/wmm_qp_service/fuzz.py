@@ -4,7 +4,7 @@
 truncations, bit flips, type swaps, NaN/inf, huge numbers and huge vectors, wrong vector
 lengths, missing and unknown fields, another robot's id or protocol version, another key's
 message — plus a few valid ones. :func:`fuzz_wire` throws them at a running stack over Zenoh
-(``benchmarks/reliability/fuzz.py``, ``tests/test_fuzz_wire.py``); the in-process tests feed
+(``benchmarks/reliability/fuzz.py``, ``tests/integration/test_fuzz_wire.py``); the in-process tests feed
 them straight to the validators and the :class:`~.daemon.ControlCore`.
 """
 

@@ -19,7 +19,7 @@ Two conservative skips keep the count exact at a fraction of the cost (a Gen3 st
   against obstacles, |Δt_base| + |Δψ|·R (R: the body's farthest reach from the base's z axis); a
   planar base does not move any body towards the floor. A distance is 1-Lipschitz in the motion
   of either body, so a pair within budget is at least the threshold apart: the count is exact
-  (``tests/test_sim_collision_budget.py`` holds it to a check of every pair at every step).
+  (``tests/sim/test_sim_collision_budget.py`` holds it to a check of every pair at every step).
 
 ``min_distance`` is the smallest distance computed, or the bounding spheres' gap of a skipped pair
 (every distance below the threshold is computed).

@@ -20,7 +20,7 @@ SOLVERS = available_solvers()
 
 def config() -> w.ControllerConfig:
     """The shipped controller config without the collision rows: these tests are about bounds (13),
-    the stages and strict priority (the collision rows have their own, tests/test_collision.py)."""
+    the stages and strict priority (the collision rows have their own, tests/core/test_collision.py)."""
     return _config().with_(collision={"enabled": False})
 
 
@@ -226,7 +226,7 @@ def test_unknown_solver_is_a_clear_error() -> None:
         qp("cplex")
 
 
-# 6 is tests/test_cli.py::test_verify_reports_zero_violations_for_every_qp_solver
+# 6 is tests/service/test_cli.py::test_verify_reports_zero_violations_for_every_qp_solver
 
 
 def test_the_problem_is_inspectable() -> None:

@@ -36,7 +36,7 @@ def model(name: str) -> w.WmmModel:
 
 def controller(name: str, task: str = "position", kind: str = "qp", **qp: object) -> w.Controller:
     """The shipped controller in the paper's setting, without collision rows (on by default; their
-    tests on every robot are in test_collision.py)."""
+    tests on every robot are in tests/core/test_collision.py)."""
     cfg = w.load_controller_config().with_(task={"kind": task}, qp=dict(qp) if qp else {},
                                            collision={"enabled": False})
     return w.make_controller(kind, model(name), cfg)

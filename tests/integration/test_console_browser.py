@@ -3,7 +3,7 @@ running, ``wmm-qp console`` attached; the page loads, its 3D canvas is not blank
 analysed), a mode button changes the daemon's mode (read back from its ``status``), and a move
 of the target gizmo through viser's own message streams setpoints that move the simulated EE.
 
-Screenshots: ``WMM_QP_CONSOLE_SHOTS=docs/img .venv/bin/pytest tests/test_console_browser.py``.
+Screenshots: ``WMM_QP_CONSOLE_SHOTS=docs/img .venv/bin/pytest tests/integration/test_console_browser.py``.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The real daemon and the real sim as processes on loopback, driven through the client API.
 
 No timing asserts: generous timeouts, figures checked only for correctness. The process
-faults (SIGKILL, restarts, SIGSTOP, floods, state loss) are in test_reliability_faults.py.
+faults (SIGKILL, restarts, SIGSTOP, floods, state loss) are in tests/integration/test_reliability_faults.py.
 """
 
 from __future__ import annotations
@@ -124,7 +124,7 @@ def test_stream_tracked_mode_change_smooth_and_malformed_rejected(service_stack:
 
 
 # Killing the sim / the daemon (safe stop, the sim's own stop, restarts): extended with
-# measured figures in tests/test_reliability_faults.py.
+# measured figures in tests/integration/test_reliability_faults.py.
 
 
 @pytest.mark.parametrize("base", ["diff_drive", "fixed"])

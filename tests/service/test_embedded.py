@@ -2,7 +2,7 @@
 (read → update → write, no transport), and every safety behaviour of the split processes in it:
 the state-age and stale-command watchdogs, a tick that overruns, faults and the manual resume,
 the operator lock, the fence and the collision rows, the referee judging each command as the
-robot received it. No Zenoh, no timing (the lease over Zenoh: test_integration_embedded.py)."""
+robot received it. No Zenoh, no timing (the lease over Zenoh: tests/integration/test_integration_embedded.py)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """``wmm-qp driver franka --embedded`` in process: the control core in libfranka's cycle, against a
 fake libfranka (a joint velocity interface that integrates what is written) and a fake clock.
-No robot, no Zenoh, no timing (franky-sim: test_demo_franka.py)."""
+No robot, no Zenoh, no timing (franky-sim: tests/integration/test_demo_franka.py)."""
 
 from __future__ import annotations
 

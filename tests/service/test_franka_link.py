@@ -1,7 +1,7 @@
 """libfranka's side of the Franka driver (``drivers/franka_link.py``) against a stand-in for
 pylibfranka that keeps libfranka's rules: one control at a time, recovery and a new control
 refused while one is held, the robot readable without one. (The real library against
-franky-sim: ``tests/test_franka_driver.py``.)"""
+franky-sim: ``tests/integration/test_franka_driver.py``.)"""
 
 from __future__ import annotations
 

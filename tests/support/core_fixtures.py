@@ -18,7 +18,7 @@ def robot() -> w.RobotConfig:
 def config() -> w.ControllerConfig:
     """The shipped controller config in the paper's setting: no collision rows (on by default).
     The core tests check the paper's equations and bounds (13); the rows' own tests turn them on
-    (test_collision.py)."""
+    (tests/core/test_collision.py)."""
     return w.load_controller_config().with_(collision={"enabled": False})
 
 

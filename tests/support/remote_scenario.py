@@ -1,4 +1,4 @@
-"""Run inside the console host's network namespace by tests/test_remote_netns.py: consoles
+"""Run inside the console host's network namespace by tests/integration/test_remote_netns.py: consoles
 reach two robot stacks through the router (TLS, the remote users' own credentials); prints one
 JSON line with what it saw. Usage, with tests/ on PYTHONPATH: python -m support.remote_scenario PREFIX
 OPERATOR_CFG VIEWER_CFG LOGDIR."""

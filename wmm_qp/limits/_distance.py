@@ -1,5 +1,5 @@
 """Compiled distances between primitives, for the collision rows' hot path (checked against coal
-in ``tests/test_collision.py``).
+in ``tests/core/test_collision.py``).
 
 A primitive is a segment [a, b] swept by a radius r (a sphere: a = b; a capsule), a box (centre c,
 rotation R, half extents h), or a plane (unit normal n, offset o: the half-space n·p ≤ o is free).

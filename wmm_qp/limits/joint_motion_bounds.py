@@ -23,7 +23,7 @@ by the state's age (transport, the robot's own step, a drive that ramps towards 
 it is the command of r ticks ago (r ≥ 2 over a transport). Where the braking bound is active,
 the acceleration bound wins, so each command could then drop only A·dt below the command of r
 ticks ago: the joint brakes at A/r, not A, and overshoots by far more than any latency margin
-covers (``tests/test_limits.py`` drives a joint into its limit both ways). The latency margin
+covers (``tests/core/test_limits.py`` drives a joint into its limit both ways). The latency margin
 covers the lag of the *position*.
 """
 

@@ -55,7 +55,7 @@ def convex_hull(mesh: coal.BVHModelBase) -> coal.ConvexBase:
     Not ``buildConvexRepresentation``: its Convex keeps every vertex of the mesh, the interior
     ones too, on which coal's GJK gives wrong distances that jump at sub-millimetre motion; on the
     hull of its vertices the distance is the vertices' own and continuous
-    (``tests/test_convex_hulls.py``)."""
+    (``tests/core/test_convex_hulls.py``)."""
     points = [np.asarray(mesh.vertex(i), dtype=float) for i in range(mesh.num_vertices)]
     return coal.Convex.convexHull(points, False, "Qt")
 

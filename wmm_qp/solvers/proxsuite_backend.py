@@ -6,7 +6,7 @@ benchmarks/collision/proxsuite_determinism.py):
 
 * eps_abs as configured (1e-9): on the hard collision QPs ProxQP reaches it on about half of
   them (the rest go to DAQP); 1e-6 would double that but leaves rows ~6e-7 out and the task
-  velocity ~2e-8 off (tests/test_collision.py, tests/test_qp.py).
+  velocity ~2e-8 off (tests/core/test_collision.py, tests/core/test_qp.py).
 * max_iter 30 (outer), max_iter_in 50 (inner, per outer one): a feasible QP here solves in < 30
   outer iterations; one without a solution (a state sampled inside an obstacle) ran 200 × 1500
   inner ones, seconds, before DAQP decided it. A cap reached is a failure: the controller
