@@ -1,6 +1,6 @@
 """Fault timing figures: sim/daemon SIGKILL and restart, setpoint flood, state loss/delay, SIGSTOP.
 
-    /work/venv/bin/python benchmarks/reliability/faults.py --rate 1000 --json --out benchmarks/reliability/faults.json
+    .venv/bin/python benchmarks/reliability/faults.py --rate 1000 --json --out benchmarks/reliability/faults.json
 
 Each scenario runs against the real processes (``wmm_qp_service.faults``); latencies come
 from the publishers' wall-clock stamps. See docs/reliability.md.

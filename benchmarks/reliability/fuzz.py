@@ -1,6 +1,6 @@
 """Wire fuzzing run: sim + daemon as processes, one client floods every key with hostile payloads.
 
-    /work/venv/bin/python benchmarks/reliability/fuzz.py --n 100000 --rate 4000 --loop-rate 1000 --json
+    .venv/bin/python benchmarks/reliability/fuzz.py --n 100000 --rate 4000 --loop-rate 1000 --json
 
 Prints (or writes as JSON) messages sent by key and kind, the daemon's rejections by reason
 and accepted messages during the flood, deadline misses and ticks during the flood, crashes

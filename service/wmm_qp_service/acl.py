@@ -8,13 +8,20 @@ holds (:data:`ROLES`):
 - its own secret if it connects anywhere (the daemon as ``controller``, ``operator``, ``viewer``),
   in ``<user>.secret``, which its config names as ``password: "file:<user>.secret"``;
 - if it listens, a dictionary with the secrets of exactly the users that connect to it (the sim:
-  controller, operator, viewer; the daemon: operator, viewer). The checking side needs the
-  password itself (zenoh has no hashed dictionary), so a listener is trusted with its clients'.
+  controller, operator, viewer; the daemon: operator, viewer; the embedded process: operator,
+  viewer). The checking side needs the password itself (zenoh has no hashed dictionary), so a
+  listener is trusted with its clients'.
 
 The sim connects nowhere, so the daemon sees no user name on its link to the sim: the daemon's
 ACL names the sim by that link's protocol, a unix socket in DIR (mode 0700) that the daemon
 dials — its only unix-socket link, since a config that trusts such links may not listen on one
 (:func:`check_listen_endpoints`).
+
+The embedded process (``wmm-qp sim --embedded``: the sim and the daemon's core in one process)
+takes the place of both. It connects nowhere — its core writes the command in memory, there is
+no sim to dial — so it has no secret and no unix socket: it listens for the operator and the
+viewer as the daemon does, and its ACL admits no ``cmd``, ``state`` or ``sim/truth`` from
+anyone. A folder is written for it with the others; run either the split pair or it.
 
 Nothing in the repository or the installed package is a working secret: the configs are
 templates naming credential files that only ``wmm-qp acl init DIR`` (:func:`init`) writes, with
@@ -77,6 +84,8 @@ class Role:
 ROLES: tuple[Role, ...] = (
     Role("sim", "acl_sim.json5", None, "sim_users.txt", ("controller", "operator", "viewer"), "wmm-qp sim"),
     Role("daemon", "acl_daemon.json5", "controller", "daemon_users.txt", ("operator", "viewer"), "wmm-qp serve"),
+    Role("embedded", "acl_embedded.json5", None, "embedded_users.txt", ("operator", "viewer"),
+         "wmm-qp sim --embedded"),
     Role("operator", "acl_operator.json5", "operator", None, (), "wmm-qp teleop"),
     Role("viewer", "acl_viewer.json5", "viewer", None, (), "wmm-qp status"),
 )

@@ -4,8 +4,9 @@
 truncations, bit flips, type swaps, NaN/inf, huge numbers and huge vectors, wrong vector
 lengths, missing and unknown fields, another robot's id or protocol version, another key's
 message — plus a few valid ones. :func:`fuzz_wire` throws them at a running stack over Zenoh
-(``benchmarks/reliability/fuzz.py``, ``tests/integration/test_fuzz_wire.py``); the in-process tests feed
-them straight to the validators and the :class:`~.daemon.ControlCore`.
+(``benchmarks/reliability/fuzz.py``, ``tests/integration/test_fuzz_wire.py``; at the embedded process with
+:data:`EMBEDDED_KEYS`, ``tests/integration/test_fuzz_wire_embedded.py``); the in-process tests feed them
+straight to the validators and the :class:`~.daemon.ControlCore`.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import functools
 import math
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -29,6 +30,11 @@ from .protocol import CommandMsg, ModeMsg, SetpointMsg, StateMsg
 KEYS = ("state", "setpoint", "mode", "cmd", "info")
 """The keys fuzzed: the daemon's subscriptions (state, setpoint, mode), its ``info``
 queryable (query payloads and parameters), and the sim's command subscription (cmd)."""
+
+EMBEDDED_KEYS = ("setpoint", "mode", "info")
+"""The keys of :data:`KEYS` an embedded process (``wmm-qp sim --embedded``) listens on: the
+core's setpoint and mode subscriptions and its ``info`` queryable. Its state and command never
+cross the wire (nothing subscribes ``state`` or ``cmd`` there)."""
 
 KINDS = ("garbage", "truncated", "bitflip", "type_swap", "non_finite", "huge", "huge_vector",
          "wrong_length", "missing_field", "extra_field", "wrong_robot", "wrong_version",
@@ -224,12 +230,13 @@ def _delta(a: dict[str, int], b: dict[str, int]) -> dict[str, int]:
 def fuzz_wire(client: Any, n: int, rate_hz: float = 4000.0, seed: int = 0,
               alive: Callable[[], int] | None = None, query_share: float = 0.01,
               progress: Callable[[int], None] | None = None,
-              robot: w.RobotConfig | None = None) -> FuzzReport:
+              robot: w.RobotConfig | None = None, keys: Sequence[str] = KEYS) -> FuzzReport:
     """Throw ``n`` hostile payloads at a running stack through ``client`` (a :class:`~.client.Client`).
 
-    Keys are drawn uniformly from :data:`KEYS` (``info``: a query with a hostile payload and
-    parameters, drawn with probability ``query_share`` instead). Paced at ``rate_hz`` so the
-    daemon's depth-1 ring channels see most messages instead of overwriting them.
+    Keys are drawn uniformly from ``keys`` (``info``: a query with a hostile payload and
+    parameters, drawn with probability ``query_share`` instead, if ``keys`` holds it). Paced at
+    ``rate_hz`` so the daemon's depth-1 ring channels see most messages instead of overwriting
+    them.
 
     Args:
         client: an open client of the stack.
@@ -240,17 +247,20 @@ def fuzz_wire(client: Any, n: int, rate_hz: float = 4000.0, seed: int = 0,
         query_share: share of the messages that are ``info`` queries.
         progress: called every 10,000 messages with the count sent.
         robot: the stack's robot description (the valid templates' sizes); None: the default.
+        keys: the keys fuzzed, of :data:`KEYS`, one besides ``info`` at least (an embedded
+            process: :data:`EMBEDDED_KEYS`).
     """
+    puts = [k for k in keys if k != "info"]
+    queries = query_share if "info" in keys else 0.0
     mut = Mutator(client.svc.robot, seed, robot)
     rep = FuzzReport()
     before = client.wait_for_daemon(10.0)
     n_alive = alive() if alive is not None else 0
-    keys = [k for k in KEYS if k != "info"]
     session = client.session
     period = 1.0 / rate_hz
     t0 = time.perf_counter()
     for i in range(n):
-        if mut.rng.random() < query_share:
+        if mut.rng.random() < queries:
             payload, kind = mut.payload("info")
             params = mut.rng.bytes(int(mut.rng.integers(0, 40))).decode("latin-1")
             # a hostile selector may be refused by zenoh itself: that is not a crash
@@ -258,7 +268,7 @@ def fuzz_wire(client: Any, n: int, rate_hz: float = 4000.0, seed: int = 0,
                 session.get(f"{client.keys.info}?{params}", payload=payload, timeout=0.001)
             key = "info"
         else:
-            key = keys[int(mut.rng.integers(len(keys)))]
+            key = puts[int(mut.rng.integers(len(puts)))]
             payload, kind = mut.payload(key)
             client.put_raw(key, payload)
         rep.sent += 1

@@ -1,4 +1,4 @@
-"""The referee's collision check: the distance of every monitored pair, every step (issue 13).
+"""The referee's collision check: the distance of every monitored pair, every step (docs/model.md, "Collisions").
 
 Independent of the controller's rows (``wmm_qp.limits.collision``): the same bodies and pairs (the
 robot description's), but placed by Pinocchio's own geometry pipeline (``updateGeometryPlacements``

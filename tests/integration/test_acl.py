@@ -27,14 +27,15 @@ from wmm_qp_service.client import Client
 from wmm_qp_service.config import ServiceConfig, load_service_config
 from wmm_qp_service.keys import Keys
 from wmm_qp_service.processes import isolated_config
-from wmm_qp_service.transport import ROLE_CLIENT, ROLE_DAEMON, ROLE_SIM, session_config
+from wmm_qp_service.transport import ROLE_CLIENT, ROLE_DAEMON, ROLE_EMBEDDED, ROLE_SIM, session_config
 
 from wmm_qp import ConfigError, default_config_dir
 
 ZENOH_DIR = default_config_dir() / "zenoh"
 TEMPLATES = sorted(ZENOH_DIR.glob("acl_*.json5"))
 FOLDERS = [r.folder for r in acl.ROLES]
-ROLE_OF = {"sim": ROLE_SIM, "daemon": ROLE_DAEMON, "operator": ROLE_CLIENT, "viewer": ROLE_CLIENT}
+ROLE_OF = {"sim": ROLE_SIM, "daemon": ROLE_DAEMON, "embedded": ROLE_EMBEDDED, "operator": ROLE_CLIENT,
+           "viewer": ROLE_CLIENT}
 TIMEOUT = 30.0
 WAIT = 10.0  # [s] patience for a link, a declaration or a message that must arrive
 
@@ -99,7 +100,7 @@ def test_acl_init_gives_each_role_only_its_own_credentials(creds: Path) -> None:
     assert {p.name for p in (creds / "viewer").iterdir()} == {"acl_viewer.json5", "viewer.secret"}
 
 
-@pytest.mark.parametrize("folder", ["sim", "daemon"])
+@pytest.mark.parametrize("folder", ["sim", "daemon", "embedded"])
 def test_a_listener_admits_exactly_the_users_its_acl_names(creds: Path, folder: str) -> None:
     """A user in the dictionary but not in the ACL could connect (default deny, but still); one in
     the ACL but not in the dictionary could not connect at all."""

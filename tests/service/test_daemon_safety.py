@@ -77,6 +77,37 @@ def test_a_second_sim_instance_is_a_fault_not_mixed(robot: w.RobotConfig) -> Non
     assert core.faults["second state source"] >= 1  # reported all the same
 
 
+def test_a_second_source_is_reported_even_while_the_daemon_is_already_in_a_safe_stop(
+        robot: w.RobotConfig) -> None:
+    """The latched robot is in its own protective stop (the daemon's stream broken, in a safe
+    stop), then another robot's states arrive on the key: the status counts the second source
+    and names it, though the daemon was already stopped for another reason (under a state flood
+    on a loaded host the daemon was already stopped and the twin was never reported)."""
+    core, plant = make(robot)
+    other = Plant(core.model)
+    other.instance = "sim-B"
+    t = 0.0
+    for _ in range(20):
+        core.on_state(plant.msg(), t)
+        tick(core, plant, t)
+        t += DT
+    plant.protective_stops = 1
+    for _ in range(20):  # the latched robot stops itself (its firmware's protective stop)
+        core.on_state(plant.msg(protective_stop=True, protective_reason="bumper"), t)
+        cmd = tick(core, plant, t)
+        t += DT
+    assert core.safe and "second state source" not in core.faults, core.faults
+    for k in range(40):  # and now another robot publishes on the key too
+        if k % 2:
+            core.on_state(plant.msg(protective_stop=True, protective_reason="bumper"), t)
+        else:
+            assert not core.on_state(other.msg(), t)
+        cmd = tick(core, plant, t)
+        t += DT
+    assert cmd.status == w.Status.SAFE_STOP
+    assert core.faults["second state source"] == 1  # once, as it appeared
+
+
 def test_a_restarted_sim_is_latched_after_the_old_one_fell_silent(robot: w.RobotConfig) -> None:
     core, plant = make(robot)
     t = 0.0

@@ -1,4 +1,4 @@
-"""Performance benchmarks behind ``wmm-qp bench`` (issue 6): one module per section.
+"""Performance benchmarks behind ``wmm-qp bench`` (docs/benchmarks.md): one module per section.
 
 * :mod:`.controller` — per-tick controller time per solver and mode, with a breakdown;
 * :mod:`.oneshot` — qpsolvers' one-shot API versus our persistent workspaces;

@@ -2,8 +2,9 @@
 
 Run as a script with ``PYTHONPATH`` (and the working directory) set to one source tree, so that it
 imports *that* tree's ``wmm_qp`` and reads its ``configs/``; it imports nothing else of this
-package and uses only what every version of ``wmm_qp`` since issue 6 has (the default robot, the
-default controller config, ``make_controller``, ``warm_up``, ``RobotState``, ``Reference``).
+package and uses only what every version of ``wmm_qp`` since the compiled hot path (``59f50a6``) has
+(the default robot, the default controller config, ``make_controller``, ``warm_up``, ``RobotState``,
+``Reference``).
 
     python -P _tick_worker.py SOLVER
 

@@ -163,12 +163,12 @@ def run_case(
         stack.start()
         with Client(svc, name="bench-e2e", telemetry=True) as c:
             try:
-                info = c.wait_ready(STARTUP_TIMEOUT, state_timeout=STARTUP_TIMEOUT)
-            except NotReady:
-                info = None
-            st = c.wait_truth(5.0) if info is not None else None
-            if info is None or st is None:
-                return out | {"available": False, "reason": f"the stack did not come up (logs: {log_dir})"}
+                info = c.wait_ready(STARTUP_TIMEOUT, state_timeout=STARTUP_TIMEOUT, exited=stack.exited)
+            except NotReady as e:
+                return out | {"available": False, "reason": f"the stack did not come up: {e} (logs: {log_dir})"}
+            st = c.wait_truth(5.0)
+            if st is None:
+                return out | {"available": False, "reason": f"the sim sent no evaluation data (logs: {log_dir})"}
             out["controller"] = info.config.get("controller", {}).get("kind")
             out["solver"] = info.config.get("controller", {}).get("solver")
             from ..experiments.realtime import Recorder

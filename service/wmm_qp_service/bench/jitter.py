@@ -1,4 +1,4 @@
-"""The machine's floor under the loop's figures (issue 15): the daemon's fixed-rate loop with no
+"""The machine's floor under the loop's figures (docs/benchmarks.md §5.3): the daemon's fixed-rate loop with no
 work at all.
 
 A :class:`~wmm_qp_service.rate_loop.RateLoop` at 500 Hz and at 1 kHz (the e2e section's rates),

@@ -15,11 +15,13 @@ Example::
         tr = c.latest_truth()                        # the sim's last ground truth, referee (or None)
 
 :class:`Client` (:mod:`.client`) is a :class:`~.reader.Reader` (the streams and the daemon's
-queries) that also commands; :func:`robot_id` (:mod:`.robot_id`) says which robot it talks to.
+queries) that also commands; :func:`robot_id` (:mod:`.robot_id`) says which robot it talks to;
+:class:`NotReady` is the wait's one failure (:mod:`..readiness`, the wait itself).
 """
 
+from ..readiness import NotReady
 from .client import FOLLOWING, Client
-from .reader import NotReady, Reader
+from .reader import Reader
 from .robot_id import robot_id
 
 __all__ = ["FOLLOWING", "Client", "NotReady", "Reader", "robot_id"]

@@ -8,35 +8,15 @@ from __future__ import annotations
 
 import contextlib
 import time
+from collections.abc import Callable
 
 import msgspec
 import zenoh
 
-from wmm_qp.exceptions import WmmQpError
-
 from ..config import ServiceConfig
 from ..keys import Keys
 from ..protocol import InfoMsg, StateMsg, StatusMsg, TelemetryMsg, TruthMsg
-
-STATE_POLL = 0.1  # [s] between two ``info`` queries while the daemon waits for a valid state
-
-
-class NotReady(WmmQpError):
-    """The daemon did not answer, or answered without a valid state from its robot, in time.
-
-    Attributes:
-        robot: ``<prefix>/<robot>`` of the daemon waited for.
-        info: the daemon's last answer (its status's ``state_ok`` false); None: it never answered.
-        waited: [s] how long :meth:`Reader.wait_ready` waited.
-        reason: what was missing, e.g. "no daemon for robot … (…); daemons seen: none".
-    """
-
-    def __init__(self, robot: str, info: InfoMsg | None, waited: float, reason: str) -> None:
-        self.robot = robot
-        self.info = info
-        self.waited = waited
-        self.reason = reason
-        super().__init__(f"not ready after {waited:.1f} s: {reason}")
+from ..readiness import wait_ready
 
 
 class Reader:
@@ -123,40 +103,37 @@ class Reader:
             time.sleep(0.05)
         return None
 
-    def wait_ready(self, timeout: float = 90.0, state_timeout: float | None = None) -> InfoMsg:
-        """Wait until the daemon answers and has a valid state from its robot (``status.state_ok``).
+    def wait_ready(self, timeout: float = 90.0, state_timeout: float | None = None, *,
+                   exited: Callable[[], str | None] | None = None,
+                   say: Callable[[str], None] | None = None) -> InfoMsg:
+        """Wait until the daemon is up and has a valid state from its robot (``status.state_ok``):
+        :func:`~..readiness.wait_ready` with this client.
 
         Args:
-            timeout: [s] for the daemon to answer (:meth:`wait_for_daemon`; a first start
-                compiles its kernels, tens of seconds).
-            state_timeout: [s] from its first answer, for its state to be valid (the robot's
-                first states); None: within ``timeout``, counted from the call. A query that
-                goes unanswered meanwhile is asked again.
+            timeout: [s] from the call, for the daemon's liveliness token (a first start compiles
+                its kernels, tens of seconds); with ``exited``, for the sim's and the daemon's.
+            state_timeout: [s] from then, for its state to be valid (the robot's first states);
+                None: within ``timeout``, counted from the call. A query that goes unanswered
+                meanwhile is asked again.
+            exited: for a program that started the processes (e.g. ``Stack.exited``): the reason
+                one of them is gone, None while all run; a process that exits ends the wait at once.
+            say: progress (what is being waited for), a few times a second.
 
         Returns:
             The daemon's info, its status's ``state_ok`` true.
 
         Raises:
-            NotReady: no daemon answered within ``timeout`` (``info`` None, the reason
-                :meth:`no_daemon_reason`'s), or its state was not valid within
-                ``state_timeout`` (``info`` its last answer).
+            NotReady: no daemon came up within ``timeout`` (``info`` None; without ``exited`` the
+                reason is :meth:`no_daemon_reason`'s), its state was not valid within
+                ``state_timeout`` (``info`` its last answer), or (with ``exited``) a process
+                exited or did not come up.
         """
-        t0 = time.monotonic()
-        info = self.wait_for_daemon(timeout)
-        if info is None:
-            raise NotReady(self.keys.root, None, time.monotonic() - t0, self.no_daemon_reason())
-        end = t0 + timeout if state_timeout is None else time.monotonic() + state_timeout
-        last = info
-        while not (info is not None and info.status.state_ok):
-            if time.monotonic() >= end:
-                st = last.status
-                why = (f"the daemon of robot {self.keys.root} has no valid state from its robot (robot alive: "
-                       f"{'yes' if st.sim_alive else 'no'}; last fault: {st.last_fault or 'none'})")
-                raise NotReady(self.keys.root, last, time.monotonic() - t0, why)
-            time.sleep(STATE_POLL)
-            info = self.info(timeout=min(2.0, max(0.1, end - time.monotonic())))
-            last = info if info is not None else last
-        return info
+        if exited is not None:
+            return wait_ready(self, exited, timeout=timeout, state_timeout=state_timeout, robot=self.keys.root,
+                              say=say)
+        return wait_ready(self, timeout=timeout, state_timeout=state_timeout, robot=self.keys.root,
+                          tokens=lambda t: ["daemon"] if self.daemon_alive(t) else [],
+                          absent=self.no_daemon_reason, say=say)
 
     # ------------------------------------------------------------------ the robot's streams
     def latest_state(self) -> StateMsg | None:

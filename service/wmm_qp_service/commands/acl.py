@@ -10,11 +10,13 @@ HELP = "write per-role Zenoh credentials with fresh secrets and their ACL config
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="acl_command", metavar="ACTION", required=True)
-    p = sub.add_parser("init", help="write DIR/{sim,daemon,operator,viewer}/: each role's config and "
+    p = sub.add_parser("init", help="write DIR/{sim,daemon,embedded,operator,viewer}/: each role's config and "
                                     "only its own credentials (random secrets, files 0600)",
-                       description="Write DIR/{sim,daemon,operator,viewer}/: each role's Zenoh config "
+                       description="Write DIR/{sim,daemon,embedded,operator,viewer}/: each role's Zenoh config "
                                    "(from configs/zenoh/acl_*.json5) and only its own credentials "
-                                   "(random secrets, files 0600, folders 0700). Never overwrites.")
+                                   "(random secrets, files 0600, folders 0700); embedded is the one "
+                                   "process of wmm-qp sim --embedded, in place of the sim and the daemon. "
+                                   "Never overwrites.")
     p.add_argument("dir", type=Path, metavar="DIR", help="a new (or empty) folder")
     p.add_argument("--templates", type=Path, metavar="FOLDER",
                    help="folder of the acl_*.json5 templates (default: configs/zenoh)")
@@ -30,7 +32,11 @@ def run(args: argparse.Namespace) -> int:
         files = ", ".join(p.name for p in written[r.folder])
         holds = f"  (checks {', '.join(r.admits)})" if r.admits else ""
         print(f"  {r.folder + '/':10} {files}{holds}")
+    run = {r.folder: f"  {r.command} --zenoh-config {root / r.folder / r.config}" for r in ROLES}
     print(f"the sim and the daemon share {root / SIM_SOCKET} (the sim creates it); run:")
-    for r in ROLES:
-        print(f"  {r.command} --zenoh-config {root / r.folder / r.config}")
+    print("\n".join(run.pop(f) for f in ("sim", "daemon")))
+    print("or, in their place, the one embedded process:")
+    print(run.pop("embedded"))
+    print("and the clients:")
+    print("\n".join(run.values()))
     return 0

@@ -1,6 +1,6 @@
 """``wmm-qp bench``: per-tick controller time, one-shot vs persistent QPs, the pink race,
 scaling with the number of joints, every shipped robot × task kind × solver, and the loop over
-Zenoh (issues 6 and 12, docs/benchmarks.md).
+Zenoh (docs/benchmarks.md).
 
 ``--robot-config FILE`` picks the robot of every section but ``robots`` (which loops over the
 shipped robot files); ``--task KIND`` overrides the controller config's task kind (not in

@@ -221,18 +221,18 @@ def _drive(svc: Any, duration: float, bar: ProgressLine, exited: Any = lambda: N
     """The scenario against a started stack (None: the daemon stopped answering at the end).
 
     Raises:
-        NotReady: the stack did not come up (:func:`~..readiness.wait_ready`; ``exited`` names a
+        NotReady: the stack did not come up (:meth:`~..client.Reader.wait_ready`; ``exited`` names a
             started process that ended).
     """
     import numpy as np
 
     from ..client import Client
-    from ..readiness import wait_ready
+    from ..readiness import START_TIMEOUT, STATE_TIMEOUT
     from ..teleop import hold_stream, stream_circle, stream_haptic, wait
 
     scale = duration / sum(d for _, d in PHASES)
     with Client(svc, name="demo", telemetry=True) as c:
-        info = wait_ready(c, exited, say=bar.update)
+        info = c.wait_ready(START_TIMEOUT, STATE_TIMEOUT, exited=exited, say=bar.update)
         if on_ready is not None:
             on_ready()
         ee_err: list[float] = []

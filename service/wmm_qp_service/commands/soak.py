@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
     from ..bench.machine import CPU_HOW, CpuMeter
     from ..client import Client
     from ..processes import Stack, isolated_config, log_folder
-    from ..readiness import NotReady, wait_ready
+    from ..readiness import START_TIMEOUT, STATE_TIMEOUT, NotReady
     from ..teleop import stream_circle, stream_haptic
 
     robot = load_robot(args)  # a bad file: one line, exit 2, before anything starts
@@ -91,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
         stack.start()
         with Client(svc, name="soak") as c:
             try:
-                info = wait_ready(c, stack.exited, say=bar.update)
+                info = c.wait_ready(START_TIMEOUT, STATE_TIMEOUT, exited=stack.exited, say=bar.update)
             except NotReady as e:
                 return _no_stack(out, stack, log_dir, args.json, f"the stack did not come up: {e}")
             up = True

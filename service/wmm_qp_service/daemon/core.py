@@ -35,7 +35,7 @@ from .inputs import CoreInputs
 from .obstacles import LiveObstacles
 from .setpoints import Setpoints
 from .state_gate import Latch, StateGate
-from .watchdog import FaultRecord, hazard, say
+from .watchdog import FaultRecord, hazard, say, second_source
 
 
 class ControlCore(CoreInputs):
@@ -130,8 +130,13 @@ class ControlCore(CoreInputs):
         The first state latches the robot's instance (:class:`~.state_gate.StateGate`); a
         restarted robot is latched as a new one (a fault), with its rates and ages anew.
         """
+        seen = self.gate.foreign_time
         latch = self.gate.latch(msg.instance, now, self.state_time)
         if latch is Latch.REFUSED:
+            # recorded as it appears, whatever the daemon is doing (already in a safe stop, its
+            # stream broken): the status names the second robot; the tick's hazard holds the stop
+            if now - seen > self.svc.watchdog.state_timeout:
+                self._fault(second_source(self.gate))
             return False
         if latch is Latch.NEW:
             if self.gate.previous:

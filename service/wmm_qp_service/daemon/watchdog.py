@@ -102,13 +102,19 @@ class FaultRecord:
         self.event_until = until
 
 
+def second_source(gate: StateGate) -> str:
+    """The fault of a second robot's states on the key (the gate's last foreign instance)."""
+    return (f"second state source (sim instance {gate.foreign} on the key besides the latched "
+            f"{gate.instance}: two robots under one id)")
+
+
 def hazard(wd: WatchdogConfig, now: float, state_time: float, gate: StateGate, protective: str,
            round_trip: float, faults: FaultRecord) -> str | None:
     """The fault that forces a safe stop now, or None.
 
-    Conditions: no valid state for ``state_timeout`` (or the sim's token vanished); a second
-    sim instance on the key within ``state_timeout``; the sim's firmware in a protective
-    stop; the state older than ``state_age_max`` (round trip); and, for ``state_timeout``
+    Conditions, the first that holds named: a second sim instance on the key within
+    ``state_timeout``; no valid state for ``state_timeout`` (or the sim's token vanished); the
+    sim's firmware in a protective stop; the state older than ``state_age_max`` (round trip); and, for ``state_timeout``
     after it happened, a rise of the sim's violation counts.
 
     Args:
@@ -120,11 +126,12 @@ def hazard(wd: WatchdogConfig, now: float, state_time: float, gate: StateGate, p
         round_trip: [s] the median state-age bound over :data:`ROUND_TRIPS` states (NaN: not yet).
         faults: the record (its event fault).
     """
+    # the second source first: a flood of another robot's states on the key also starves the
+    # latched one, and "state stale" would hide the cause the operator must remove
+    if now - gate.foreign_time <= wd.state_timeout:
+        return second_source(gate)
     if now - state_time > wd.state_timeout:
         return f"state stale (none valid for > {wd.state_timeout * 1e3:.0f} ms)"
-    if now - gate.foreign_time <= wd.state_timeout:
-        return (f"second state source (sim instance {gate.foreign} on the key besides the latched "
-                f"{gate.instance}: two robots under one id)")
     if protective:
         return f"sim protective stop ({protective})"
     if round_trip > wd.state_age_max:

@@ -70,7 +70,7 @@ def run_circle(
 
 
 def circle_metrics(trace: Trace) -> dict[str, Any]:
-    """Table I and Figs. 5–6 metrics (JSON keys of issue 5).
+    """Table I and Figs. 5–6 metrics (the JSON keys of ``wmm-qp experiment circle --json``).
 
     - ``base_velocity``: max |·| and RMS of the commanded body twist (vx, vy [m/s], wz [rad/s]).
     - ``ee_error_max``: max |x_d − x_true| in x and y [m] (ground truth EE).

@@ -71,7 +71,8 @@ def cartesian_end(duration: float) -> float:
 
 
 def dm_metrics(trace: Trace, setup: Setup, direction: str) -> dict[str, Any]:
-    """Fig. 9 metrics (JSON keys of issue 5); the switch is the null-space phase's first tick.
+    """Fig. 9 metrics (the JSON keys of ``wmm-qp experiment dm --json``); the switch is the null-space
+    phase's first tick.
 
     - ``dm_start``, ``dm_after_cartesian``, ``dm_final``: H2 along u (true joint angles).
     - ``z_after_cartesian``: [m] true EE height at the end of the Cartesian phase.

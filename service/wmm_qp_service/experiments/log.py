@@ -3,7 +3,8 @@
 The columns depend on the robot only through its sizes: one ``q``, ``qd_cmd`` and ``tau`` column
 per arm joint (numbered from 1, in the order of the robot file's ``arm.joints``), one
 ``wheel_cmd`` column per wheel (the base kind's wheel order, docs/robots.md; none for a fixed
-base). For the Gen3 on its Mecanum base these are issue 5's columns.
+base). For the Gen3 on its Mecanum base (7 joints, 4 wheels) these are the columns the log had
+when it knew one robot only.
 """
 
 from __future__ import annotations

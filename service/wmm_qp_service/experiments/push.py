@@ -134,7 +134,8 @@ def run_push(
 
 
 def push_metrics(setup: Setup, trace: Trace) -> dict[str, Any]:
-    """Fig. 8 metrics of one run, from its push phase's first tick on (JSON keys of issue 5).
+    """Fig. 8 metrics of one run, from its push phase's first tick on (the JSON keys of
+    ``wmm-qp experiment push --json``).
 
     ``max_weighted_torque_norm`` is max_t ‖W τ(t)‖ [N·m] with the W of eq. (8);
     ``saturated_joint`` the 0-based index of the first joint that stalled the push (null if none);

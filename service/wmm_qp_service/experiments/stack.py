@@ -19,7 +19,7 @@ from ..processes import Stack, isolated_config
 from .recorder import Recorder
 from .setup import Setup
 
-STARTUP_TIMEOUT = 60.0  # [s] for the daemon to answer with a valid state
+STARTUP_TIMEOUT = 60.0  # [s] for the sim and the daemon to come up and the daemon to have a valid state
 
 
 class RealtimeError(WmmQpError):
@@ -83,7 +83,8 @@ def on_stack(opts: StackOptions, drive: Callable[[Client, Recorder], Any]) -> tu
         (what ``drive`` returned, the closed recorder, the service-side figures).
 
     Raises:
-        RealtimeError: they did not come up within ``STARTUP_TIMEOUT`` (the message names the logs).
+        RealtimeError: they did not come up within ``STARTUP_TIMEOUT``, or one exited first (the
+            message names the process, why, and the logs).
     """
     svc = isolated_config(robot=opts.robot)
     daemon_args = ["--controller", opts.controller, *(["--solver", opts.solver] if opts.solver else []),
@@ -99,9 +100,9 @@ def on_stack(opts: StackOptions, drive: Callable[[Client, Recorder], Any]) -> tu
         stack.start()
         with Client(svc, name="experiment", telemetry=True) as c:
             try:
-                c.wait_ready(STARTUP_TIMEOUT)
+                c.wait_ready(STARTUP_TIMEOUT, exited=stack.exited)
             except NotReady as e:
-                raise RealtimeError(f"the daemon or the sim did not come up (logs: {opts.log_dir})") from e
+                raise RealtimeError(f"the stack did not come up: {e} (logs: {opts.log_dir})") from e
             rec = Recorder(c).open()
             c.telemetry()  # start from here
             info0 = c.info()

@@ -1,7 +1,7 @@
 """One e2e case with the daemon pinned to CPU 1 and the sim to CPU 0 (``taskset -a -cp``), or not
 (docs/benchmarks.md §5.3).
 
-    python benchmarks/issue15/pinning.py none|pin rate|state TICKS
+    python benchmarks/loop/pinning.py none|pin rate|state TICKS
 """
 
 import subprocess
