@@ -1,7 +1,7 @@
 """Prove that a change left docs/results.md's figures alone: its deterministic runs in two trees, JSON compared.
 
     python benchmarks/refactor/same_results.py --before DIR --after DIR [--only NAME ...] [--out F.json]
-        [--jobs 2] [--recheck 2] [--timeout S] [--fail-fast] [--list]
+        [--jobs 2] [--recheck 2] [--timeout S] [--fail-fast] [--solver NAME] [--list]
 
 Runs every command of :data:`results_runs.RUNS` (docs/results.md's in-process runs, ``--list``
 prints them; ``--only`` takes names or shell patterns such as ``circle_*``) once in each tree and
@@ -42,6 +42,7 @@ every command (verdict ``RUNNING`` until the end), so that a run cut short leave
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import fnmatch
 import json
 import os
@@ -335,6 +336,19 @@ def write_report(path: Path, trees: dict[str, Tree], runs: list[Run], verdicts: 
     tmp.replace(path)
 
 
+def on_solver(run: Run, solver: str) -> Run:
+    """``run`` on ``solver``: its ``--solver`` replaced, or added to an experiment or verify command
+    (the others, which take no solver, unchanged)."""
+    argv = list(run.argv)
+    if "--solver" in argv:
+        argv[argv.index("--solver") + 1] = solver
+    elif argv[:2] in (["wmm-qp", "experiment"], ["wmm-qp", "verify"]):
+        argv += ["--solver", solver]
+    else:
+        return run
+    return dataclasses.replace(run, name=f"{run.name}@{solver}", argv=tuple(argv))
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="same_results.py", description=__doc__.split("\n\n")[0])
     ap.add_argument("--before", type=Path, help="the tree before the change (a git worktree)")
@@ -347,10 +361,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--recheck", type=int, default=2, metavar="N",
                     help="run each command that differs N more times in the before tree, to tell run-to-run "
                          "noise from the change (default 2)")  # fmt: skip
+    ap.add_argument("--solver", metavar="NAME", default=None,
+                    help="run every experiment and verify command on this QP solver (e.g. daqp, which repeats "
+                         "itself to the bit: the runs that are noisy on the shipped solver compared exactly)")
     ap.add_argument("--list", action="store_true", help="print the runs and the excluded ones, run nothing")
     args = ap.parse_args(argv)
     try:
         runs = select(args.only)
+        if args.solver is not None:
+            runs = [on_solver(r, args.solver) for r in runs]
         if args.list:
             for r in runs:
                 print(f"{r.name:42s} {r.section:5s} {r.command()}" + (f"  [{r.note}]" if r.note else ""))
