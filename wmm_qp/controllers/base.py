@@ -40,6 +40,7 @@ class TickContext:
     lo: FloatArray  # bounds on v = [v_b; v_m]: wheel bounds, then eq. (13)
     hi: FloatArray
     n_wheels: int
+    v_prev: FloatArray  # [v_b; v_m] the bounds' centre: the rates the robot executes next
 
     @property
     def wheel_lo(self) -> FloatArray:
@@ -269,10 +270,8 @@ class Controller(ABC):
             dm, grad_q = directional_manipulability(kin.J_arm, u, W), None  # eq. (8)
         sig = sigma_min(kin.J_m[:3] if self.pose else kin.J_m)  # the arm's translational σ_min: the DLS law's
         wheels = self._rest_wheels if state.wheel_speeds is AT_REST else state.wheel_speeds
-        lo, hi = self.bounds(
-            np.concatenate((self._no_wheel_q, state.q_arm)),
-            np.concatenate((wheels, state.v_arm)),
-        )  # eq. (13) and the wheel bounds
+        v_prev = np.concatenate((wheels, state.v_arm))
+        lo, hi = self.bounds(np.concatenate((self._no_wheel_q, state.q_arm)), v_prev)  # eq. (13), the wheel bounds
         return TickContext(
             kin=kin,
             u=u,
@@ -283,6 +282,7 @@ class Controller(ABC):
             lo=lo,
             hi=hi,
             n_wheels=self.n_wheels,
+            v_prev=v_prev,
         )
 
     def task_velocity(self, ctx: TickContext, reference: Reference) -> FloatArray:

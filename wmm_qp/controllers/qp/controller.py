@@ -38,7 +38,7 @@ from ...limits.singularity_floor import SigmaMinFloor
 from ...model.collision import robot_geometry
 from ...model.wmm import WmmModel
 from ...scene import Scene
-from ...types import AT_REST, Command, Mode, Reference, RobotState, Status
+from ...types import Command, Mode, Reference, RobotState, Status
 from ..base import TickContext
 from .cascade import SLACK_ACCEPT, SolveCascade
 from .kernels import EE_BOX_TOL, NO_REF, _hold_ee_box, task_residual
@@ -82,6 +82,7 @@ class QpController(QpStages, SolveCascade):
             self.row_sources += [self.collision, self.fence]
         self.row_sources.append(SigmaMinFloor(config.sigma_min_floor, config.state_latency))
         self.last_rows: Rows | None = None  # the dampers' rows of the last tick
+        self._no_rows = StageRows([], self.n_v)  # a tick without rows (read only, shared)
 
     def warm_up(self, q_arm: FloatArray | None = None) -> None:
         """:meth:`Controller.warm_up`, then, with collision rows, every mode once more among
@@ -144,10 +145,9 @@ class QpController(QpStages, SolveCascade):
     # ------------------------------------------------------------------ the tick
     def stage_rows(self, ctx: TickContext, state: RobotState, mode: Mode) -> StageRows:
         """Every source's rows this tick, stacked (the dampers pooled: ``last_rows``)."""
-        wheels = self._rest_wheels if state.wheel_speeds is AT_REST else state.wheel_speeds
-        v_prev = np.concatenate((wheels, state.v_arm))  # the bounds' centre (the daemon's last command)
-        tick = Tick(mode, ctx.kin, v_prev, ctx.lo, ctx.hi)
-        rows = StageRows([(s, s.compute_rows(tick)) for s in self.row_sources], self.n_v)
+        tick = Tick(mode, ctx.kin, ctx.v_prev, ctx.lo, ctx.hi)  # centred on the daemon's last command
+        parts = [(s, r) for s in self.row_sources if (r := s.compute_rows(tick)) is not None]
+        rows = StageRows(parts, self.n_v) if parts else self._no_rows  # most ticks of a free robot: none
         self.last_rows = rows.dampers
         return rows
 

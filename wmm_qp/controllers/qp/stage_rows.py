@@ -10,6 +10,7 @@ at the first damper source's place: relaxed together, reported together.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,7 +37,7 @@ class StageRows:
         n_v: the length of v = [v_b; v_m].
     """
 
-    def __init__(self, parts: list[tuple[RowSource, Rows | None]], n_v: int) -> None:
+    def __init__(self, parts: Sequence[tuple[RowSource, Rows | None]], n_v: int) -> None:
         self.n_v = n_v
         groups: list[RowGroup | None] = []
         dampers: list[Rows] = []
