@@ -13,7 +13,7 @@ import math
 import shutil
 import subprocess
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 import pytest
 import zenoh
+from support.zenoh_acl import config_value, peers, until
 from wmm_qp_service import acl
 from wmm_qp_service.cli import main as cli_main
 from wmm_qp_service.client import Client
@@ -38,19 +39,6 @@ ROLE_OF = {"sim": ROLE_SIM, "daemon": ROLE_DAEMON, "embedded": ROLE_EMBEDDED, "o
            "viewer": ROLE_CLIENT}
 TIMEOUT = 30.0
 WAIT = 10.0  # [s] patience for a link, a declaration or a message that must arrive
-
-
-def _get(zc: zenoh.Config, key: str) -> Any:
-    return json.loads(zc.get_json(key))
-
-
-def _until(pred: Callable[[], Any], timeout: float = TIMEOUT, what: str = "condition") -> Any:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if v := pred():
-            return v
-        time.sleep(0.02)
-    raise AssertionError(f"{what} not met within {timeout} s")
 
 
 @pytest.fixture(scope="module")
@@ -106,7 +94,7 @@ def test_a_listener_admits_exactly_the_users_its_acl_names(creds: Path, folder: 
     the ACL but not in the dictionary could not connect at all."""
     role = next(r for r in acl.ROLES if r.folder == folder)
     zc = session_config(_cfg(load_service_config(), creds, folder), ROLE_OF[folder])
-    named = {u for s in _get(zc, "access_control")["subjects"] for u in s.get("usernames") or []}
+    named = {u for s in config_value(zc, "access_control")["subjects"] for u in s.get("usernames") or []}
     assert named == set(role.admits)
 
 
@@ -201,34 +189,34 @@ CASES = [(None, r) for r in (ROLE_DAEMON, ROLE_SIM, ROLE_CLIENT)] + [(f, ROLE_OF
 def test_sessions_bind_loopback_only_and_do_not_scout(creds: Path, folder: str | None, role: str) -> None:
     svc = load_service_config() if folder is None else _cfg(load_service_config(), creds, folder)
     zc = session_config(svc, role)
-    assert _get(zc, "mode") == "peer"
-    assert _get(zc, "scouting/multicast/enabled") is False
-    for ep in _get(zc, "listen/endpoints") + _get(zc, "connect/endpoints"):
+    assert config_value(zc, "mode") == "peer"
+    assert config_value(zc, "scouting/multicast/enabled") is False
+    for ep in config_value(zc, "listen/endpoints") + config_value(zc, "connect/endpoints"):
         assert ep.startswith("tcp/127.0.0.1:") or ep == f"unixsock-stream/{creds / acl.SIM_SOCKET}", ep
     if role == ROLE_CLIENT:
-        assert _get(zc, "listen/endpoints") == []  # a client listens nowhere
-    assert _get(zc, "transport/link/tx/lease") <= 1000  # a hung peer is dropped within ~1 s
+        assert config_value(zc, "listen/endpoints") == []  # a client listens nowhere
+    assert config_value(zc, "transport/link/tx/lease") <= 1000  # a hung peer is dropped within ~1 s
     if folder is not None:
-        assert _get(zc, "scouting/gossip/enabled") is False
+        assert config_value(zc, "scouting/gossip/enabled") is False
 
 
 @pytest.mark.parametrize("folder", FOLDERS)
 def test_acl_configs_authenticate_and_default_deny(creds: Path, folder: str) -> None:
     role = next(r for r in acl.ROLES if r.folder == folder)
     zc = session_config(_cfg(load_service_config(), creds, folder), ROLE_OF[folder])
-    usr = _get(zc, "transport/auth/usrpwd")
+    usr = config_value(zc, "transport/auth/usrpwd")
     assert usr["user"] == role.user
     if role.user is not None:  # the secret itself, read from its file
         assert usr["password"] == _secrets(creds)[role.user]
     if role.dictionary is None:
         assert usr["dictionary_file"] is None
-        assert _get(zc, "access_control")["enabled"] is False  # a client: listens nowhere
+        assert config_value(zc, "access_control")["enabled"] is False  # a client: listens nowhere
     else:
         assert Path(usr["dictionary_file"]) == creds / folder / role.dictionary
-        ac = _get(zc, "access_control")
+        ac = config_value(zc, "access_control")
         assert ac["enabled"] is True and ac["default_permission"] == "deny"
         assert all(s["zids"] is None for s in ac["subjects"])  # nobody is named by a (public) Zenoh id
-    assert _get(zc, "id") is None  # no fixed Zenoh id
+    assert config_value(zc, "id") is None  # no fixed Zenoh id
 
 
 def test_a_daemon_may_not_listen_where_its_acl_trusts_any_peer(creds: Path) -> None:
@@ -283,10 +271,6 @@ class Mesh:
         return out
 
 
-def _peers(s: zenoh.Session) -> set[str]:
-    return {str(z) for z in s.info.peers_zid()}
-
-
 @pytest.fixture(scope="module")
 def mesh(creds: Path) -> Iterator[Mesh]:
     svc = isolated_config()
@@ -298,7 +282,7 @@ def mesh(creds: Path) -> Iterator[Mesh]:
             subs[name] = s.declare_subscriber(f"{keys.root}/**", zenoh.handlers.FifoChannel(10_000))
             tokens[name] = s.liveliness().declare_subscriber(f"{keys.root}/**", zenoh.handlers.FifoChannel(1000))
             keep.append(s.declare_queryable(f"{keys.root}/barrier/{name}", lambda q: q.reply(q.key_expr, b"")))
-        _until(lambda: str(sim.info.zid()) in _peers(daemon), WAIT, "the daemon's link to the sim")
+        until(lambda: str(sim.info.zid()) in peers(daemon), WAIT, "the daemon's link to the sim")
         yield Mesh(svc, creds, keys, sim, daemon, subs, tokens)
         for q in keep:
             q.undeclare()
@@ -311,7 +295,7 @@ def _barrier(m: Mesh, client: zenoh.Session, at: str) -> None:
     def answered() -> bool:
         return any(r.ok is not None for r in client.get(f"{m.keys.root}/barrier/{at}", timeout=1.0))
 
-    _until(answered, WAIT, f"a reply from the {at}")
+    until(answered, WAIT, f"a reply from the {at}")
 
 
 def _put_where_heard(m: Mesh, client: zenoh.Session, tag: str, keys: list[str]) -> None:
@@ -319,12 +303,12 @@ def _put_where_heard(m: Mesh, client: zenoh.Session, tag: str, keys: list[str]) 
     (a message missing at a listener was then dropped by its ACL, not for want of a subscriber),
     then wait until both listeners have handled them."""
     want = {str(m.sim.info.zid()), str(m.daemon.info.zid())}
-    _until(lambda: want <= _peers(client), WAIT, "the client's links")
+    until(lambda: want <= peers(client), WAIT, "the client's links")
     for at in ("sim", "daemon"):
         _barrier(m, client, at)
     for k in keys:
         p = client.declare_publisher(f"{m.keys.root}/{k}")
-        _until(lambda p=p: p.matching_status.matching, WAIT, f"a subscriber known for {k}")
+        until(lambda p=p: p.matching_status.matching, WAIT, f"a subscriber known for {k}")
         p.put(f"{tag}:{k}".encode())
         p.undeclare()
     for at in ("sim", "daemon"):
@@ -343,7 +327,7 @@ def _tokens_until(m: Mesh, at: str, key: str) -> set[str]:
         seen.update(m.seen_tokens(at))
         return key in seen
 
-    _until(done, WAIT, f"the token {key} at the {at}")
+    until(done, WAIT, f"the token {key} at the {at}")
     return seen
 
 
@@ -356,9 +340,9 @@ def test_a_viewer_cannot_authenticate_as_the_controller(mesh: Mesh) -> None:
     with mesh.client("viewer") as viewer, mesh.client("viewer", user="controller") as impostor, \
             mesh.client("viewer", user="operator") as impostor2:
         both = {str(mesh.sim.info.zid()), str(mesh.daemon.info.zid())}
-        _until(lambda: _peers(viewer) == both, WAIT, "the viewer's links")
+        until(lambda: peers(viewer) == both, WAIT, "the viewer's links")
         _barrier(mesh, viewer, "sim")  # the impostors opened together with it and had the same time
-        assert _peers(impostor) == set() and _peers(impostor2) == set()
+        assert peers(impostor) == set() and peers(impostor2) == set()
 
 
 def test_a_viewer_can_read_but_publish_nothing(mesh: Mesh) -> None:
@@ -368,7 +352,7 @@ def test_a_viewer_can_read_but_publish_nothing(mesh: Mesh) -> None:
         assert _from(mesh.received("daemon"), "viewer") == []
         # ... while it may read: it receives the state the sim publishes
         states = viewer.declare_subscriber(mesh.keys.state, zenoh.handlers.FifoChannel(100))
-        _until(lambda: (mesh.sim.put(mesh.keys.state, b"sim:state"), states.try_recv())[1], WAIT, "a state")
+        until(lambda: (mesh.sim.put(mesh.keys.state, b"sim:state"), states.try_recv())[1], WAIT, "a state")
 
 
 def test_the_operator_may_put_setpoint_mode_and_scene_but_not_cmd_or_state(mesh: Mesh) -> None:
@@ -438,10 +422,10 @@ def test_rogue_session_cannot_command(tmp_path_factory: pytest.TempPathFactory, 
             Client(_cfg(svc, creds, "viewer"), name="viewer") as rogue:
         # the operator is accepted: the stack runs and obeys its mode change
         assert op.wait_for_daemon(TIMEOUT) is not None
-        info = _until(lambda: (i := op.info()) is not None and i.status.state_ok and i)
+        info = until(lambda: (i := op.info()) is not None and i.status.state_ok and i)
         # (the operator's mode message also resumes a daemon that a fault of a cold first start,
         # kernels still compiling, moved to hold: sent until the daemon tracks)
-        _until(lambda: op.set_mode("track") or ((i := op.info()) is not None and i.status.mode == "track"))
+        until(lambda: op.set_mode("track") or ((i := op.info()) is not None and i.status.mode == "track"))
         # the viewer may read (query the daemon, receive the state) ...
         assert rogue.wait_for_daemon(TIMEOUT) is not None
         assert rogue.wait_state(TIMEOUT) is not None
@@ -468,10 +452,10 @@ def test_rogue_session_cannot_command(tmp_path_factory: pytest.TempPathFactory, 
         for _ in range(20):
             op.send_setpoint(x0)
             time.sleep(0.01)
-        _until(lambda: op.info().status.accepted["setpoint"] > n0)
+        until(lambda: op.info().status.accepted["setpoint"] > n0)
         # ... and so does its box (sim/box)
         op.place_box(26.0, 0.65, x0[0] + 0.5, x0[1])
-        _until(lambda: (st := op.wait_truth(0.5)) is not None and math.isfinite(st.box_position))
+        until(lambda: (st := op.wait_truth(0.5)) is not None and math.isfinite(st.box_position))
         # no credentials: no session at all
         with Client(svc, name="anonymous") as anon:  # configs/zenoh/peer.json5: no credentials
             assert anon.wait_for_daemon(3.0) is None
@@ -498,6 +482,6 @@ def test_acl_stack_connects_whichever_process_starts_first(tmp_path_factory: pyt
             assert op.wait_for_daemon(TIMEOUT) is not None  # the daemon is up, the sim is not
             assert not op.info().status.sim_alive
             stack.start_sim()
-            _until(lambda: (i := op.info()) is not None and i.status.state_ok and i.status.sim_alive)
+            until(lambda: (i := op.info()) is not None and i.status.state_ok and i.status.sim_alive)
     finally:
         stack.stop()

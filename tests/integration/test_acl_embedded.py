@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import pytest
 import zenoh
+from support.zenoh_acl import config_value, peers, until
 from wmm_qp_service import acl
 from wmm_qp_service.cli import main as cli_main
 from wmm_qp_service.client import Client
@@ -36,29 +37,12 @@ ALL_PUTS = ["cmd", "state", "sim/truth", "setpoint", "mode", "obstacles", "sim/b
 OPERATOR_PUTS = ["gripper", "mode", "obstacles", "setpoint", "sim/box"]  # sorted
 
 
-def _get(zc: zenoh.Config, key: str) -> Any:
-    return json.loads(zc.get_json(key))
-
-
-def _until(pred: Callable[[], Any], timeout: float = TIMEOUT, what: str = "condition") -> Any:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if v := pred():
-            return v
-        time.sleep(0.02)
-    raise AssertionError(f"{what} not met within {timeout} s")
-
-
 def _cfg(svc: ServiceConfig, creds: Path, folder: str, config: str | None = None) -> ServiceConfig:
     return svc.with_(zenoh={"config": creds / folder / (config or f"acl_{folder}.json5")})
 
 
 def _secret(creds: Path, user: str, folder: str | None = None) -> str:
     return (creds / (folder or user) / f"{user}.secret").read_text().strip()
-
-
-def _peers(s: zenoh.Session) -> set[str]:
-    return {str(z) for z in s.info.peers_zid()}
 
 
 @pytest.fixture(scope="module")
@@ -85,14 +69,15 @@ def test_acl_init_gives_the_embedded_process_its_clients_secrets_and_no_own(cred
 def test_the_embedded_config_listens_on_tcp_connects_nowhere_and_names_its_two_users(creds: Path) -> None:
     svc = isolated_config()
     zc = session_config(_cfg(svc, creds, "embedded"), ROLE_EMBEDDED)
-    assert _get(zc, "listen/endpoints") == [svc.zenoh.daemon_endpoint, svc.zenoh.sim_endpoint]
-    assert all(ep.startswith("tcp/127.0.0.1:") for ep in _get(zc, "listen/endpoints"))
-    assert _get(zc, "connect/endpoints") == []  # no sim to dial: the core writes its command in memory
-    assert _get(zc, "scouting/multicast/enabled") is False and _get(zc, "scouting/gossip/enabled") is False
-    usr = _get(zc, "transport/auth/usrpwd")
+    assert config_value(zc, "listen/endpoints") == [svc.zenoh.daemon_endpoint, svc.zenoh.sim_endpoint]
+    assert all(ep.startswith("tcp/127.0.0.1:") for ep in config_value(zc, "listen/endpoints"))
+    assert config_value(zc, "connect/endpoints") == []  # no sim to dial: the core writes its command in memory
+    assert config_value(zc, "scouting/multicast/enabled") is False
+    assert config_value(zc, "scouting/gossip/enabled") is False
+    usr = config_value(zc, "transport/auth/usrpwd")
     assert usr["user"] is None and usr["password"] is None
     assert Path(usr["dictionary_file"]) == creds / "embedded" / USERS
-    ac = _get(zc, "access_control")
+    ac = config_value(zc, "access_control")
     assert ac["enabled"] is True and ac["default_permission"] == "deny"
     # every subject is a user name it checks: none is taken on its link's protocol or a Zenoh id
     assert all(s["usernames"] and not s.get("link_protocols") and s["zids"] is None for s in ac["subjects"])
@@ -149,7 +134,7 @@ class Embedded:
                     seen.add(str(s.key_expr).removeprefix(self.keys.root + "/"))
             return key in seen
 
-        _until(done, WAIT, f"the token {key}")
+        until(done, WAIT, f"the token {key}")
         return seen
 
     def barrier(self, client: zenoh.Session) -> None:
@@ -159,7 +144,7 @@ class Embedded:
         def answered() -> bool:
             return any(r.ok is not None for r in client.get(f"{self.keys.root}/barrier", timeout=1.0))
 
-        _until(answered, WAIT, "a reply from the embedded session")
+        until(answered, WAIT, "a reply from the embedded session")
 
 
 @pytest.fixture(scope="module")
@@ -182,20 +167,20 @@ def test_only_the_operator_and_the_viewer_get_a_link(embedded: Embedded) -> None
             embedded.client("operator", user="controller", password=controller) as daemon, \
             embedded.client("viewer", user="operator") as impostor:
         zid = str(embedded.session.info.zid())
-        _until(lambda: _peers(viewer) == {zid}, WAIT, "the viewer's link")
+        until(lambda: peers(viewer) == {zid}, WAIT, "the viewer's link")
         embedded.barrier(viewer)  # the others opened together with it and had the same time
-        assert _peers(anonymous) == set() and _peers(daemon) == set() and _peers(impostor) == set()
+        assert peers(anonymous) == set() and peers(daemon) == set() and peers(impostor) == set()
 
 
 def _put_where_heard(e: Embedded, client: zenoh.Session, tag: str) -> None:
     """Put ``<tag>:<key>`` on each key of :data:`ALL_PUTS` once ``client`` knows the embedded
     session's subscriber (a message missing there was dropped by its ACL, not for want of a
     subscriber), then wait until it has handled them."""
-    _until(lambda: str(e.session.info.zid()) in _peers(client), WAIT, "the client's link")
+    until(lambda: str(e.session.info.zid()) in peers(client), WAIT, "the client's link")
     e.barrier(client)
     for k in ALL_PUTS:
         p = client.declare_publisher(f"{e.keys.root}/{k}")
-        _until(lambda p=p: p.matching_status.matching, WAIT, f"a subscriber known for {k}")
+        until(lambda p=p: p.matching_status.matching, WAIT, f"a subscriber known for {k}")
         p.put(f"{tag}:{k}".encode())
         p.undeclare()
     e.barrier(client)
@@ -272,7 +257,7 @@ def test_the_embedded_process_obeys_the_operator_only(creds: Path, tmp_path: Pat
             st = op.latest_status()
             return st is not None and float(np.linalg.norm(np.array(st.x) - target)) < 0.005
 
-        _until(there, TIMEOUT, "the EE at the operator's target")
+        until(there, TIMEOUT, "the EE at the operator's target")
         truth = op.wait_truth(TIMEOUT)
         assert truth is not None and truth.ee_true[0] - ee0[0] > 0.04  # the robot moved
         assert sum(truth.violations.values()) == 0, truth.violations
