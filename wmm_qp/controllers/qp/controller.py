@@ -143,7 +143,7 @@ class QpController(QpStages, SolveCascade):
         return self.last_rows
 
     # ------------------------------------------------------------------ the tick
-    def stage_rows(self, ctx: TickContext, state: RobotState, mode: Mode) -> StageRows:
+    def stage_rows(self, ctx: TickContext, mode: Mode) -> StageRows:
         """Every source's rows this tick, stacked (the dampers pooled: ``last_rows``)."""
         tick = Tick(mode, ctx.kin, ctx.v_prev, ctx.lo, ctx.hi)  # centred on the daemon's last command
         parts = [(s, r) for s in self.row_sources if (r := s.compute_rows(tick)) is not None]
@@ -155,7 +155,7 @@ class QpController(QpStages, SolveCascade):
         mode = reference.mode
         ctx = self.context(state, reference, need_gradient=self.needs_gradient(mode))
         xdot = self.reference_velocity(ctx, reference)
-        rows = self.stage_rows(ctx, state, mode)
+        rows = self.stage_rows(ctx, mode)
         if self.config.qp.arm_first and mode in (Mode.TRACK, Mode.HOLD):
             p, w_hold = self.build_arm_first(ctx, xdot, rows)
             z = self._solve(self._arm, p)
