@@ -312,46 +312,34 @@ class FrankaDriver(LeaseGate):
               file=sys.stderr, flush=True)
         return why
 
-    def _loop(self, fr: Any, link: FrankaLink, subs: tuple[Any, Any], lease_sub: Any, pubs: tuple[Any, Any],
-              stop: threading.Event, max_cycles: int | None, robot_ip: str) -> int:
-        sub, sub_gripper = subs
-        pub, pub_truth = pubs
-        n = 0
+    def drive(self, fr: Any, link: FrankaLink, stop: threading.Event, max_cycles: int | None, robot_ip: str,
+              step: Callable[[bool], tuple[np.ndarray, int]], after: Callable[[bool], None]) -> int:
+        """libfranka's cycle until ``stop`` (or ``max_cycles``), then brake to rest and finish the
+        motion; a reflex is a protective stop (:meth:`reflex`) and the cycle goes on.
+
+        Args:
+            fr: pylibfranka (its exception types).
+            link: the robot.
+            stop, max_cycles: when to brake and finish.
+            robot_ip: for the message when the connection is lost.
+            step: one cycle up to the write — read the robot, take the inputs (none once
+                finishing, its argument), shape the command — giving the velocities to write and
+                the cycles so far.
+            after: the cycle's slack after the write (its argument: the motion finished).
+
+        Returns:
+            0 after a clean stop; 1 when the connection was lost.
+        """
         finishing = False
-
-        def recover() -> str | None:
-            return self.recover(link)
-
         while True:
             try:
-                st, elapsed = link.read()
-                q = np.array(st.q, dtype=float)
-                while (a := lease_sub.try_recv()) is not None:
-                    self.on_lease(str(a.key_expr).rsplit("/", 1)[-1], a.kind == zenoh.SampleKind.PUT)
-                if not finishing:
-                    while (c := sub.try_recv()) is not None:
-                        try:
-                            self.on_command(c.payload.to_bytes(), q, time.monotonic(), recover)
-                        except fr.NetworkException:
-                            raise
-                        except Exception as e:  # never out of the control loop: the command is dropped
-                            self.refused["error"] += 1
-                            if self.refused["error"] <= 10:
-                                print(f"wmm-qp driver franka: a command dropped: {type(e).__name__}: {e}",
-                                      file=sys.stderr, flush=True)
-                v = self.cycle(elapsed, q)
-                n += 1
-                if not finishing and (stop.is_set() or (max_cycles is not None and n >= max_cycles)):
+                v, cycles = step(finishing)
+                if not finishing and (stop.is_set() or (max_cycles is not None and cycles >= max_cycles)):
                     finishing = True  # brake to rest, then finish the motion
                     self.shaper.halt()
                 done = finishing and self.shaper.at_rest
                 link.write(v, finished=done)
-                if (g := sub_gripper.try_recv()) is not None:
-                    self.on_gripper(g.payload.to_bytes())
-                width = self.hand.width if self.hand is not None else math.nan
-                pub.put(encode(self.state_msg(q, np.array(st.tau_ext_hat_filtered, dtype=float), width)))
-                if n % TRUTH_EVERY == 1 or done:
-                    pub_truth.put(encode(self.truth_msg(np.array(st.O_F_ext_hat_K, dtype=float)[:3])))
+                after(done)
                 if done:
                     return 0
             except fr.NetworkException as e:
@@ -362,3 +350,45 @@ class FrankaDriver(LeaseGate):
                 self.reflex(e, link)
                 if finishing:
                     return 0
+
+    def _loop(self, fr: Any, link: FrankaLink, subs: tuple[Any, Any], lease_sub: Any, pubs: tuple[Any, Any],
+              stop: threading.Event, max_cycles: int | None, robot_ip: str) -> int:
+        sub, sub_gripper = subs
+        pub, pub_truth = pubs
+        n = 0
+        st: Any = None
+        q = np.zeros(0)
+
+        def recover() -> str | None:
+            return self.recover(link)
+
+        def step(finishing: bool) -> tuple[np.ndarray, int]:
+            nonlocal n, st, q
+            st, elapsed = link.read()
+            q = np.array(st.q, dtype=float)
+            while (a := lease_sub.try_recv()) is not None:
+                self.on_lease(str(a.key_expr).rsplit("/", 1)[-1], a.kind == zenoh.SampleKind.PUT)
+            if not finishing:
+                while (c := sub.try_recv()) is not None:
+                    try:
+                        self.on_command(c.payload.to_bytes(), q, time.monotonic(), recover)
+                    except fr.NetworkException:
+                        raise
+                    except Exception as e:  # never out of the control loop: the command is dropped
+                        self.refused["error"] += 1
+                        if self.refused["error"] <= 10:
+                            print(f"wmm-qp driver franka: a command dropped: {type(e).__name__}: {e}",
+                                  file=sys.stderr, flush=True)
+            v = self.cycle(elapsed, q)
+            n += 1
+            return v, n
+
+        def after(done: bool) -> None:
+            if (g := sub_gripper.try_recv()) is not None:
+                self.on_gripper(g.payload.to_bytes())
+            width = self.hand.width if self.hand is not None else math.nan
+            pub.put(encode(self.state_msg(q, np.array(st.tau_ext_hat_filtered, dtype=float), width)))
+            if n % TRUTH_EVERY == 1 or done:
+                pub_truth.put(encode(self.truth_msg(np.array(st.O_F_ext_hat_K, dtype=float)[:3])))
+
+        return self.drive(fr, link, stop, max_cycles, robot_ip, step, after)

@@ -146,29 +146,14 @@ class FrankaEmbedded:
         """
         d = self.driver
         self._link = link
-        finishing = False
-        while True:
-            try:
-                st, elapsed = link.read()
-                v = self.cycle(elapsed, np.array(st.q, dtype=float),
-                               np.array(st.tau_ext_hat_filtered, dtype=float),
-                               np.array(st.O_F_ext_hat_K, dtype=float)[:3], self.mono(), tick=not finishing)
-                if not finishing and (stop.is_set() or (max_cycles is not None and self.cycles >= max_cycles)):
-                    finishing = True  # brake to rest, then finish the motion
-                    d.shaper.halt()
-                done = finishing and d.shaper.at_rest
-                link.write(v, finished=done)
-                self.after()
-                if done:
-                    return 0
-            except fr.NetworkException as e:
-                print(f"wmm-qp driver franka: error: lost the connection to the robot at {robot_ip}: {e}",
-                      file=sys.stderr, flush=True)
-                return 1
-            except fr.ControlException as e:
-                d.reflex(e, link)
-                if finishing:
-                    return 0
+
+        def step(finishing: bool) -> tuple[np.ndarray, int]:
+            st, elapsed = link.read()
+            v = self.cycle(elapsed, np.array(st.q, dtype=float), np.array(st.tau_ext_hat_filtered, dtype=float),
+                           np.array(st.O_F_ext_hat_K, dtype=float)[:3], self.mono(), tick=not finishing)
+            return v, self.cycles
+
+        return d.drive(fr, link, stop, max_cycles, robot_ip, step, lambda done: self.after())
 
     def run(self, robot_ip: str, stop: threading.Event, max_cycles: int | None = None,
             wait_lease: bool = False) -> int:
