@@ -48,7 +48,10 @@ def test_console_in_chromium_drives_the_robot(tmp_path: Path) -> None:
     from wmm_qp_service.client import Client
     from wmm_qp_service.processes import Stack, free_port, isolated_config
 
-    with Stack(isolated_config(), log_dir=tmp_path) as stack, Client(stack.svc, name="observer") as obs:
+    # at half the shipped rates (sim 500 Hz, daemon 250 Hz): the page and its drag are the subject,
+    # and software WebGL shares the 2 cores with the sim and the daemon, each SCHED_FIFO
+    with Stack(isolated_config(), rate_hz=250.0, extra_sim_args=["--rate", "500"], log_dir=tmp_path) as stack, \
+            Client(stack.svc, name="observer") as obs:
         assert obs.wait_for_daemon(60.0) is not None, "daemon did not answer"
         port = free_port()
         with console_process(["--port", str(port), *service_args(stack.svc)], tmp_path / "console.log") as (_, url), \

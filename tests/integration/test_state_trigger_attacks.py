@@ -74,12 +74,15 @@ def test_a_state_flood_at_ten_kilohertz_is_refused_and_cannot_speed_up_the_loop(
     assert rej.get("instance", 0) > before.status.rejected.get("instance", 0)
     assert after.status.faults.get("second state source", 0) >= 1
     assert sum(rej.values()) - sum(before.status.rejected.values()) > 500
-    # the loop ticks at most at the robot's rate (the minimum gap), however many states arrive
-    # (the daemon's own stamps of the two statuses bracket the ticks counted between them)
+    # the loop's state ticks come at most at the robot's rate, however many states arrive (the
+    # daemon's own stamps of the two statuses bracket the ticks counted between them). Watchdog
+    # ticks (no state for 1.5 periods) are left out: a loaded host's late states add one each, a
+    # timing matter, not the flood's (a tick per flooded state would be ten times the rate)
     ticks = after.status.loop.ticks - before.status.loop.ticks
+    watchdog = after.status.loop.watchdog_ticks - before.status.loop.watchdog_ticks
     span = after.status.stamp - before.status.stamp
     assert span >= elapsed
-    assert ticks <= RATE * span * 1.02 + 5, (ticks, span)
+    assert ticks - watchdog <= RATE * span * 1.02 + 5, (ticks, watchdog, span)
     # and it comes back: the twin's states stopped, the latched sim is followed again
     ok = probe.until(lambda: (i := c.info()) is not None and i.status.sim_instance == real.instance
                      and i.status.state_ok and i, timeout=30.0)
