@@ -16,7 +16,8 @@ the bounds' centre, the last command): like bounds (13), the rows account for th
 latency. A moving obstacle (velocity v_b, world frame) closes the distance by n̂ᵀv_b on its own:
 its rows ask that much more of the robot, ḋ = C v − n̂ᵀv_b (the robot gives way at the obstacle's
 approach speed, as far as the bounds allow). Inside d_s the bound is positive: the pair is pushed
-apart.
+apart. A pair inside d_s also has a row on its bodies linearised where full braking ends
+(:mod:`.inside_pairs`): its bound carries an offset, (d − d̃)/Δt.
 
 Priority: the acceleration bounds (13) win. Each row is relaxed, where the bounds cannot meet it,
 to the most separating rate they admit, l ← min(l, max_{lb ≤ v ≤ ub} C_k v): the robot then
