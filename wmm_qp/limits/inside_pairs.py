@@ -7,15 +7,11 @@ must keep is relative (``wmm-qp verify``'s, :mod:`wmm_qp.verify.collision`): the
 after the tick no less than now, or than full braking v₀ = clip(0, lb, ub) takes it; the dampers,
 relaxed, ask C v ≥ C v₀. Neither stand-in carries that over to the bodies:
 
-* the row shape is not the body: the capsule's witness points are not the cylinder's, and a
-  command that approaches no faster than braking on the capsules can on the cylinders (a Panda's
-  ``panda_link1_0/panda_hand_1``: the capsules 1.2 cm in each other, the cylinders 0.2 mm inside
-  d_s, the command 2.0e-5 m deeper than braking on the cylinders, 5.5e-6 m shallower on the
-  capsules);
+* the row shape is not the body: a capsule's witness points are not its cylinder's, and a command
+  that approaches no faster than braking on the capsules can on the cylinders;
 * the distance inside a body is not smooth: a sphere deep in a box is as deep as its nearest face
-  lets it be, and that face can change within a tick (a Panda's finger 12.7 cm in its base: the
-  nearest face switched 0.3 of a tick in; linearised at the state, on the first face, the command
-  was 9.9e-6 m better than braking, at the end 1.5e-5 m worse).
+  lets it be, and that face can change within the tick, after which the row's rate is another
+  face's (docs/model.md "inside d_s" has the Panda's two cases, measured).
 
 So each pair whose row shapes are inside d_s gets one more row, on its bodies (coal), at the
 braking configuration q_b = q + Δt·v₀ (the base moved by Δt·P(ψ) v₀ for a pair with the world):
