@@ -233,7 +233,7 @@ def test_the_damper_bound_is_the_braking_profile_where_the_linear_damper_asks_to
     zero, lo, hi = np.zeros(3), -np.ones(3), np.ones(3)
 
     def bound(d: float) -> float:
-        return _row_bounds(row, zero, zero, lo, hi, d, 0.03, 0.3, 0.5, 0.0, 0.0, accel, 0.25)[0]
+        return _row_bounds(row, zero, zero, lo, hi, d, 0.03, 0.3, 0.5, 0.0, 0.0, accel, 0.25, 0.0)[0]
 
     assert bound(0.25) == pytest.approx(-math.sqrt(2 * 0.25 * 0.4 * 0.22))  # far: the profile (−0.21, not −0.41)
     assert bound(0.031) == pytest.approx(-0.5 * 0.001 / 0.27)  # near d_s: the linear damper
@@ -294,8 +294,9 @@ def test_no_pair_inside_its_safety_distance_is_left_out_of_the_rows(tmp_path: Pa
     m = model()
     ctl.step(w.RobotState(q_base=np.zeros(3), q_arm=m.config.arm.start), w.Reference("hold"))
     rows = ctl.last_collision_rows()
-    inside = [n for n in rows.names if n.split("/")[1].startswith("box")]
+    inside = Counter(n for n in rows.names if n.split("/")[1].startswith("box"))
     assert len(inside) == 6 * len(ctl.collision.geo.bodies) > MAX_ROWS, (len(inside), rows.names)  # type: ignore[attr-defined]
+    assert set(inside.values()) == {2}, inside  # its row, and its row on the bodies where braking ends
 
 
 def test_a_capsule_whose_segment_is_inside_a_box_is_left_to_coal() -> None:

@@ -6,7 +6,9 @@ For a monitored pair (a, b) at distance d with closest points p_a, p_b and n̂ =
 (p − o_j), so n̂ᵀJ_p = n̂ᵀJ_v + ((p − o_j) × n̂)ᵀJ_ω (the joint's Jacobian in the base frame); for a
 pair with the world (floor, obstacles) the base's motion adds n̂ᵀ[[1, 0, −p_y], [0, 1, p_x], [0, 0,
 0]]·M on the wheels (eq. (5)'s J_b for the point p, eq. (3)'s M); between two bodies of the robot
-it cancels. The pairs near enough to need a row come from :mod:`.pair_search`.
+it cancels. The pairs near enough to need a row come from :mod:`.pair_search`. A pair whose row
+shapes are inside d_s gets one more row, on its bodies, linearised at the configuration full braking
+reaches (:mod:`.inside_pairs`); it is never merged.
 
 At most ``MAX_ROWS`` body pairs per tick, and of one pair of links' rows only those that are not
 parallel (cos > ``PARALLEL``; the more restrictive is kept): nearly parallel rows of one link's
@@ -27,6 +29,7 @@ from ..config import CollisionParams, ShapeConfig
 from ..model.collision import RobotGeometry
 from ..scene import obstacles_from_tables
 from .dampers import DamperRows, damper_bounds
+from .inside_pairs import InsidePairs
 from .pair_search import Obstacle, PairSearch
 from .rows import Rows, Tick
 
@@ -49,10 +52,11 @@ class CollisionRows(DamperRows):
         latency: [s] τ, the state's age the rows account for (the controller's ``state_latency``).
         accel: A of each column of v = [wheels, arm] (the controller's bounds (13)): the braking
             profile's deceleration.
+        dt: [s] Δt, the control period (the rows of the pairs inside d_s: :mod:`.inside_pairs`).
     """
 
     def __init__(self, geometry: RobotGeometry, M: FloatArray, params: CollisionParams, latency: float,
-                 accel: FloatArray) -> None:
+                 accel: FloatArray, dt: float) -> None:
         self.geo = geometry
         self.M = np.asarray(M, dtype=float)
         own = geometry.robot.collision.influence_distance  # the robot file's, when larger
@@ -64,6 +68,7 @@ class CollisionRows(DamperRows):
         self.n_a = geometry.arm.n
         self._accel = np.asarray(accel, dtype=float)
         self.search = PairSearch(geometry, params)
+        self.inside = InsidePairs(geometry, self.M, dt)
         bodies = geometry.bodies
         model = geometry.arm.model  # support[j, k]: joint j moves with the velocity column k
         self._support = np.zeros((model.njoints, model.nv))
@@ -95,13 +100,14 @@ class CollisionRows(DamperRows):
     def compute_rows(self, tick: Tick) -> Rows:
         """The pairs' rows at the tick's state (its kinematics ran just before: the arm's forward
         kinematics and joint Jacobians are current)."""
-        return self.rows(tick.kin.q_base, tick.v_prev, tick.lb, tick.ub)
+        return self.rows(tick.kin.q_base, tick.kin.q_arm, tick.v_prev, tick.lb, tick.ub)
 
-    def rows(self, q_base: FloatArray, v_prev: FloatArray, lb: FloatArray, ub: FloatArray) -> Rows:
+    def rows(self, q_base: FloatArray, q_arm: FloatArray, v_prev: FloatArray, lb: FloatArray,
+             ub: FloatArray) -> Rows:
         """The monitored pairs' rows at the state the arm's data was last computed at.
 
         Args:
-            q_base: [m, m, rad] base pose.
+            q_base: [m, m, rad] base pose; q_arm: [rad] the arm's joints (the arm's data's).
             v_prev: the bounds' centre (the last command), for the latency term.
             lb, ub: the stage's box bounds on v (for the relaxations).
         """
@@ -128,7 +134,7 @@ class CollisionRows(DamperRows):
             for k in np.flatnonzero(other <= -2).tolist():
                 shift[k] = float(normal[k] @ (Rb.T @ self.search.obstacles[-2 - int(other[k])].velocity_w))
         l, l_brake, damper = damper_bounds(C, v_prev, lb, ub, dist, safety, d_i, p.gain, self.latency, shift,
-                                           self._accel, p.braking)
+                                           self._accel, p.braking, np.zeros(m))
         # two bodies of one pair of links: one row where they are parallel (the key: link a, and
         # link b, the floor or the obstacle)
         keep = _distinct_rows(C, l, keys)
@@ -138,7 +144,33 @@ class CollisionRows(DamperRows):
             out.C, out.l, out.l_brake, out.damper = C[keep], l[keep], l_brake[keep], damper[keep]
             out.distances = dist[keep]
         out.names = [self.search.name(int(body[k]), int(other[k])) for k in keep.tolist()]
+        inside = np.flatnonzero(dist < safety)
+        if inside.shape[0]:
+            self._add_inside(out, body[inside], other[inside], safety[inside], q_base, q_arm, v_prev, lb, ub)
         return out
+
+    def _add_inside(self, out: Rows, body: IntArray, other: IntArray, safety: FloatArray, q_base: FloatArray,
+                    q_arm: FloatArray, v_prev: FloatArray, lb: FloatArray, ub: FloatArray) -> None:
+        """Append to ``out`` the rows of the pairs inside d_s on their bodies at the braking
+        configuration (:mod:`.inside_pairs`): C_b v ≥ damper(d) + (d − d̃)/Δt, relaxed as every
+        damper (to C_b v₀ at worst: the distance after the tick no less than braking's)."""
+        p, m = self.p, body.shape[0]
+        v0 = np.minimum(np.maximum(0.0, lb), ub)
+        d, d_b, P, Q, N, Jw = self.inside.braking_end(body, other, q_base, q_arm, v0, self.search.obstacles)
+        C = np.zeros((m, self.n_w + self.n_a))
+        _point_rows(Jw, self._support, self._body_joint, body, other, P, Q, N, self.M, self.n_w, C)
+        offset = (d - (d_b - self.inside.dt * (C @ v0))) / self.inside.dt  # (d − d̃)/Δt
+        shift = np.zeros(m)
+        if self.search.moving:
+            Rb = self.search.base_rotation
+            for k in np.flatnonzero(other <= -2).tolist():
+                shift[k] = float(N[k] @ (Rb.T @ self.search.obstacles[-2 - int(other[k])].velocity_w))
+        l, l_brake, damper = damper_bounds(C, v_prev, lb, ub, d, safety, p.influence_distance, p.gain,
+                                           self.latency, shift, self._accel, p.braking, offset)
+        out.C, out.l = np.vstack((out.C, C)), np.concatenate((out.l, l))
+        out.l_brake, out.damper = np.concatenate((out.l_brake, l_brake)), np.concatenate((out.damper, damper))
+        out.distances = np.concatenate((out.distances, d))
+        out.names = out.names + [self.search.name(i, j) for i, j in zip(body.tolist(), other.tolist(), strict=True)]
 
 
 def warm_up_obstacles(x: FloatArray) -> tuple[ShapeConfig, ...]:

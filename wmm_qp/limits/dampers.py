@@ -16,7 +16,8 @@ the bounds' centre, the last command): like bounds (13), the rows account for th
 latency. A moving obstacle (velocity v_b, world frame) closes the distance by n̂ᵀv_b on its own:
 its rows ask that much more of the robot, ḋ = C v − n̂ᵀv_b (the robot gives way at the obstacle's
 approach speed, as far as the bounds allow). Inside d_s the bound is positive: the pair is pushed
-apart.
+apart. A pair inside d_s also has a row on its bodies linearised where full braking ends
+(:mod:`.inside_pairs`): its bound carries an offset, (d − d̃)/Δt.
 
 Priority: the acceleration bounds (13) win. Each row is relaxed, where the bounds cannot meet it,
 to the most separating rate they admit, l ← min(l, max_{lb ≤ v ≤ ub} C_k v): the robot then
@@ -42,7 +43,7 @@ from .rows import RELAX_MARGIN, Retry, Rows, RowSource
 def _row_bounds(
     row: FloatArray, v_prev: FloatArray, v0: FloatArray, lb: FloatArray, ub: FloatArray,
     d: float, d_s: float, d_i: float, gain: float, latency: float, shift: float, accel: FloatArray,
-    braking: float,
+    braking: float, offset: float,
 ) -> tuple[float, float, float]:
     """(the damper's bound, the most separating rate in lb ≤ v ≤ ub, the braking command's rate).
 
@@ -59,13 +60,14 @@ def _row_bounds(
     d_eff = d - latency * max(0.0, shift - prev)  # the approach during the state's age (ḋ = prev − shift)
     linear = -gain * (d_eff - d_s) / (d_i - d_s)
     profile = -math.sqrt(2.0 * braking * a_n * max(d_eff - d_s, 0.0))
-    return max(linear, profile) + shift, best, brake
+    return max(linear, profile) + shift + offset, best, brake
 
 
 @jit
 def damper_bounds(
     C: FloatArray, v_prev: FloatArray, lb: FloatArray, ub: FloatArray, d: FloatArray, d_s: FloatArray,
     d_i: float, gain: float, latency: float, shift: FloatArray, accel: FloatArray, braking: float,
+    offset: FloatArray,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """(l, l_brake, damper) of every row: the module docstring's bound, relaxed.
 
@@ -77,6 +79,9 @@ def damper_bounds(
         d_i: [m] the influence distance; gain: [m/s] ξ; latency: [s] τ; braking: [-] β.
         shift: [m/s] (k,) n̂ᵀv_b of a row against a moving obstacle (0 otherwise).
         accel: A of each column of v [rad/s², rad/s² per wheel].
+        offset: [m/s] (k,) added to each damper bound: (d − d̃)/Δt of a row linearised at the
+            braking configuration (:mod:`.inside_pairs`: d̃ + Δt·C v is its distance after the
+            tick, d its distance now), 0 for a row linearised at the state.
 
     Returns:
         l (the damper relaxed to the most separating rate the bounds admit), l_brake (relaxed to
@@ -87,7 +92,7 @@ def damper_bounds(
     v0 = np.minimum(np.maximum(0.0, lb), ub)
     for k in range(m):
         dk, best, brake = _row_bounds(C[k], v_prev, v0, lb, ub, d[k], d_s[k], d_i, gain, latency, shift[k],
-                                      accel, braking)
+                                      accel, braking, offset[k])
         damper[k] = dk
         # a relaxed row would pass through a vertex of the box exactly: 1e-9 m/s below it, so that
         # no solver's tolerance reads the degenerate (feasible) problem as infeasible

@@ -118,5 +118,5 @@ class FenceRows(DamperRows):
         C, d = np.array(rows), np.array(dist)
         p = self.p
         l, l_brake, damper = damper_bounds(C, v_prev, lb, ub, d, np.zeros(d.shape[0]), d_i, p.gain, self.latency,
-                                           np.zeros(d.shape[0]), self._accel, p.braking)
+                                           np.zeros(d.shape[0]), self._accel, p.braking, np.zeros(d.shape[0]))
         return Rows(C, l, l_brake=l_brake, damper=damper, names=names, distances=d)

@@ -76,7 +76,7 @@ class QpController(QpStages, SolveCascade):
         if config.collision.enabled:
             geometry = robot_geometry(self.robot, model.arm)
             self.collision = CollisionRows(geometry, model.base.M, config.collision, config.state_latency,
-                                           self.bounds.a_max)
+                                           self.bounds.a_max, self.dt)
             self.fence = FenceRows(model.base.M, self.n_arm, self.collision.p, config.state_latency,
                                    self.bounds.a_max)
             self.row_sources += [self.collision, self.fence]
