@@ -79,9 +79,11 @@ class InsidePairs:
         """
         geo, dt, m = self.geo, self.dt, body.shape[0]
         arm = geo.arm
-        now = [self._pose(k, arm.data.oMi) for k in range(len(geo.bodies))]
+        # the placements of the pairs' bodies only (a robot has dozens; a tick has a few such pairs)
+        used = {int(k) for k in body} | {int(k) for k in other if k >= 0}
+        now = {k: self._pose(k, arm.data.oMi) for k in used}
         pin.computeJointJacobians(arm.model, self._data, arm.pin_q(q_arm + dt * v0[self.n_w :]))
-        at_b = [self._pose(k, self._data.oMi) for k in range(len(geo.bodies))]
+        at_b = {k: self._pose(k, self._data.oMi) for k in used}
         # the base after the braking tick, moved as the judge moves it: q_b + Δt·P(ψ) v₀ (eq. (3))
         c, s = math.cos(q_base[2]), math.sin(q_base[2])
         db = dt * (self.M @ v0[: self.n_w])  # [ẋ, ẏ, ψ̇]·Δt in the base frame
@@ -98,7 +100,7 @@ class InsidePairs:
         b = self.geo.bodies[k]
         return transform(oMi[b.joint] * b.placement if b.joint else b.placement)
 
-    def _distance(self, i: int, j: int, poses: list[coal.Transform3s], q_base: FloatArray,
+    def _distance(self, i: int, j: int, poses: dict[int, coal.Transform3s], q_base: FloatArray,
                   obstacles: list[Obstacle]) -> tuple[float, FloatArray, FloatArray, FloatArray]:
         """(d, p_a, p_b, n̂ from b to a) of body i and the other side j on the bodies themselves,
         the bodies at ``poses`` (base frame), the base at ``q_base`` (for the obstacles)."""
