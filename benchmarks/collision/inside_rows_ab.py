@@ -1,13 +1,25 @@
-# Usage: python benchmarks/collision/inside_rows_ab.py panda_diffdrive tiago > out.json (from the repository root)
 """A/B of the inside-d_s rows' cost: the in-process circle (rows on, default scene), 5 s, alternating
-runs with CollisionRows._add_inside as shipped (A) and as a no-op (B), in one process."""
-import contextlib, io, json, sys, time
-from wmm_qp.limits import collision as col
+runs with CollisionRows._add_inside as shipped (A) and as a no-op (B), in one process; prints a line
+per robot (median seconds, the ratio), then the JSON of every run (docs/benchmarks.md §9).
+
+Usage, from the repository root: python benchmarks/collision/inside_rows_ab.py gen3_mecanum panda_diffdrive
+"""
+import contextlib
+import io
+import json
+import sys
+import time
+
 from wmm_qp_service.cli import main
 
+from wmm_qp.limits import collision as col
+
 shipped = col.CollisionRows._add_inside
-def off(self, out, *a, **k):
+
+
+def off(self, out, *a, **k):  # the rows of the pairs inside d_s left out
     return None
+
 
 res = {}
 for robot in sys.argv[1:]:
