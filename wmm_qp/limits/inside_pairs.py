@@ -34,7 +34,7 @@ import pinocchio as pin
 
 from .._typing import FloatArray, IntArray
 from ..model.collision import RobotGeometry, transform
-from .pair_search import FLOOR, Obstacle
+from .pair_search import FLOOR, Obstacle, unit_normal
 
 
 class InsidePairs:
@@ -97,8 +97,7 @@ class InsidePairs:
         return d, d_b, P, Q, N, np.asarray(self._data.J)
 
     def _pose(self, k: int, oMi: Any) -> coal.Transform3s:
-        b = self.geo.bodies[k]
-        return transform(oMi[b.joint] * b.placement if b.joint else b.placement)
+        return transform(self.geo.placement(k, oMi))
 
     def _distance(self, i: int, j: int, poses: dict[int, coal.Transform3s], q_base: FloatArray,
                   obstacles: list[Obstacle]) -> tuple[float, FloatArray, FloatArray, FloatArray]:
@@ -122,8 +121,6 @@ class InsidePairs:
         res = self._res
         res.clear()
         d = float(coal.distance(bodies[i].shape, poses[i], other, To, self._req, res))
-        n = -np.asarray(res.normal, dtype=float)  # coal's points from the first shape to the second
-        nn = float(np.linalg.norm(n))
         p_a = np.asarray(res.getNearestPoint1(), dtype=float).copy()
         p_b = np.asarray(res.getNearestPoint2(), dtype=float).copy()
-        return d, p_a, p_b, n / nn if nn > 1e-12 else np.array([0.0, 0.0, 1.0])
+        return d, p_a, p_b, unit_normal(res)

@@ -298,18 +298,17 @@ class PairSearch:
 
     def _T(self, i: int) -> coal.Transform3s:
         """Body i's pose in the base frame as coal's (for the pairs coal computes)."""
-        b = self.geo.bodies[i]
-        return transform(self.geo.arm.data.oMi[b.joint] * b.placement if b.joint else b.placement)
+        return transform(self.geo.placement(i, self.geo.arm.data.oMi))
 
     def _coal(self, a: coal.CollisionGeometry, Ta: coal.Transform3s, b: coal.CollisionGeometry,
               Tb: coal.Transform3s) -> tuple[float, FloatArray, FloatArray, FloatArray]:
         res = self._res
         res.clear()
         d = coal.distance(a, Ta, b, Tb, self._req, res)
-        return float(d), np.asarray(res.getNearestPoint1()), np.asarray(res.getNearestPoint2()), _normal(res)
+        return float(d), np.asarray(res.getNearestPoint1()), np.asarray(res.getNearestPoint2()), unit_normal(res)
 
 
-def _normal(res: coal.DistanceResult) -> FloatArray:
+def unit_normal(res: coal.DistanceResult) -> FloatArray:
     """n̂ from body b to body a: −coal's normal (which points from the first shape to the second),
     defined in penetration too."""
     n = -np.asarray(res.normal, dtype=float)

@@ -23,6 +23,7 @@ Pairs, decided here once and never per tick:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import coal
 import numpy as np
@@ -234,7 +235,13 @@ class RobotGeometry:
     def placements_after_fk(self) -> list[pin.SE3]:
         """Every body's pose in the base frame from the arm's current forward kinematics."""
         oMi = self.arm.data.oMi
-        return [oMi[b.joint] * b.placement if b.joint else b.placement for b in self.bodies]
+        return [self.placement(k, oMi) for k in range(len(self.bodies))]
+
+    def placement(self, k: int, oMi: Any) -> pin.SE3:
+        """Body k's pose in the base frame, the joints at ``oMi`` (a Pinocchio data's, after its
+        forward kinematics)."""
+        b = self.bodies[k]
+        return oMi[b.joint] * b.placement if b.joint else b.placement
 
 
 def robot_geometry(robot: RobotConfig, arm: ArmModel) -> RobotGeometry:
