@@ -127,12 +127,7 @@ class CollisionRows(DamperRows):
         m = dist.shape[0]
         if not m:
             return out
-        # a moving obstacle b: ḋ = n̂ᵀJ_a v − n̂ᵀv_b, so its rows ask n̂ᵀv_b more of the robot
-        shift = np.zeros(m)
-        if self.search.moving:
-            Rb = self.search.base_rotation
-            for k in np.flatnonzero(other <= -2).tolist():
-                shift[k] = float(normal[k] @ (Rb.T @ self.search.obstacles[-2 - int(other[k])].velocity_w))
+        shift = self._obstacle_shift(normal, other)
         l, l_brake, damper = damper_bounds(C, v_prev, lb, ub, dist, safety, d_i, p.gain, self.latency, shift,
                                            self._accel, p.braking, np.zeros(m))
         # two bodies of one pair of links: one row where they are parallel (the key: link a, and
@@ -149,6 +144,16 @@ class CollisionRows(DamperRows):
             self._add_inside(out, body[inside], other[inside], safety[inside], q_base, q_arm, v_prev, lb, ub)
         return out
 
+    def _obstacle_shift(self, normal: FloatArray, other: IntArray) -> FloatArray:
+        """[m/s] n̂ᵀv_b of each row against a moving obstacle b (0 otherwise): ḋ = n̂ᵀJ_a v − n̂ᵀv_b,
+        so its rows ask n̂ᵀv_b more of the robot."""
+        shift = np.zeros(other.shape[0])
+        if self.search.moving:
+            Rb = self.search.base_rotation
+            for k in np.flatnonzero(other <= -2).tolist():
+                shift[k] = float(normal[k] @ (Rb.T @ self.search.obstacles[-2 - int(other[k])].velocity_w))
+        return shift
+
     def _add_inside(self, out: Rows, body: IntArray, other: IntArray, safety: FloatArray, q_base: FloatArray,
                     q_arm: FloatArray, v_prev: FloatArray, lb: FloatArray, ub: FloatArray) -> None:
         """Append to ``out`` the rows of the pairs inside d_s on their bodies at the braking
@@ -160,13 +165,9 @@ class CollisionRows(DamperRows):
         C = np.zeros((m, self.n_w + self.n_a))
         _point_rows(Jw, self._support, self._body_joint, body, other, P, Q, N, self.M, self.n_w, C)
         offset = (d - (d_b - self.inside.dt * (C @ v0))) / self.inside.dt  # (d − d̃)/Δt
-        shift = np.zeros(m)
-        if self.search.moving:
-            Rb = self.search.base_rotation
-            for k in np.flatnonzero(other <= -2).tolist():
-                shift[k] = float(N[k] @ (Rb.T @ self.search.obstacles[-2 - int(other[k])].velocity_w))
         l, l_brake, damper = damper_bounds(C, v_prev, lb, ub, d, safety, p.influence_distance, p.gain,
-                                           self.latency, shift, self._accel, p.braking, offset)
+                                           self.latency, self._obstacle_shift(N, other), self._accel, p.braking,
+                                           offset)
         out.C, out.l = np.vstack((out.C, C)), np.concatenate((out.l, l))
         out.l_brake, out.damper = np.concatenate((out.l_brake, l_brake)), np.concatenate((out.damper, damper))
         out.distances = np.concatenate((out.distances, d))
