@@ -196,8 +196,10 @@ def test_sessions_bind_loopback_only_and_do_not_scout(creds: Path, folder: str |
     if role == ROLE_CLIENT:
         assert config_value(zc, "listen/endpoints") == []  # a client listens nowhere
     assert config_value(zc, "transport/link/tx/lease") <= 1000  # a hung peer is dropped within ~1 s
-    if folder is not None:
-        assert config_value(zc, "scouting/gossip/enabled") is False
+    # every link an explicit connect: with gossip on, the sim dialled the daemon that had dialled it
+    # (two links in one transport); after a frozen sim's one-sided lease expiry the pair can stay
+    # split for good (docs/reliability.md, "Gossip is off")
+    assert config_value(zc, "scouting/gossip/enabled") is False
 
 
 @pytest.mark.parametrize("folder", FOLDERS)

@@ -1,13 +1,14 @@
 """One robot, one controller, over real Zenoh: the blind drill's attacks, replayed.
 
 Each test starts a real sim and daemon on loopback and attacks them the way the drill did: a
-second daemon for the same robot, a second sim under the same id bridged in by a client, a
+second daemon for the same robot, a second sim under the same id dialling the daemon, a
 client publishing ``cmd`` itself, a status query for a mistyped robot id. No timing asserts.
 """
 
 from __future__ import annotations
 
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -49,25 +50,31 @@ def test_a_second_daemon_refuses_to_start_or_waits_for_the_lease(service_stack: 
             st2 = until(lambda: (s := c.wait_state(2.0)) is not None and s.lease
                         and s.lease != first.status.lease and s)
             # the second daemon answers with its own lease and, once its first states are in, state_ok
-            # (asserted at the first answer, CI once saw its status of the tick before its first state)
-            second = until(lambda: (i := c.info()) is not None and i.status.lease == st2.lease
-                           and i.status.state_ok and i)
+            # (asserted at the first answer, CI once saw its status of the tick before its first state);
+            # asked where it listens: every link is an explicit connect (no gossip), so a client of
+            # the first daemon's endpoint does not reach it
+            with Client(other, name="test2") as c2:
+                second = until(lambda: (i := c2.info()) is not None and i.status.lease == st2.lease
+                               and i.status.state_ok and i)
             assert second.status.lease == st2.lease
         finally:
             waiting.stop()
 
 
-def test_a_second_sim_under_the_same_id_is_a_fault_not_mixed(service_stack: Any) -> None:
+def test_a_second_sim_under_the_same_id_is_a_fault_not_mixed(service_stack: Any, tmp_path: Path) -> None:
     stack: Stack = service_stack(500.0)
     with Client(stack.svc, name="test") as c:
         info = ready(c)
         latched = info.status.sim_instance
-        # a second sim for the same robot, on another port
+        # a second sim for the same robot, on another port, that dials the daemon itself (a robot
+        # process configured with the daemon's endpoint; every link is an explicit connect)
         twin_svc = stack.svc.with_(zenoh={"sim_endpoint": f"tcp/127.0.0.1:{free_port()}"})
-        twin = Stack(twin_svc, log_dir=stack.log_dir)
+        dial = tmp_path / "twin_dials_the_daemon.json5"
+        dial.write_text(f'{{ connect: {{ endpoints: ["{stack.svc.zenoh.daemon_endpoint}"] }} }}\n', encoding="utf-8")
+        twin = Stack(twin_svc, log_dir=stack.log_dir, extra_sim_args=["--zenoh-config", str(dial)])
         twin.start_sim()
         try:
-            # a peer bridges to it (the drill: wmm-qp status --sim-endpoint <the twin's port>)
+            # a peer watches it (the drill: wmm-qp status --sim-endpoint <the twin's port>)
             with Client(twin_svc, name="bridge") as bridge:
                 twin_state = until(lambda: (s := bridge.wait_state(2.0)) is not None
                                    and s.instance != latched and s)
