@@ -300,7 +300,7 @@ def setpoint_flood(p: Probe, factor: float = 10.0, seconds: float = 5.0) -> dict
 
     svc = p.stack.svc
     base_hz, base_miss, _, _ = window(lambda: time.sleep(seconds))
-    argv = [sys.executable, "-c", _FLOODER, svc.prefix, f"{factor * rate}", f"{seconds}",
+    argv = [sys.executable, "-P", "-c", _FLOODER, svc.prefix, f"{factor * rate}", f"{seconds}",
             *(f"{v}" for v in x), svc.zenoh.daemon_endpoint, svc.zenoh.sim_endpoint, svc.robot]
     proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     try:

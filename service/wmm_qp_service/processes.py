@@ -98,7 +98,10 @@ class Stack:
     def _spawn(self, name: str, argv: list[str]) -> subprocess.Popen[bytes]:
         err = subprocess.DEVNULL if self.log_dir is None else open(self.log_dir / f"{name}.log", "ab")  # noqa: SIM115
         env = dict(os.environ, PYTHONUNBUFFERED="1")
-        p = subprocess.Popen([sys.executable, "-m", "wmm_qp_service.cli", *argv],
+        # -P: the working directory is not put on sys.path. Started from a checkout's root, ``-m``
+        # would import its ``wmm_qp/`` instead of the installed one (and compile its own numba
+        # kernels there: every stack of a fresh CI venv paid that once, ~25 s of CPU)
+        p = subprocess.Popen([sys.executable, "-P", "-m", "wmm_qp_service.cli", *argv],
                              stdin=subprocess.DEVNULL, stdout=err, stderr=err, env=env)
         self.procs[name] = p
         return p

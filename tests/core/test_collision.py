@@ -375,7 +375,7 @@ def test_the_first_obstacle_near_the_arm_compiles_nothing_in_the_loop(tmp_path: 
     import subprocess
     import sys
 
-    out = subprocess.run([sys.executable, "-c", _FIRST_OBSTACLE], capture_output=True, text=True, timeout=600)
+    out = subprocess.run([sys.executable, "-P", "-c", _FIRST_OBSTACLE], capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr[-2000:]
     rows = int(out.stdout.split("rows ")[1].split()[0])
     assert rows > 0, out.stdout  # the obstacles were near: their rows were built

@@ -27,7 +27,7 @@ def test_the_demo_runs_through_the_franka_driver_against_franky_sim(tmp_path: Pa
     in libfranka's cycle."""
     sim = start_franky_sim(w.load_robot_config(FR3))
     try:
-        p = subprocess.run([sys.executable, "-m", "wmm_qp_service.cli", "demo", "--robot-config", str(FR3),
+        p = subprocess.run([sys.executable, "-P", "-m", "wmm_qp_service.cli", "demo", "--robot-config", str(FR3),
                             "--driver", "franka", "--robot-ip", sim.host, "--duration", "8",
                             "--json", "--logs", str(tmp_path), *(["--embedded"] if embedded else [])],
                            capture_output=True, text=True, timeout=600, stdin=subprocess.DEVNULL)
@@ -47,6 +47,6 @@ def test_the_demo_runs_through_the_franka_driver_against_franky_sim(tmp_path: Pa
 
 
 def test_driver_and_robot_ip_go_together() -> None:
-    p = subprocess.run([sys.executable, "-m", "wmm_qp_service.cli", "demo", "--driver", "franka"],
+    p = subprocess.run([sys.executable, "-P", "-m", "wmm_qp_service.cli", "demo", "--driver", "franka"],
                        capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL)
     assert p.returncode == 2 and "--driver and --robot-ip go together" in p.stderr and "Traceback" not in p.stderr

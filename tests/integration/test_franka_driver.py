@@ -88,7 +88,7 @@ def rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Daemon, Any]
     svc = isolated_config(robot=robot)
     log = tmp_path_factory.mktemp("franka") / "driver.log"
     with open(log, "w") as err:
-        drv = subprocess.Popen([sys.executable, "-m", "wmm_qp_service.cli", "driver", "franka", "--robot-ip",
+        drv = subprocess.Popen([sys.executable, "-P", "-m", "wmm_qp_service.cli", "driver", "franka", "--robot-ip",
                                 sim.host, "--robot-config", str(FR3), "--prefix", svc.prefix,
                                 "--daemon-endpoint", svc.zenoh.daemon_endpoint,
                                 "--sim-endpoint", svc.zenoh.sim_endpoint], stderr=err)

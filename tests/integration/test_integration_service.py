@@ -194,7 +194,7 @@ def test_a_sim_started_with_a_robot_file_is_found_under_its_name(tmp_path: Any) 
     ends = ["--prefix", f"idtest{time.monotonic_ns() % 10**9}",
             "--sim-endpoint", f"tcp/127.0.0.1:{free_port()}", "--daemon-endpoint", f"tcp/127.0.0.1:{free_port()}"]
     with open(tmp_path / "sim.log", "wb") as log:
-        sim = subprocess.Popen([sys.executable, "-m", "wmm_qp_service.cli", "sim", "--robot-config", str(path),
+        sim = subprocess.Popen([sys.executable, "-P", "-m", "wmm_qp_service.cli", "sim", "--robot-config", str(path),
                                 *ends], stdin=subprocess.DEVNULL, stdout=log, stderr=log)
     try:
         svc = service_config(build_parser("status").parse_args(["status", "--robot", "cell_7", *ends]))

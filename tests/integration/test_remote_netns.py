@@ -119,7 +119,7 @@ def test_console_drives_the_chosen_robot_through_a_tls_router_and_a_viewer_canno
                 'user: "operator", password: "file:operator.secret"':
                     f'user: "{user}", password: "file:{user}.secret"'})
 
-        py = [sys.executable, "-m", "wmm_qp_service.cli"]
+        py = [sys.executable, "-P", "-m", "wmm_qp_service.cli"]
         path = os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")])
         env = dict(os.environ, PYTHONUNBUFFERED="1", PYTHONPATH=path)
         prefix = f"wmmremote{tag}"

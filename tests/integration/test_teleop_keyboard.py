@@ -57,7 +57,7 @@ def test_keyboard_teleop_in_tmux(tmp_path: Path) -> None:
     with Stack(isolated_config(), log_dir=tmp_path) as stack, Client(stack.svc, name="observer") as obs:
         assert obs.wait_for_daemon(60.0) is not None, "daemon did not answer"
         exit_file = tmp_path / "exit"
-        cmd = " ".join([sys.executable, "-m", "wmm_qp_service.cli", "teleop", "keyboard", "--speed", "0.1",
+        cmd = " ".join([sys.executable, "-P", "-m", "wmm_qp_service.cli", "teleop", "keyboard", "--speed", "0.1",
                         *service_args(stack.svc)])
         tmux = Tmux(f"{cmd} 2> {tmp_path / 'teleop.log'}; echo $? > {exit_file}")
         try:

@@ -191,7 +191,7 @@ def driver_stack(sim: FrankySim, logs: Path, serve: bool = True) -> Iterator[tup
             if name == "serve" and not serve:
                 continue
             with open(logs / f"{name}.log", "w") as err:
-                procs[name] = subprocess.Popen([sys.executable, "-m", "wmm_qp_service.cli", *argv, *common],
+                procs[name] = subprocess.Popen([sys.executable, "-P", "-m", "wmm_qp_service.cli", *argv, *common],
                                                stderr=err, stdin=subprocess.DEVNULL)
         yield svc, procs
     finally:

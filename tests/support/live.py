@@ -30,5 +30,5 @@ def ready(c: Client) -> Any:
 
 
 def cli(*argv: str, timeout: float = 60.0) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "wmm_qp_service.cli", *argv], capture_output=True,
+    return subprocess.run([sys.executable, "-P", "-m", "wmm_qp_service.cli", *argv], capture_output=True,
                           text=True, timeout=timeout, stdin=subprocess.DEVNULL)
