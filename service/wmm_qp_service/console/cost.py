@@ -26,8 +26,8 @@ from ..config import ServiceConfig
 def _console(s: ServiceConfig, port: int, log: Path) -> subprocess.Popen[bytes]:
     args = ["--port", str(port), "--prefix", s.prefix, "--robot", s.robot,
             "--daemon-endpoint", s.zenoh.daemon_endpoint, "--sim-endpoint", s.zenoh.sim_endpoint]
-    return subprocess.Popen([sys.executable, "-P", "-m", "wmm_qp_service.cli", "console", *args], stdin=subprocess.DEVNULL,
-                            stdout=open(log, "ab"), stderr=subprocess.STDOUT)
+    return subprocess.Popen([sys.executable, "-P", "-m", "wmm_qp_service.cli", "console", *args],
+                            stdin=subprocess.DEVNULL, stdout=open(log, "ab"), stderr=subprocess.STDOUT)
 
 
 def _browser(port: int, profile: Path) -> subprocess.Popen[bytes]:
