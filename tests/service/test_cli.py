@@ -314,7 +314,8 @@ def test_driver_franka_without_a_robot_says_so_and_exits_1(tmp_path: object) -> 
     from wmm_qp_service.processes import free_port
 
     r = subprocess.run([sys.executable, "-P", "-m", "wmm_qp_service.cli", "driver", "franka",
-                        "--robot-ip", "127.0.0.254", "--prefix", f"wmmnorobot{free_port()}", "--sim-endpoint", f"tcp/127.0.0.1:{free_port()}"],
+                        "--robot-ip", "127.0.0.254", "--prefix", f"wmmnorobot{free_port()}",
+                        "--sim-endpoint", f"tcp/127.0.0.1:{free_port()}"],
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 1 and "cannot connect to the robot at 127.0.0.254" in r.stderr, r.stderr
     assert "Traceback" not in r.stderr
