@@ -29,13 +29,14 @@ import sys
 import time
 from pathlib import Path
 
+from wmm_qp_service.processes import CLI
 from wmm_qp_service.stress import CONDITIONS, stressed
 
 
 def one_demo(out: Path, condition: str, i: int, args: argparse.Namespace) -> dict:
     logs = out / f"{condition}_{i:02d}"
     logs.mkdir(parents=True, exist_ok=True)
-    argv = [sys.executable, "-P", "-m", "wmm_qp_service.cli", "demo", "--json", "--logs", str(logs),
+    argv = [*CLI, "demo", "--json", "--logs", str(logs),
             "--duration", str(args.demo_duration), "--rate", str(args.rate)]
     if args.robot_config:
         argv += ["--robot-config", args.robot_config]

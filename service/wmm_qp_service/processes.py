@@ -19,6 +19,12 @@ import wmm_qp as w
 
 from .config import ServiceConfig, load_service_config
 
+CLI: tuple[str, ...] = (sys.executable, "-P", "-m", "wmm_qp_service.cli")
+"""The command that runs ``wmm-qp`` in a new process, as installed: ``-P`` keeps the working
+directory off ``sys.path`` (started from a checkout's root, ``-m`` would import its ``wmm_qp/``
+instead of the installed one, and compile its own numba kernels there: every stack of a fresh
+CI venv paid that once, ~25 s of CPU)."""
+
 _HANDED_OUT: set[int] = set()
 
 
@@ -98,10 +104,7 @@ class Stack:
     def _spawn(self, name: str, argv: list[str]) -> subprocess.Popen[bytes]:
         err = subprocess.DEVNULL if self.log_dir is None else open(self.log_dir / f"{name}.log", "ab")  # noqa: SIM115
         env = dict(os.environ, PYTHONUNBUFFERED="1")
-        # -P: the working directory is not put on sys.path. Started from a checkout's root, ``-m``
-        # would import its ``wmm_qp/`` instead of the installed one (and compile its own numba
-        # kernels there: every stack of a fresh CI venv paid that once, ~25 s of CPU)
-        p = subprocess.Popen([sys.executable, "-P", "-m", "wmm_qp_service.cli", *argv],
+        p = subprocess.Popen([*CLI, *argv],
                              stdin=subprocess.DEVNULL, stdout=err, stderr=err, env=env)
         self.procs[name] = p
         return p

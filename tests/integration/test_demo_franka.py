@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -15,6 +14,7 @@ pytest.importorskip("pylibfranka", reason="needs pylibfranka (pip install 'wmm-q
 pytest.importorskip("franky_sim", reason="needs franky-sim (pip install franky-sim)")
 
 from support.franky_rig import FR3, start_franky_sim
+from wmm_qp_service.processes import CLI
 
 import wmm_qp as w
 
@@ -27,7 +27,7 @@ def test_the_demo_runs_through_the_franka_driver_against_franky_sim(tmp_path: Pa
     in libfranka's cycle."""
     sim = start_franky_sim(w.load_robot_config(FR3))
     try:
-        p = subprocess.run([sys.executable, "-P", "-m", "wmm_qp_service.cli", "demo", "--robot-config", str(FR3),
+        p = subprocess.run([*CLI, "demo", "--robot-config", str(FR3),
                             "--driver", "franka", "--robot-ip", sim.host, "--duration", "8",
                             "--json", "--logs", str(tmp_path), *(["--embedded"] if embedded else [])],
                            capture_output=True, text=True, timeout=600, stdin=subprocess.DEVNULL)
@@ -47,6 +47,6 @@ def test_the_demo_runs_through_the_franka_driver_against_franky_sim(tmp_path: Pa
 
 
 def test_driver_and_robot_ip_go_together() -> None:
-    p = subprocess.run([sys.executable, "-P", "-m", "wmm_qp_service.cli", "demo", "--driver", "franka"],
+    p = subprocess.run([*CLI, "demo", "--driver", "franka"],
                        capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL)
     assert p.returncode == 2 and "--driver and --robot-ip go together" in p.stderr and "Traceback" not in p.stderr

@@ -7,7 +7,6 @@ driver franka``; the test plays the daemon (it holds the control lease and publi
 from __future__ import annotations
 
 import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -22,7 +21,7 @@ pytest.importorskip("franky_sim", reason="needs franky-sim (pip install franky-s
 import zenoh
 from support.franky_rig import FR3, RECOVERIES, REFLEXES, driver_stack, start_franky_sim
 from wmm_qp_service.keys import Keys
-from wmm_qp_service.processes import isolated_config
+from wmm_qp_service.processes import CLI, isolated_config
 from wmm_qp_service.protocol import CommandMsg, GripperMsg, StateMsg, TruthMsg, decode, encode
 from wmm_qp_service.transport import ROLE_DAEMON, open_session
 
@@ -88,7 +87,7 @@ def rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Daemon, Any]
     svc = isolated_config(robot=robot)
     log = tmp_path_factory.mktemp("franka") / "driver.log"
     with open(log, "w") as err:
-        drv = subprocess.Popen([sys.executable, "-P", "-m", "wmm_qp_service.cli", "driver", "franka", "--robot-ip",
+        drv = subprocess.Popen([*CLI, "driver", "franka", "--robot-ip",
                                 sim.host, "--robot-config", str(FR3), "--prefix", svc.prefix,
                                 "--daemon-endpoint", svc.zenoh.daemon_endpoint,
                                 "--sim-endpoint", svc.zenoh.sim_endpoint], stderr=err)

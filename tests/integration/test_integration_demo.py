@@ -4,16 +4,16 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+from wmm_qp_service.processes import CLI
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
 
 def test_demo_json_summary() -> None:
-    out = subprocess.run([sys.executable, "-P", "-m", "wmm_qp_service.cli", "demo", "--duration", "6",
+    out = subprocess.run([*CLI, "demo", "--duration", "6",
                           "--json"], capture_output=True, text=True, timeout=180, check=False)
     assert out.returncode == 0, out.stderr[-2000:]
     d = json.loads(out.stdout)
@@ -36,6 +36,6 @@ def test_demo_json_summary() -> None:
 
 
 def test_demo_rejects_bad_arguments() -> None:
-    out = subprocess.run([sys.executable, "-P", "-m", "wmm_qp_service.cli", "demo", "--rate", "-1"],
+    out = subprocess.run([*CLI, "demo", "--rate", "-1"],
                          capture_output=True, text=True, timeout=60, check=False)
     assert out.returncode == 2 and "Traceback" not in out.stderr

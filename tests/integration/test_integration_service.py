@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from support.live import TIMEOUT, ready, until
 from wmm_qp_service.client import Client
+from wmm_qp_service.processes import CLI
 from wmm_qp_service.protocol import ModeMsg, SetpointMsg, StateMsg, TelemetryMsg, TruthMsg, encode
 
 import wmm_qp as w
@@ -183,7 +184,6 @@ def test_a_sim_started_with_a_robot_file_is_found_under_its_name(tmp_path: Any) 
     """``wmm-qp sim --robot-config F`` (no --robot; configs/service.toml names robot "wmm") serves
     under F's name: a client given ``--robot <that name>`` receives its states."""
     import subprocess
-    import sys
 
     from support.service_robots import gen3_file
     from wmm_qp_service.cli import build_parser
@@ -194,7 +194,7 @@ def test_a_sim_started_with_a_robot_file_is_found_under_its_name(tmp_path: Any) 
     ends = ["--prefix", f"idtest{time.monotonic_ns() % 10**9}",
             "--sim-endpoint", f"tcp/127.0.0.1:{free_port()}", "--daemon-endpoint", f"tcp/127.0.0.1:{free_port()}"]
     with open(tmp_path / "sim.log", "wb") as log:
-        sim = subprocess.Popen([sys.executable, "-P", "-m", "wmm_qp_service.cli", "sim", "--robot-config", str(path),
+        sim = subprocess.Popen([*CLI, "sim", "--robot-config", str(path),
                                 *ends], stdin=subprocess.DEVNULL, stdout=log, stderr=log)
     try:
         svc = service_config(build_parser("status").parse_args(["status", "--robot", "cell_7", *ends]))

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import pytest
 from support.console_helpers import wait_for
+from wmm_qp_service.processes import CLI
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
@@ -119,7 +120,7 @@ def test_console_drives_the_chosen_robot_through_a_tls_router_and_a_viewer_canno
                 'user: "operator", password: "file:operator.secret"':
                     f'user: "{user}", password: "file:{user}.secret"'})
 
-        py = [sys.executable, "-P", "-m", "wmm_qp_service.cli"]
+        py = list(CLI)
         path = os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")])
         env = dict(os.environ, PYTHONUNBUFFERED="1", PYTHONPATH=path)
         prefix = f"wmmremote{tag}"

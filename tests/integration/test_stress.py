@@ -12,13 +12,14 @@ import sys
 from pathlib import Path
 
 import pytest
+from wmm_qp_service.processes import CLI
 from wmm_qp_service.stress import CpuHogs, Freezer, child_pid, stressed
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
 
 def test_the_demo_under_cpu_hogs_disk_writes_and_random_freezes_counts_no_violation(tmp_path: Path) -> None:
-    argv = [sys.executable, "-P", "-m", "wmm_qp_service.cli", "demo", "--json", "--duration", "12",
+    argv = [*CLI, "demo", "--json", "--duration", "12",
             "--logs", str(tmp_path)]
     proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL)
     with stressed("all", parent=lambda: proc.pid, seed=7) as applied:
@@ -37,7 +38,7 @@ def test_the_embedded_demo_under_cpu_hogs_disk_writes_and_random_freezes_counts_
     """``wmm-qp demo --embedded``: one process, the robot and its controller in one cycle, frozen
     at random (the robot runs every step it missed when continued: its firmware brakes past the
     command timeout), under CPU hogs and a disk writer: the referee counts 0."""
-    argv = [sys.executable, "-P", "-m", "wmm_qp_service.cli", "demo", "--embedded", "--json", "--duration", "10",
+    argv = [*CLI, "demo", "--embedded", "--json", "--duration", "10",
             "--logs", str(tmp_path)]
     proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL)
     with stressed("all", parent=lambda: proc.pid, seed=11) as applied:

@@ -7,7 +7,6 @@ from __future__ import annotations
 import re
 import shutil
 import subprocess
-import sys
 import time
 import uuid
 from pathlib import Path
@@ -15,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from support.console_helpers import service_args, wait_for
+from wmm_qp_service.processes import CLI
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
@@ -57,7 +57,7 @@ def test_keyboard_teleop_in_tmux(tmp_path: Path) -> None:
     with Stack(isolated_config(), log_dir=tmp_path) as stack, Client(stack.svc, name="observer") as obs:
         assert obs.wait_for_daemon(60.0) is not None, "daemon did not answer"
         exit_file = tmp_path / "exit"
-        cmd = " ".join([sys.executable, "-P", "-m", "wmm_qp_service.cli", "teleop", "keyboard", "--speed", "0.1",
+        cmd = " ".join([*CLI, "teleop", "keyboard", "--speed", "0.1",
                         *service_args(stack.svc)])
         tmux = Tmux(f"{cmd} 2> {tmp_path / 'teleop.log'}; echo $? > {exit_file}")
         try:

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 
 import pytest
 from wmm_qp_service.cli import main
+from wmm_qp_service.processes import CLI
 
 from wmm_qp.config import default_config_dir
 from wmm_qp.solvers import available_solvers
@@ -116,7 +116,7 @@ def test_verify_scene_and_no_collision_exclude_each_other(capsys: pytest.Capture
 
 def test_console_script_runs_without_traceback() -> None:
     r = subprocess.run(
-        [sys.executable, "-P", "-m", "wmm_qp_service.cli", "inspect", "--arm-q", "1"],
+        [*CLI, "inspect", "--arm-q", "1"],
         capture_output=True,
         text=True,
         timeout=60,
@@ -204,7 +204,7 @@ def test_a_bad_robot_file_is_one_line_naming_file_and_key(tmp_path, capsys: pyte
 def test_a_bad_robot_file_through_the_console_script(tmp_path, case: str) -> None:  # type: ignore[no-untyped-def]
     """The whole process's stderr (a C++ parser may write to it directly): one line."""
     path, key = bad_robot_file(tmp_path, case)
-    r = subprocess.run([sys.executable, "-P", "-m", "wmm_qp_service.cli", "sim", "--robot-config", str(path)],
+    r = subprocess.run([*CLI, "sim", "--robot-config", str(path)],
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1
     assert f"{path}: {key}:" in r.stderr
@@ -313,7 +313,7 @@ def test_driver_franka_without_a_robot_says_so_and_exits_1(tmp_path: object) -> 
     pytest.importorskip("franky_sim", reason="configs/robots/fr3.toml's URDF ships with franky-sim")
     from wmm_qp_service.processes import free_port
 
-    r = subprocess.run([sys.executable, "-P", "-m", "wmm_qp_service.cli", "driver", "franka",
+    r = subprocess.run([*CLI, "driver", "franka",
                         "--robot-ip", "127.0.0.254", "--prefix", f"wmmnorobot{free_port()}",
                         "--sim-endpoint", f"tcp/127.0.0.1:{free_port()}"],
                        capture_output=True, text=True, timeout=60)

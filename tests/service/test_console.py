@@ -5,7 +5,6 @@ one-line errors."""
 from __future__ import annotations
 
 import subprocess
-import sys
 from typing import Any
 
 import numpy as np
@@ -20,6 +19,7 @@ from wmm_qp_service.console.geometry import (
     wxyz_to_xyzw,
     xyzw_to_wxyz,
 )
+from wmm_qp_service.processes import CLI
 
 import wmm_qp as w
 from wmm_qp.manipulability import directional_manipulability
@@ -177,7 +177,7 @@ def test_the_robot_file_is_the_daemons_else_the_shipped_one_of_that_name(tmp_pat
 ])
 def test_console_errors_are_one_line(args: list[str], message: str) -> None:
     pytest.importorskip("viser")
-    p = subprocess.run([sys.executable, "-P", "-m", "wmm_qp_service.cli", "console", *args], capture_output=True,
+    p = subprocess.run([*CLI, "console", *args], capture_output=True,
                        text=True, timeout=120, stdin=subprocess.DEVNULL)
     assert p.returncode in (1, 2)
     assert message in p.stderr and "Traceback" not in p.stderr
@@ -192,7 +192,7 @@ def test_console_refuses_a_port_in_use() -> None:
         s.bind(("127.0.0.1", 0))
         s.listen()
         port = s.getsockname()[1]
-        p = subprocess.run([sys.executable, "-P", "-m", "wmm_qp_service.cli", "console", "--port", str(port)],
+        p = subprocess.run([*CLI, "console", "--port", str(port)],
                            capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL)
     assert p.returncode == 2 and "choose another --port" in p.stderr and "Traceback" not in p.stderr
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +13,7 @@ from wmm_qp_service.cli import main
 from wmm_qp_service.experiments import circle
 from wmm_qp_service.experiments.runner import anchored
 from wmm_qp_service.experiments.setup import make_setup
+from wmm_qp_service.processes import CLI
 
 import wmm_qp as w
 
@@ -65,7 +65,7 @@ def test_an_uninstalled_plant_is_one_line_and_exit_2(argv: list[str], monkeypatc
 @pytest.mark.integration
 @pytest.mark.slow
 def test_the_demo_in_physics_has_no_violation() -> None:
-    out = subprocess.run([sys.executable, "-P", "-m", "wmm_qp_service.cli", "demo", "--duration", "6", "--physics",
+    out = subprocess.run([*CLI, "demo", "--duration", "6", "--physics",
                           "mujoco", "--json"], capture_output=True, text=True, timeout=180, check=False)
     assert out.returncode == 0, out.stderr[-2000:]
     d = json.loads(out.stdout)
@@ -81,7 +81,7 @@ def test_the_demo_in_physics_on_a_robot_file_the_suite_writes(tmp_path: Path) ->
     from support.service_robots import gen3_file
 
     robot = gen3_file(tmp_path, base="diff_drive", name="gen3_diff_suite")
-    out = subprocess.run([sys.executable, "-P", "-m", "wmm_qp_service.cli", "demo", "--duration", "6", "--physics",
+    out = subprocess.run([*CLI, "demo", "--duration", "6", "--physics",
                           "mujoco", "--robot-config", str(robot), "--json", "--logs", str(tmp_path / "logs")],
                          capture_output=True, text=True, timeout=180, check=False)
     assert out.returncode == 0, out.stderr[-2000:]

@@ -14,7 +14,6 @@ from __future__ import annotations
 import multiprocessing as mp
 import signal
 import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -23,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from wmm_qp_service.processes import CLI
 
 import wmm_qp as w
 from wmm_qp.config import default_config_dir
@@ -191,7 +191,7 @@ def driver_stack(sim: FrankySim, logs: Path, serve: bool = True) -> Iterator[tup
             if name == "serve" and not serve:
                 continue
             with open(logs / f"{name}.log", "w") as err:
-                procs[name] = subprocess.Popen([sys.executable, "-P", "-m", "wmm_qp_service.cli", *argv, *common],
+                procs[name] = subprocess.Popen([*CLI, *argv, *common],
                                                stderr=err, stdin=subprocess.DEVNULL)
         yield svc, procs
     finally:

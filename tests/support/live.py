@@ -4,12 +4,12 @@ timeout, a daemon ready to take setpoints, and the ``wmm-qp`` CLI as a child pro
 from __future__ import annotations
 
 import subprocess
-import sys
 import time
 from collections.abc import Callable
 from typing import Any
 
 from wmm_qp_service.client import Client
+from wmm_qp_service.processes import CLI
 
 TIMEOUT = 30.0
 
@@ -30,5 +30,5 @@ def ready(c: Client) -> Any:
 
 
 def cli(*argv: str, timeout: float = 60.0) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-P", "-m", "wmm_qp_service.cli", *argv], capture_output=True,
+    return subprocess.run([*CLI, *argv], capture_output=True,
                           text=True, timeout=timeout, stdin=subprocess.DEVNULL)

@@ -21,12 +21,13 @@ import time
 from pathlib import Path
 
 from ..config import ServiceConfig
+from ..processes import CLI
 
 
 def _console(s: ServiceConfig, port: int, log: Path) -> subprocess.Popen[bytes]:
     args = ["--port", str(port), "--prefix", s.prefix, "--robot", s.robot,
             "--daemon-endpoint", s.zenoh.daemon_endpoint, "--sim-endpoint", s.zenoh.sim_endpoint]
-    return subprocess.Popen([sys.executable, "-P", "-m", "wmm_qp_service.cli", "console", *args],
+    return subprocess.Popen([*CLI, "console", *args],
                             stdin=subprocess.DEVNULL, stdout=open(log, "ab"), stderr=subprocess.STDOUT)
 
 
