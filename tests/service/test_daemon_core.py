@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from support.daemon_drive import DT, Plant, max_step_ratio, rotated
+from support.daemon_drive import DT, Plant, max_step_ratio, rotated, tick
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.daemon import ControlCore
 from wmm_qp_service.protocol import ModeMsg, SetpointMsg
@@ -31,10 +31,7 @@ def run(core: ControlCore, plant: Plant, t: float, n: int,
         core.on_state(plant.msg(), t)
         if setpoint is not None:
             core.on_setpoint(SetpointMsg(robot="wmm", seq=1, stamp=t, x=setpoint.tolist(), source="op"), t)
-        cmd = core.tick(t)
-        assert cmd is not None
-        plant.apply(cmd)
-        cmds.append(cmd)
+        cmds.append(tick(core, plant, t))  # numbered, sent, applied: the state names it
         t += DT
     return t, cmds
 
@@ -83,9 +80,11 @@ def test_stale_state_gives_a_safe_stop_inside_the_bounds(robot: w.RobotConfig) -
     t, cmds = run(core, plant, 0.0, 300, setpoint=x0 + np.array([0.3, 0.2, 0.0]))
     assert np.abs(cmds[-1].v).max() > 1e-3
     stops = []
-    for _ in range(400):  # no state any more
+    for _ in range(400):  # no state any more (the commands still go out)
         c = core.tick(t)
         assert c is not None
+        core.seq += 1
+        core.sent(core.seq, t)
         stops.append(c)
         t += DT
     assert core.safe and "state stale" in core.last_fault
@@ -203,9 +202,8 @@ def test_pose_task_reaches_a_streamed_orientation_and_hold_relatches(robot: w.Ro
         core.on_state(plant.msg(), t)
         core.on_setpoint(SetpointMsg(robot="wmm", seq=1, stamp=t, x=x0.tolist(), source="op",
                                      q=target.tolist()), t)
-        cmd = core.tick(t)
-        assert cmd is not None and cmd.status != w.Status.SAFE_STOP, cmd and cmd.reason
-        plant.apply(cmd)
+        cmd = tick(core, plant, t)
+        assert cmd.status != w.Status.SAFE_STOP, cmd.reason
         cmds.append(cmd)
         t += DT
     assert orientation_error(core, plant, target) < 1e-3
@@ -235,14 +233,14 @@ def test_pose_task_turns_at_the_streamed_angular_velocity(robot: w.RobotConfig) 
                                  q=q1.tolist(), w=[0.0, 0.0, 0.2]), t)
     for _ in range(50):  # 0.1 s without a new sample
         core.on_state(plant.msg(), t)
-        plant.apply(core.tick(t))  # type: ignore[arg-type]
+        tick(core, plant, t)
         t += DT
     expected = rotated(q1, [0.0, 0.0, 1.0], 0.2 * 50 * DT)
     assert abs(abs(float(np.dot(core.orient.quat, expected))) - 1.0) < 1e-9
     assert np.allclose(core.ref.omega_d, [0.0, 0.0, 0.2])
     for _ in range(200):  # past setpoint_timeout (0.25 s): the target stops turning
         core.on_state(plant.msg(), t)
-        plant.apply(core.tick(t))  # type: ignore[arg-type]
+        tick(core, plant, t)
         t += DT
     assert core.orient.resting and np.allclose(core.ref.omega_d, 0.0)
 
@@ -259,9 +257,7 @@ def test_position_task_ignores_a_setpoints_orientation_and_counts_it(robot: w.Ro
         core.on_state(plant.msg(), t)
         assert core.on_setpoint(SetpointMsg(robot="wmm", seq=1, stamp=t, x=target.tolist(), source="op",
                                             q=[0.0, 0.0, 0.38, 0.92], w=[0.0, 0.0, 1.0]), t)
-        cmd = core.tick(t)
-        assert cmd is not None
-        plant.apply(cmd)
+        tick(core, plant, t)
         t += DT
     assert core.ref.quat_d is None and np.allclose(core.ref.omega_d, 0.0)
     assert np.linalg.norm(core.model.ee_position(plant.q_base, plant.q_arm) - target) < 2e-3

@@ -13,6 +13,11 @@ loaded hosts and SIGSTOP drills produced, replayed with fake clocks (no timing).
    the robot at rest in an older stream's stop, which had applied none of the broken stream's
    commands; those reached the robot afterwards and moved it, and the new stream's first command,
    computed from rest, met it moving. The daemon now keeps the stream and brakes it.
+4. Two whole stacks at real-time priority on the 2 cores (a starved transmit thread drops
+   commands): a new stream's first 12 commands, ramping from rest, were lost on the wire; its
+   13th reached the robot at rest 9 A·Δt from it ("changed by 9.00 A·Δt over Δt = 2.00 ms from
+   the executed rates (a new stream)"). The daemon now repeats a new stream's first command until
+   a state shows the robot applied one of the stream's.
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ from wmm_qp_sim import load_sim_config
 from wmm_qp_sim.robot import SimCommand, SimRobot
 
 import wmm_qp as w
+from wmm_qp.config.shapes import ShapeConfig
 
 DT = 0.001  # the sim's step
 PERIOD = 0.002  # the daemon's (500 Hz)
@@ -327,7 +333,10 @@ def test_after_its_own_stall_the_daemon_brakes_its_stream_while_its_commands_may
     for _ in range(40):
         wire.tick()
     assert core.stream_start == b and len(wire.queue) == 41 and wire.sim.stale  # none of B applied
-    assert np.abs(wire.sent[-1][2].arm_rates).max() > 2 * robot.arm.acceleration_max[0] * PERIOD  # B moves
+    # B's first command, again and again: the robot applied none of B yet (before, B went on from
+    # it and moved: its commands then met the robot at rest as a jump; see the test of lost commands)
+    first = wire.sent[-40][2]
+    assert all(cmd is first for _, _, cmd in wire.sent[-40:])
     wire.run(0.050)  # the daemon stalls 50 ms
     wire.tick()  # on a state of the robot at rest in A's stop: B's commands may still be on the way
     wire.hold = False  # they are: the wire delivers them, and what the daemon sent after them
@@ -398,3 +407,42 @@ def test_a_robot_that_stopped_the_stream_during_the_stall_refuses_its_braking(ro
         wire.tick()
     assert wire.counts() == 0, wire.sim.referee.last_event
     assert core.mode == w.Mode.HOLD and core.resume_needed
+
+
+def test_a_new_stream_whose_first_commands_are_lost_starts_from_rest_whichever_arrives_first(
+        robot: w.RobotConfig) -> None:
+    """The defect, replayed: the robot stopped the stream by itself (its timeout) and braked to
+    rest; a ball then came at the arm, and the daemon's new stream, started from rest, gave way
+    at the acceleration limits; its first commands were lost on the wire, and a later one reached
+    the robot at rest. Before, that one was 2 A·Δt (here) to 9 A·Δt (the drill) from the robot's
+    rates: a jump "from the executed rates (a new stream)". Now, until a state shows the robot
+    applied one of the new stream's commands, the daemon sends the stream's first command again
+    (within A·Δt of rest): whichever arrives first is a legal start, and the stream goes on from
+    it once the robot follows."""
+    wire, _ = _tracking(robot)
+    core = wire.core
+    wire.drop = True  # the robot hears nothing: it stops the stream by itself, at rest
+    while not (wire.sim.stale and not wire.sim.v_arm.any()):
+        wire.tick()
+    b = core.stream_start
+    x = core.model.ee_position(wire.sim.base_odom, wire.sim.q_arm)
+    ball = ShapeConfig(name="ball", link="", kind="sphere", size=np.array([0.08, 0.0, 0.0]),
+                         xyz=x + [0.0, 0.2, 0.0], rpy=np.zeros(3), velocity=np.array([0.0, -0.2, 0.0]))
+    core.on_obstacles((ball,), wire.t)  # coming at the arm: its row makes the robot give way
+    for _ in range(6):  # the new stream's first commands are lost
+        wire.tick()
+    assert core.stream_start > b and wire.sim.stale and not wire.sim.v_arm.any()  # none of it applied
+    new = [cmd for _, stream, cmd in wire.sent if stream == core.stream_start]
+    assert len(new) == 6
+    a = np.asarray(robot.arm.acceleration_max) * PERIOD
+    wa = np.asarray(robot.base.wheel_acceleration_max) * PERIOD
+    for cmd in new:  # every one of them a legal first command from rest
+        assert np.all(np.abs(cmd.arm_rates) <= a * (1 + 1e-9)), np.max(np.abs(cmd.arm_rates) / a)
+        assert np.all(np.abs(cmd.wheel_speeds) <= wa * (1 + 1e-9))
+    wire.drop = False
+    for _ in range(100):
+        wire.tick()
+    assert wire.counts() == 0, wire.sim.referee.last_event
+    after = [cmd for _, stream, cmd in wire.sent if stream == core.stream_start]
+    assert max_step_ratio(robot, after) <= 1.0 + 1e-9
+    assert not wire.sim.stale and np.abs(wire.sim.v_arm).max() > a.max()  # past its first command: following

@@ -49,6 +49,8 @@ class CommandStream:
         follow_state_age: the margin follows the measured age (the state trigger).
         broken: the robot no longer follows this stream (nothing is sent until it rests).
         start: the seq of the current stream's first command.
+        confirmed: a state showed the robot applied a command of the current stream (until then
+            the daemon sends the stream's first command again: :meth:`begin`).
         anchor_on_command: the robot follows the stream: the bounds start from the last command.
         cmd_state_seq: seq of the state this tick's command comes from (-1: predicted).
         inherited_cmd_seq: the last command the robot applied before this daemon drove it (a
@@ -80,6 +82,7 @@ class CommandStream:
         self.last_sent_t = -math.inf
         self.broken = False
         self.start = 0
+        self.confirmed = False
         self.anchor_on_command = False
         self.cmd_state_seq = -1
         self.inherited_cmd_seq = -1
@@ -105,11 +108,26 @@ class CommandStream:
         self.stalled = ""  # the braked stream's commands name the old instance: it refuses them
         self.reset_age()
 
+    def begin(self) -> None:
+        """The next command starts a stream (the referee's baseline: the robot's executed rates).
+
+        Until a state shows the robot applied one of its commands (:attr:`confirmed`), the
+        daemon sends this first command again instead of going on from it. Commands can be lost
+        on the way (a starved transmit thread drops them): a stream that went on, A·Δt per
+        command, would reach a robot that received none of the first ones as a jump from its
+        rates. Every repeat is a legal first command, and a legal successor of itself.
+        """
+        self.start = self.seq + 1  # the seq the sender gives it
+        self.confirmed = False
+
     def applied(self, msg: StateMsg) -> None:
         """An accepted state: once it names another command than the inherited one, the robot
-        applied one of this daemon's."""
+        applied one of this daemon's; once it names one of the current stream's, the stream
+        is :attr:`confirmed`."""
         if msg.cmd_seq != self.inherited_cmd_seq:
             self.inherited_cmd_seq = -1
+        if 0 < self.start <= msg.cmd_seq and msg.cmd_seq != self.inherited_cmd_seq:
+            self.confirmed = True
 
     def observe(self, msg: StateMsg, now: float) -> None:
         """An accepted state arrived at ``now`` [s]: if it applied a command of this stream, its

@@ -243,7 +243,7 @@ class ControlCore(CoreInputs):
         if self.state is None or not self._may_send(now):
             return None
         if not stream.anchor_on_command:  # this tick's command starts a stream (the referee's baseline)
-            stream.start = stream.seq + 1  # the seq the sender gives it
+            stream.begin()
         if (why := self.hazard(now) or stream.stalled or None) is not None:
             cmd = self._safe_stop(why)
             if stream.stalled and not stream.rest_seq and not cmd.arm_rates.any() and not cmd.wheel_speeds.any():
@@ -252,6 +252,10 @@ class ControlCore(CoreInputs):
                 self.stages.lap(WATCHDOGS)
             return cmd
         self._after_fault()
+        if not stream.confirmed and stream.anchor_on_command and self.cmd is not None:
+            # the robot applied none of this stream's commands yet: its first again (begin)
+            stream.cmd_state_seq = -1
+            return self.cmd
         stream.cmd_state_seq = self.gate.last_seq if self.state_fresh else -1
         if not self.state_fresh and self.cmd is not None:
             self.state = predicted(self.model, self.dt, self.state, self.cmd)
