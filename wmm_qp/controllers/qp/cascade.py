@@ -5,7 +5,11 @@
 2. The configured backend (one workspace per stage: shapes differ, warm starts stay meaningful).
 3. DAQP (dual active set, exact), when the configured backend failed: iterative solvers stall on
    rare hard instances. Only when it fails too has the stage no solution (the stage logic then
-   relaxes its rows, or stops safely).
+   relaxes its rows, or stops safely). Hard instances come in runs (a moving obstacle's rows
+   holding the arm: about every other solve ended at proxsuite's iteration cap, twice with its
+   cold retry, ~270 µs each, before DAQP solved it in ~50 µs), so after the configured backend
+   failed on a stage, that stage's next :data:`DAQP_FIRST` solves go to DAQP first (the
+   configured backend only if DAQP fails), then the configured backend is tried again.
 4. The answer clipped to the box bounds: a no-op for exact solvers, the guarantee for iterative
    solvers' tolerances.
 5. Strict priority: the slack's exact penalty keeps s = 0 only while ρ₁ exceeds the task's
@@ -27,6 +31,8 @@ from ..base import Controller
 from .kernels import _closed_form, task_residual
 
 SLACK_ACCEPT = 1e-7  # [m/s] slack below this counts as "the task is met"
+DAQP_FIRST = 50
+"""Solves of a stage that go to DAQP first after the configured backend failed on it."""
 
 
 class SolveCascade(Controller):
@@ -50,6 +56,7 @@ class SolveCascade(Controller):
         # penalised solve left unmet is feasible (_task_first).
         self._fallback = make_backend("daqp", qp.eps_abs) if "daqp" in available_solvers() else None
         self.fallbacks = 0  # stages the fallback solved
+        self._daqp_first: dict[int, int] = {}  # id(stage backend) -> solves left that go to DAQP first
         self.closed_form_hits = 0  # stages solved in closed form (no bound active)
         self._closed_form_hit = False  # the last _solve was answered in closed form
         self.task_checks = 0  # stages that left slack and were re-solved with the task as an equality
@@ -69,6 +76,7 @@ class SolveCascade(Controller):
     def reset(self) -> None:
         self._arm.reset()
         self._full.reset()
+        self._daqp_first.clear()
 
     def clear_statistics(self) -> None:
         self.fallbacks = self.closed_form_hits = self.task_checks = 0
@@ -103,10 +111,19 @@ class SolveCascade(Controller):
                 self.closed_form_hits += 1
                 self._closed_form_hit = True
                 return z
-        sol = backend.solve(problem)
-        if (not sol.ok or sol.z is None) and self._fallback is not None and self.solver != "daqp":
-            sol = self._fallback.solve(problem)
+        fallback = self._fallback if self.solver != "daqp" else None
+        if fallback is not None and self._daqp_first.get(id(backend), 0) > 0:  # in a run of hard instances
+            self._daqp_first[id(backend)] -= 1
+            sol = fallback.solve(problem)
             self.fallbacks += int(sol.ok)
+            if not sol.ok or sol.z is None:
+                sol = backend.solve(problem)
+        else:
+            sol = backend.solve(problem)
+            if (not sol.ok or sol.z is None) and fallback is not None:
+                self._daqp_first[id(backend)] = DAQP_FIRST
+                sol = fallback.solve(problem)
+                self.fallbacks += int(sol.ok)
         if not sol.ok or sol.z is None:
             return None
         z = np.clip(sol.z, problem.lb, problem.ub)  # hard bounds exactly, whatever the tolerance
