@@ -32,6 +32,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--ticks", type=int, default=7000, help="core ticks (default 7000: 14 s)")
     a = ap.parse_args()
+    if a.ticks < 2:
+        ap.error("--ticks must be at least 2")
     robot = w.load_robot_config()
     core = ControlCore(ServiceConfig(), w.load_controller_config(), robot)
     sim = SimRobot(core.model, load_sim_config(), ramp=True)
@@ -70,9 +72,9 @@ def main() -> None:
         if engaged < 0 and cmd is not None and "ball" in cmd.reason:
             engaged = k
     us = np.array(times) * 1e6
-    half = a.ticks // 2
+    half, last = a.ticks // 2, min(2500, a.ticks // 2)
     print(f"ticks {a.ticks}; the ball's rows first cut the task at tick {engaged}")
-    for name, part in (("approach (first half)", us[:half]), ("rows holding (last 2,500)", us[-2500:])):
+    for name, part in (("approach (first half)", us[:half]), (f"rows holding (last {last:,})", us[-last:])):
         print(f"{name}: tick p50 {np.percentile(part, 50):.0f} µs, p99 {np.percentile(part, 99):.0f} µs")
     ctl = core.ctl
     print(f"stages solved by DAQP as the fallback: {getattr(ctl, 'fallbacks', 0)}; "
