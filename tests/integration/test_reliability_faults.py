@@ -61,7 +61,8 @@ def test_a_burst_of_commands_after_a_sim_stall_is_judged_command_by_command(keep
 # ---------------------------------------------------------------- watchdogs, fake clock
 def _core_run(loss: float, burst: tuple[int, int] | None, n: int = 1500) -> tuple[ControlCore, list[w.Command]]:
     """Track a circle for n ticks; each state is lost with probability ``loss``, and all
-    states in the tick range ``burst`` are lost. The plant executes commands exactly."""
+    states in the tick range ``burst`` are lost. The plant executes commands exactly (each
+    state names the last command as applied)."""
     robot = w.load_robot_config()
     core = ControlCore(ServiceConfig(), w.load_controller_config(), robot)
     dt = core.dt
@@ -76,13 +77,15 @@ def _core_run(loss: float, burst: tuple[int, int] | None, n: int = 1500) -> tupl
         if k == 0 or not lost:
             core.on_state(StateMsg(robot="wmm", seq=k + 1, stamp=t, t=t, q_base=q_base.tolist(),
                                    q_arm=q_arm.tolist(), v_arm=v_arm.tolist(), wheel_speeds=wheels.tolist(),
-                                   tau=[0.0] * robot.n_arm, instance="sim"), t)
+                                   tau=[0.0] * robot.n_arm, instance="sim", cmd_seq=core.seq), t)
         if k == 1:
             core.on_mode(ModeMsg(robot="wmm", seq=1, stamp=t, mode="track"))
         x = x0 + 0.05 * np.array([np.sin(2 * t), 1 - np.cos(2 * t), 0.0])
         core.on_setpoint(SetpointMsg(robot="wmm", seq=k, stamp=t, x=x.tolist(), source="op"), t)
         cmd = core.tick(t)
         assert cmd is not None
+        core.seq += 1  # numbered and sent, as the daemon's cycle does; the next state names it applied
+        core.sent(core.seq, t)
         cmds.append(cmd)
         v_arm, wheels = cmd.arm_rates.copy(), cmd.wheel_speeds.copy()
         q_arm = q_arm + dt * v_arm

@@ -308,3 +308,26 @@ def test_the_status_and_info_say_whether_the_collision_rows_are_on(robot: w.Robo
     st = off.status(RateLoop(500.0, 0.0), Counter(), {})
     assert st.collision is False and st.collision_summary == "no collision rows"
     assert off.info(RateLoop(500.0, 0.0), Counter(), {}).collision is False
+
+
+def test_a_robot_whose_states_never_name_a_command_applied_is_said_once(robot: w.RobotConfig) -> None:
+    """A new stream repeats its first command until a state names one of its commands as applied
+    (``cmd_seq``). A driver that never reports it would leave the robot still without a word: after
+    a second of fresh states naming none, the status says why, once."""
+    core, plant = make(robot)
+    x0 = core.model.ee_position(plant.q_base, plant.q_arm)
+    core.on_mode(ModeMsg(robot="wmm", seq=1, stamp=0.0, mode="track"))
+    t, cmds = 0.0, []
+    for _ in range(1000):  # 2 s; the commands are numbered and sent, the plant executes them
+        core.on_state(plant.msg(), t)  # but its states always say cmd_seq -1
+        core.on_setpoint(SetpointMsg(robot="wmm", seq=1, stamp=t, x=(x0 + [0.1, 0.0, 0.0]).tolist(), source="op"), t)
+        cmd = core.tick(t)
+        assert cmd is not None
+        core.seq += 1
+        core.sent(core.seq, t)
+        plant.apply(cmd)
+        cmds.append(cmd)
+        t += DT
+    assert all(c is cmds[0] for c in cmds)  # the first command, again and again
+    assert core.faults["commands not applied"] == 1
+    assert "cmd_seq -1" in core.last_fault

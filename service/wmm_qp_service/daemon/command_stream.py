@@ -51,6 +51,7 @@ class CommandStream:
         start: the seq of the current stream's first command.
         confirmed: a state showed the robot applied a command of the current stream (until then
             the daemon sends the stream's first command again: :meth:`begin`).
+        began: [s] when the current stream's first command was computed.
         anchor_on_command: the robot follows the stream: the bounds start from the last command.
         cmd_state_seq: seq of the state this tick's command comes from (-1: predicted).
         inherited_cmd_seq: the last command the robot applied before this daemon drove it (a
@@ -83,6 +84,8 @@ class CommandStream:
         self.broken = False
         self.start = 0
         self.confirmed = False
+        self.began = -math.inf
+        self.unconfirmed_said = False  # the fault of a stream left unconfirmed was said
         self.anchor_on_command = False
         self.cmd_state_seq = -1
         self.inherited_cmd_seq = -1
@@ -108,7 +111,7 @@ class CommandStream:
         self.stalled = ""  # the braked stream's commands name the old instance: it refuses them
         self.reset_age()
 
-    def begin(self) -> None:
+    def begin(self, now: float) -> None:
         """The next command starts a stream (the referee's baseline: the robot's executed rates).
 
         Until a state shows the robot applied one of its commands (:attr:`confirmed`), the
@@ -119,6 +122,8 @@ class CommandStream:
         """
         self.start = self.seq + 1  # the seq the sender gives it
         self.confirmed = False
+        self.began = now
+        self.unconfirmed_said = False
 
     def applied(self, msg: StateMsg) -> None:
         """An accepted state: once it names another command than the inherited one, the robot

@@ -37,6 +37,10 @@ from .setpoints import Setpoints
 from .state_gate import Latch, StateGate
 from .watchdog import FaultRecord, hazard, say, second_source
 
+UNCONFIRMED = 1.0
+"""[s] a stream whose first command no state has named applied for this long, while states come,
+is said as a fault once (a driver that does not report ``cmd_seq``; the robot does not move)."""
+
 
 class ControlCore(CoreInputs):
     """The daemon's logic without transport: modes, watchdogs, smoothing, the controller.
@@ -243,7 +247,7 @@ class ControlCore(CoreInputs):
         if self.state is None or not self._may_send(now):
             return None
         if not stream.anchor_on_command:  # this tick's command starts a stream (the referee's baseline)
-            stream.begin()
+            stream.begin(now)
         if (why := self.hazard(now) or stream.stalled or None) is not None:
             cmd = self._safe_stop(why)
             if stream.stalled and not stream.rest_seq and not cmd.arm_rates.any() and not cmd.wheel_speeds.any():
@@ -254,6 +258,12 @@ class ControlCore(CoreInputs):
         self._after_fault()
         if not stream.confirmed and stream.anchor_on_command and self.cmd is not None:
             # the robot applied none of this stream's commands yet: its first again (begin)
+            if now - stream.began > UNCONFIRMED and self.state_fresh and not stream.unconfirmed_said:
+                stream.unconfirmed_said = True
+                self._fault(f"the robot's states name none of this stream's commands as applied (cmd_seq "
+                            f"{self.state_msg.cmd_seq if self.state_msg is not None else -1}, the stream "
+                            f"began at seq {stream.start}): the daemon repeats its first command; a driver "
+                            f"reports the last command it applied", "commands not applied")
             stream.cmd_state_seq = -1
             return self.cmd
         stream.cmd_state_seq = self.gate.last_seq if self.state_fresh else -1
