@@ -26,7 +26,8 @@ def main() -> None:
         for trigger in misses:
             res = e2e.run_case(trigger, 1000.0, a.ticks)
             s = res.get("state_to_cmd_us", {})
-            misses[trigger].append(float(res.get("misses_per_10k", float("nan"))))
+            m = res.get("misses_per_10k")
+            misses[trigger].append(float(m) if m is not None else float("nan"))
             print(f"round {r + 1}/{a.rounds}, {trigger} 1000 Hz: misses per 10k {res.get('misses_per_10k')}, "
                   f"state -> command p50 {s.get('p50')} / p99 {s.get('p99')} µs, "
                   f"violations {sum((res.get('violations') or {}).values())}", flush=True)

@@ -1,7 +1,7 @@
 """Whole stacks at once on one host: each a sim and a daemon (real-time priority, as shipped) with a
 ball swept into its arm over Zenoh, as the suite's obstacle test does; what each stack's referee
-counted, its faults, and the CPU its processes took while the ball was far and once its rows held
-the arm.
+counted, its faults, and the CPU its processes took while the ball was far (1-6 s into the sweep)
+and after (6-14 s: its rows hold the arm from ~9 s).
 
     python benchmarks/reliability/stacks.py                # two stacks at once, one round
     python benchmarks/reliability/stacks.py --stacks 1     # one stack: its CPU alone
@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import tempfile
 import threading
@@ -32,18 +31,10 @@ SPEED = 0.0125  # [m/s]
 BOUNDS = ("position", "velocity", "acceleration", "wheel_speed", "wheel_acceleration")
 
 
-def cpu_seconds(pid: int) -> float:
-    """[s] user + system CPU of a process so far (0 when it is gone)."""
-    try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    except OSError:
-        return 0.0
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-
 def one_stack(k: int, out: dict[str, Any], start: threading.Barrier) -> None:
     """Start a stack, sweep the ball at its arm, and put what it counted in ``out``."""
     import numpy as np
+    from wmm_qp_service.bench.machine import CpuMeter
     from wmm_qp_service.client import Client
     from wmm_qp_service.processes import Stack, isolated_config
 
@@ -61,27 +52,26 @@ def one_stack(k: int, out: dict[str, Any], start: threading.Barrier) -> None:
             x0 = np.array(info.status.x)
             start.wait()
             t0 = time.monotonic()
-            marks: list[tuple[float, dict[str, float]]] = []
+            meters: list[CpuMeter] = []  # from 1 s (the ball far), from 6 s (its rows soon holding)
+            shares: list[dict[str, float | None]] = []
             while (t := time.monotonic() - t0) < SWEEP_S:
                 centre = x0 + [0.0, 0.25 - SPEED * t, 0.0]
                 c.put_obstacles([{"id": "ball", "kind": "sphere", "radius": 0.08,
                                   "xyz": [float(v) for v in centre], "velocity": [0.0, -SPEED, 0.0]}])
-                if len(marks) < 3 and t >= (1.0, 6.0, SWEEP_S - 1.0)[len(marks)]:
-                    marks.append((time.monotonic(), {n: cpu_seconds(p) for n, p in pids.items()}))
+                if len(meters) < 2 and t >= (1.0, 6.0)[len(meters)]:
+                    if meters:
+                        shares.append(meters[-1].shares())  # 1-6 s
+                    meters.append(CpuMeter(pids))
                 time.sleep(0.05)
+            shares.append(meters[-1].shares())  # 6-14 s
             time.sleep(1.0)
             st = c.latest_status()
         if st is None:
             out.update(error="no status", logs=str(logs))
             return
-
-        def share(a: int, b: int) -> dict[str, float]:
-            (ta, ca), (tb, cb) = marks[a], marks[b]
-            return {n: round(100.0 * (cb[n] - ca[n]) / (tb - ta), 1) for n in pids}
-
         out.update(referee=dict(st.sim_violations), faults=dict(st.faults),
                    tick_p50_us=round(st.loop.tick_p50_us), tick_p99_us=round(st.loop.tick_p99_us),
-                   cpu_percent_ball_far=share(0, 1), cpu_percent_rows_holding=share(1, 2), logs=str(logs))
+                   cpu_percent_ball_far=shares[0], cpu_percent_rows_holding=shares[1], logs=str(logs))
     finally:
         stack.stop()
 

@@ -12,7 +12,7 @@ from support.core_fixtures import config as _config
 
 import wmm_qp as w
 from wmm_qp.pseudoinverse import weight_matrix_diag, weighted_pinv
-from wmm_qp.solvers import available_solvers
+from wmm_qp.solvers import QPProblem, available_solvers
 from wmm_qp.verify import check_command
 
 SOLVERS = available_solvers()
@@ -271,6 +271,67 @@ def test_a_stage_the_solver_fails_on_is_solved_by_the_fallback(solver: str, monk
     x = model().ee_position(np.zeros(3), Q0)
     cmd = ctl.step(w.RobotState(np.zeros(3), Q0), w.Reference("dm_nullspace", x_d=x))
     assert cmd.status != w.Status.SAFE_STOP and ctl.fallbacks == 1
+
+
+def test_after_a_failure_the_stage_goes_to_daqp_first_for_a_window(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Hard instances come in runs: after the configured solver failed on a stage, that stage's
+    next DAQP_FIRST solves go to DAQP first; at the window's end the configured solver starts
+    again, cold; a DAQP failure ends the window at once (the configured solver tries the stage)."""
+    import copy
+
+    from wmm_qp.controllers.qp.cascade import DAQP_FIRST
+    from wmm_qp.solvers import QPSolution
+
+    ctl = qp("proxsuite", closed_form_first=False)
+    x = model().ee_position(np.zeros(3), Q0)
+    ctl.step(w.RobotState(np.zeros(3), Q0), w.Reference("dm_nullspace", x_d=x))
+    problem = ctl.last_problem  # the full stage's QP of one step at Q0
+    assert problem is not None
+    full, daqp = ctl._full, ctl._fallback
+    assert daqp is not None
+    calls: list[str] = []
+    fail_full = [True]
+    solve_full, solve_daqp, reset_full = full.solve, daqp.solve, full.reset
+
+    def full_solve(p: QPProblem) -> QPSolution:
+        calls.append("full")
+        return QPSolution(z=None, ok=False, status="forced") if fail_full[0] else solve_full(p)
+
+    def daqp_solve(p: QPProblem) -> QPSolution:
+        calls.append("daqp")
+        return solve_daqp(p)
+
+    def full_reset() -> None:
+        calls.append("reset")
+        reset_full()
+
+    monkeypatch.setattr(full, "solve", full_solve)
+    monkeypatch.setattr(daqp, "solve", daqp_solve)
+    monkeypatch.setattr(full, "reset", full_reset)
+
+    def solve() -> object:
+        return ctl._solve(full, copy.deepcopy(problem))
+
+    assert solve() is not None
+    assert calls == ["full", "daqp"] and ctl.fallbacks == 1  # failed, DAQP solved it
+    fail_full[0] = False
+    calls.clear()
+    for _ in range(DAQP_FIRST):
+        assert solve() is not None
+    assert calls == ["daqp"] * (DAQP_FIRST - 1) + ["reset", "daqp"] and ctl.daqp_first == DAQP_FIRST
+    calls.clear()
+    solve()
+    assert calls == ["full"]  # the window is over: the configured solver again (cold)
+    fail_full[0] = True
+    solve()  # a failure opens a new window
+    fail_full[0] = False
+    monkeypatch.setattr(daqp, "solve", lambda p: QPSolution(z=None, ok=False, status="forced"))
+    calls.clear()
+    assert solve() is not None  # DAQP failed in the window: the configured solver solved it
+    assert calls == ["full"]
+    calls.clear()
+    solve()
+    assert calls == ["full"]  # and the window ended there
 
 
 def test_jumpy_reference_stream_never_needs_a_safe_stop() -> None:

@@ -126,9 +126,11 @@ def test_mutation_fuzz_through_the_validators_and_the_controller() -> None:
         if i % 4 == 3:  # one control tick per four messages, with the true state
             core.on_state(StateMsg(robot=ROBOT, seq=i + 1, stamp=t, t=t, q_base=q_base.tolist(),
                                    q_arm=q_arm.tolist(), v_arm=v_arm.tolist(), wheel_speeds=wheels.tolist(),
-                                   tau=[0.0] * robot.n_arm, instance="sim"), t)
+                                   tau=[0.0] * robot.n_arm, instance="sim", cmd_seq=core.seq), t)
             cmd = core.tick(t)
             assert cmd is not None
+            core.seq += 1  # numbered and sent, as the daemon's cycle does; the next state names it applied
+            core.sent(core.seq, t)
             assert np.isfinite(cmd.arm_rates).all() and np.isfinite(cmd.wheel_speeds).all()
             assert (np.abs(cmd.arm_rates) <= vmax + 1e-6).all()
             assert (np.abs(cmd.wheel_speeds) <= robot.base.wheel_speed_max + 1e-6).all()
@@ -137,6 +139,7 @@ def test_mutation_fuzz_through_the_validators_and_the_controller() -> None:
             q_base = q_base + dt * (core.model.base.P(float(q_base[2])) @ wheels)
             t += dt
     assert rejected > 15_000  # most of it is hostile
+    assert core.stream.confirmed and not core.faults["commands not applied"]  # the controller ran every tick
     assert all(np.isfinite(core.smoother.step()[0]))
 
 

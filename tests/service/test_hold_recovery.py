@@ -46,7 +46,7 @@ PUSH_SPEED = 0.9  # [m/s] base speed of the push, along +x (the direction that d
 PUSH_TIME = 1.6  # [s] the push (ramp up, cruise, ramp down during its last 0.5 s): ~1 m
 
 
-def _state_msg(st: Any, seq: int) -> StateMsg:
+def _state_msg(st: Any, seq: int, cmd_seq: int) -> StateMsg:
     d: dict[str, Any] = dict(
         robot="wmm",
         t=st.t,
@@ -57,7 +57,7 @@ def _state_msg(st: Any, seq: int) -> StateMsg:
         tau=st.tau.tolist(),
         stale_stop=st.stale_stop,
     )
-    d.update(seq=seq, stamp=st.t, instance="sim-hold-recovery", lease="core")
+    d.update(seq=seq, stamp=st.t, instance="sim-hold-recovery", lease="core", cmd_seq=cmd_seq)
     return StateMsg(**d)
 
 
@@ -86,8 +86,9 @@ def drill(
     period_us = round(1e6 / rate_hz)
     push_end, end = round(push_time * 1e6), round((push_time + after) * 1e6)
     states: deque[tuple[int, StateMsg]] = deque()
-    cmds: deque[tuple[int, SimCommand]] = deque()
+    cmds: deque[tuple[int, SimCommand, int]] = deque()
     tick_us, t_us, seq = 300, 0, 0
+    applied = -1  # the daemon's last command the robot applied (the state's cmd_seq)
     w_foreign = np.zeros(robot.n_wheels)
     hold_x = None
     pushed = math.nan
@@ -104,15 +105,18 @@ def drill(
                 core.on_state(msg, tick_us * 1e-6)
             cmd = core.tick(tick_us * 1e-6)
             if cmd is not None:
-                cmds.append((tick_us + COMMAND_DELAY_US, SimCommand(cmd.wheel_speeds.copy(), cmd.arm_rates.copy())))
+                core.seq += 1  # numbered and sent, as the daemon's cycle does
+                core.sent(core.seq, tick_us * 1e-6)
+                cmds.append((tick_us + COMMAND_DELAY_US, SimCommand(cmd.wheel_speeds.copy(), cmd.arm_rates.copy()),
+                             core.seq))
                 if hold_x is None and core.ref.x_d is not None:
                     hold_x = core.ref.x_d.copy()  # where hold latched
                 if tick_us >= push_end and hold_x is not None:
                     ee_err = float(np.linalg.norm(cmd.x - hold_x))  # the daemon's own (odometry) view
             tick_us += period_us
-        new = None
+        new, new_seq = None, applied
         while cmds and cmds[0][0] <= nxt:
-            new = cmds.popleft()[1]
+            _, new, new_seq = cmds.popleft()
         if teleport:  # the displacement without foreign commands: the robot is carried off
             if t_us == push_end - SIM_DT_US:
                 shift = np.array([push_speed * (push_time - 0.5), 0.0, 0.0])
@@ -120,11 +124,12 @@ def drill(
         elif t_us < push_end:  # the push: foreign wheels-only commands, every step, within limits
             target = w_push if t_us < push_end - 500_000 else np.zeros(robot.n_wheels)
             w_foreign = w_foreign + np.clip(target - w_foreign, -w_step, w_step)
-            new = SimCommand(w_foreign.copy(), np.zeros(robot.n_arm))
+            new, new_seq = SimCommand(w_foreign.copy(), np.zeros(robot.n_arm)), applied
         st = sim.step(new, SIM_DT_US * 1e-6)
+        applied = new_seq
         t_us = nxt
         seq += 1
-        states.append((t_us + state_delay_us, _state_msg(st, seq)))
+        states.append((t_us + state_delay_us, _state_msg(st, seq, applied)))
         q_hi = max(q_hi, float(st.q_arm[3]))
         if t_us > push_end:
             arm_at_limit += SIM_DT_US * 1e-6 * bool((np.abs(st.v_arm) >= 0.99 * v_max).any())
@@ -133,6 +138,7 @@ def drill(
         if t_us == push_end:
             pushed = float(np.linalg.norm(st.base_true[:2]))
     assert hold_x is not None
+    assert core.stream.confirmed  # the robot follows the daemon's stream (states name its commands applied)
     return dict(
         violations=dict(st.violations),
         q4_max=q_hi,

@@ -131,7 +131,9 @@ class CommandStream:
         is :attr:`confirmed`."""
         if msg.cmd_seq != self.inherited_cmd_seq:
             self.inherited_cmd_seq = -1
-        if 0 < self.start <= msg.cmd_seq and msg.cmd_seq != self.inherited_cmd_seq:
+        cs = msg.cmd_seq
+        if (not self.confirmed and 0 < self.start <= cs <= self.seq and cs != self.inherited_cmd_seq
+                and self._sent_seq[cs % SENT] == cs):  # one this daemon sent (not a restarted one's)
             self.confirmed = True
 
     def observe(self, msg: StateMsg, now: float) -> None:

@@ -249,6 +249,8 @@ class ControlCore(CoreInputs):
         if not stream.anchor_on_command:  # this tick's command starts a stream (the referee's baseline)
             stream.begin(now)
         if (why := self.hazard(now) or stream.stalled or None) is not None:
+            if not stream.confirmed:
+                stream.began = now  # the wait for the robot's confirmation counts from the stop's end
             cmd = self._safe_stop(why)
             if stream.stalled and not stream.rest_seq and not cmd.arm_rates.any() and not cmd.wheel_speeds.any():
                 stream.rest_seq = stream.seq + 1  # the braked stream's first command at rest
@@ -257,7 +259,8 @@ class ControlCore(CoreInputs):
             return cmd
         self._after_fault()
         if not stream.confirmed and stream.anchor_on_command and self.cmd is not None:
-            # the robot applied none of this stream's commands yet: its first again (begin)
+            # the robot applied none of this stream's commands yet: the last one again (its first,
+            # or the last of a safe stop since, braked from it)
             if now - stream.began > UNCONFIRMED and self.state_fresh and not stream.unconfirmed_said:
                 stream.unconfirmed_said = True
                 self._fault(f"the robot's states name none of this stream's commands as applied (cmd_seq "
@@ -265,6 +268,10 @@ class ControlCore(CoreInputs):
                             f"began at seq {stream.start}): the daemon repeats its first command; a driver "
                             f"reports the last command it applied", "commands not applied")
             stream.cmd_state_seq = -1
+            self.state_fresh = False
+            self.ee_error = math.nan
+            if self.stages is not None:
+                self.stages.lap(WATCHDOGS)
             return self.cmd
         stream.cmd_state_seq = self.gate.last_seq if self.state_fresh else -1
         if not self.state_fresh and self.cmd is not None:

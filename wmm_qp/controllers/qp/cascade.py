@@ -6,10 +6,11 @@
 3. DAQP (dual active set, exact), when the configured backend failed: iterative solvers stall on
    rare hard instances. Only when it fails too has the stage no solution (the stage logic then
    relaxes its rows, or stops safely). Hard instances come in runs (a moving obstacle's rows
-   holding the arm: about every other solve ended at proxsuite's iteration cap, twice with its
-   cold retry, ~270 µs each, before DAQP solved it in ~50 µs), so after the configured backend
-   failed on a stage, that stage's next :data:`DAQP_FIRST` solves go to DAQP first (the
-   configured backend only if DAQP fails), then the configured backend is tried again.
+   holding the arm: about every other solve ended at proxsuite's iteration cap, and so did its
+   cold retry, before DAQP solved it; ``benchmarks/collision/ball_tick.py``), so after the
+   configured backend failed on a stage, that stage's next :data:`DAQP_FIRST` solves go to DAQP
+   first. A DAQP failure in that window ends it (the configured backend then tries the same
+   problem); at its end the configured backend starts again cold.
 4. The answer clipped to the box bounds: a no-op for exact solvers, the guarantee for iterative
    solvers' tolerances.
 5. Strict priority: the slack's exact penalty keeps s = 0 only while ρ₁ exceeds the task's
@@ -55,7 +56,8 @@ class SolveCascade(Controller):
         # solvers stall on rare, hard instances) and decides, exactly, whether a task the
         # penalised solve left unmet is feasible (_task_first).
         self._fallback = make_backend("daqp", qp.eps_abs) if "daqp" in available_solvers() else None
-        self.fallbacks = 0  # stages the fallback solved
+        self.fallbacks = 0  # stages the fallback solved after the configured backend failed
+        self.daqp_first = 0  # stages DAQP solved first, in a window after such a failure
         self._daqp_first: dict[int, int] = {}  # id(stage backend) -> solves left that go to DAQP first
         self.closed_form_hits = 0  # stages solved in closed form (no bound active)
         self._closed_form_hit = False  # the last _solve was answered in closed form
@@ -79,7 +81,7 @@ class SolveCascade(Controller):
         self._daqp_first.clear()
 
     def clear_statistics(self) -> None:
-        self.fallbacks = self.closed_form_hits = self.task_checks = 0
+        self.fallbacks = self.daqp_first = self.closed_form_hits = self.task_checks = 0
         self.task_recovered = self.task_without_objective = 0
         super().clear_statistics()
 
@@ -112,11 +114,15 @@ class SolveCascade(Controller):
                 self._closed_form_hit = True
                 return z
         fallback = self._fallback if self.solver != "daqp" else None
-        if fallback is not None and self._daqp_first.get(id(backend), 0) > 0:  # in a run of hard instances
-            self._daqp_first[id(backend)] -= 1
+        left = self._daqp_first.get(id(backend), 0)
+        if fallback is not None and left > 0:  # in a run of hard instances
+            self._daqp_first[id(backend)] = left - 1
+            if left == 1:
+                backend.reset()  # the window ends: the configured backend starts again cold
             sol = fallback.solve(problem)
-            self.fallbacks += int(sol.ok)
+            self.daqp_first += int(sol.ok)
             if not sol.ok or sol.z is None:
+                self._daqp_first[id(backend)] = 0  # DAQP failed: the window ends here
                 sol = backend.solve(problem)
         else:
             sol = backend.solve(problem)
