@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from support.daemon_drive import send
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.daemon import ControlCore
 from wmm_qp_service.protocol import ModeMsg, SetpointMsg, StateMsg
@@ -84,8 +85,7 @@ def _core_run(loss: float, burst: tuple[int, int] | None, n: int = 1500) -> tupl
         core.on_setpoint(SetpointMsg(robot="wmm", seq=k, stamp=t, x=x.tolist(), source="op"), t)
         cmd = core.tick(t)
         assert cmd is not None
-        core.seq += 1  # numbered and sent, as the daemon's cycle does; the next state names it applied
-        core.sent(core.seq, t)
+        send(core, t)  # numbered and sent, as the daemon's cycle does; the next state names it applied
         cmds.append(cmd)
         v_arm, wheels = cmd.arm_rates.copy(), cmd.wheel_speeds.copy()
         q_arm = q_arm + dt * v_arm

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from support.daemon_drive import DT, Plant, max_step_ratio, rotated, tick
+from support.daemon_drive import DT, Plant, max_step_ratio, rotated, send, tick
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.daemon import ControlCore
 from wmm_qp_service.protocol import ModeMsg, SetpointMsg
@@ -83,8 +83,7 @@ def test_stale_state_gives_a_safe_stop_inside_the_bounds(robot: w.RobotConfig) -
     for _ in range(400):  # no state any more (the commands still go out)
         c = core.tick(t)
         assert c is not None
-        core.seq += 1
-        core.sent(core.seq, t)
+        send(core, t)
         stops.append(c)
         t += DT
     assert core.safe and "state stale" in core.last_fault
@@ -319,14 +318,9 @@ def test_a_robot_whose_states_never_name_a_command_applied_is_said_once(robot: w
     core.on_mode(ModeMsg(robot="wmm", seq=1, stamp=0.0, mode="track"))
     t, cmds = 0.0, []
     for _ in range(1000):  # 2 s; the commands are numbered and sent, the plant executes them
-        core.on_state(plant.msg(), t)  # but its states always say cmd_seq -1
+        core.on_state(plant.msg(cmd_seq=-1), t)  # but its states always say cmd_seq -1
         core.on_setpoint(SetpointMsg(robot="wmm", seq=1, stamp=t, x=(x0 + [0.1, 0.0, 0.0]).tolist(), source="op"), t)
-        cmd = core.tick(t)
-        assert cmd is not None
-        core.seq += 1
-        core.sent(core.seq, t)
-        plant.apply(cmd)
-        cmds.append(cmd)
+        cmds.append(tick(core, plant, t))
         t += DT
     assert all(c is cmds[0] for c in cmds)  # the first command, again and again
     assert core.faults["commands not applied"] == 1

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from support.daemon_drive import send
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.daemon import ControlCore
 from wmm_qp_service.fuzz import KEYS, KINDS, Mutator, templates
@@ -129,8 +130,7 @@ def test_mutation_fuzz_through_the_validators_and_the_controller() -> None:
                                    tau=[0.0] * robot.n_arm, instance="sim", cmd_seq=core.seq), t)
             cmd = core.tick(t)
             assert cmd is not None
-            core.seq += 1  # numbered and sent, as the daemon's cycle does; the next state names it applied
-            core.sent(core.seq, t)
+            send(core, t)  # numbered and sent, as the daemon's cycle does; the next state names it applied
             assert np.isfinite(cmd.arm_rates).all() and np.isfinite(cmd.wheel_speeds).all()
             assert (np.abs(cmd.arm_rates) <= vmax + 1e-6).all()
             assert (np.abs(cmd.wheel_speeds) <= robot.base.wheel_speed_max + 1e-6).all()

@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from support.daemon_drive import send
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.daemon import ControlCore
 from wmm_qp_service.protocol import StateMsg
@@ -105,10 +106,8 @@ def drill(
                 core.on_state(msg, tick_us * 1e-6)
             cmd = core.tick(tick_us * 1e-6)
             if cmd is not None:
-                core.seq += 1  # numbered and sent, as the daemon's cycle does
-                core.sent(core.seq, tick_us * 1e-6)
                 cmds.append((tick_us + COMMAND_DELAY_US, SimCommand(cmd.wheel_speeds.copy(), cmd.arm_rates.copy()),
-                             core.seq))
+                             send(core, tick_us * 1e-6)))  # numbered and sent, as the daemon's cycle does
                 if hold_x is None and core.ref.x_d is not None:
                     hold_x = core.ref.x_d.copy()  # where hold latched
                 if tick_us >= push_end and hold_x is not None:

@@ -70,11 +70,18 @@ def setpoint(x: np.ndarray, stamp: float, source: str = "op") -> SetpointMsg:
     return SetpointMsg(robot="wmm", seq=1, stamp=stamp, x=x.tolist(), source=source)
 
 
+def send(core: ControlCore, t: float) -> int:
+    """Number the tick's command and record it sent at ``t`` [s], as the daemon's cycle does
+    (a state naming that seq as ``cmd_seq`` confirms the stream); returns its seq."""
+    core.seq += 1
+    core.sent(core.seq, t)
+    return core.seq
+
+
 def tick(core: ControlCore, plant: Plant, t: float) -> w.Command:
     cmd = core.tick(t)
     assert cmd is not None
-    core.seq += 1
-    core.sent(core.seq, t)
+    send(core, t)
     plant.apply(cmd)
     plant.cmd_seq = core.seq
     return cmd
