@@ -325,3 +325,20 @@ def test_a_robot_whose_states_never_name_a_command_applied_is_said_once(robot: w
     assert all(c is cmds[0] for c in cmds)  # the first command, again and again
     assert core.faults["commands not applied"] == 1
     assert "cmd_seq -1" in core.last_fault
+
+
+def test_only_a_command_this_daemon_sent_confirms_its_stream(robot: w.RobotConfig) -> None:
+    """The attack: a restarted daemon numbers from 1 again, and a late command of the one before
+    it (a higher seq, applied just before the robot took the new lease) names a seq at or past
+    the new stream's start. It must not confirm the stream: only a seq this daemon sent does."""
+    core, plant = make(robot)
+    core.on_state(plant.msg(), 0.0)
+    first = core.tick(0.0)
+    assert first is not None
+    send(core, 0.0)  # seq 1, the stream's first
+    core.on_state(plant.msg(cmd_seq=50), DT)  # an older daemon's seq 50: never sent by this one
+    assert not core.stream.confirmed
+    assert core.tick(DT) is first  # still repeating its first command
+    send(core, DT)
+    core.on_state(plant.msg(cmd_seq=2), 2 * DT)  # this daemon's seq 2: the robot follows
+    assert core.stream.confirmed
