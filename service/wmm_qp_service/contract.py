@@ -239,16 +239,27 @@ def check_refuses_past_limits(c: Controller, joint: int | None = None) -> dict[s
 
 def check_stops_the_stopped_stream(c: Controller) -> dict[str, Any]:
     """After a protective stop (:func:`check_refuses_past_limits` just ran) the stopped stream's
-    commands stay refused, and a new stream resumes."""
+    commands stay refused (``refused.ended``), and a new stream resumes."""
     st0 = c.until(lambda st: st.protective_stop and _at_rest(st), 2.0 + SLACK, "the robot at rest in its stop")
-    fw0 = st0.refused.get("firmware", 0)
-    st = _resting(c, 0.1)  # legal commands, the stopped stream
-    if st.refused.get("firmware", 0) <= fw0 or not st.protective_stop:
-        raise ContractError(f"the stopped stream's commands were applied: {Controller._brief(st)}")
+    st = _ended(c, st0, lambda st: st.protective_stop, "stopped")
     c.new_stream()
     st = c.until(lambda st: not st.protective_stop and not st.stale_stop, 2.0, "a new stream resuming",
                  lambda: c.send(c.zeros()))
-    return {"refused_firmware": st.refused.get("firmware", 0)}
+    return {"refused_ended": st.refused.get("ended", 0)}
+
+
+def _ended(c: Controller, st0: Any, stopped: Callable[[Any], bool], which: str) -> Any:
+    """Legal commands of the stream the robot's stop ended, for 0.1 s: refused and counted in
+    ``refused.ended`` (not ``refused.firmware``), the robot still in its stop; the last state."""
+    fw0, end0 = st0.refused.get("firmware", 0), st0.refused.get("ended", 0)
+    st = _resting(c, 0.1)  # legal commands, the stopped stream
+    if not stopped(st) or st.refused.get("ended", 0) <= end0:
+        raise ContractError(f"the {which} stream's commands were not refused as ended (refused.ended): "
+                            f"{Controller._brief(st)}")
+    if st.refused.get("firmware", 0) > fw0:
+        raise ContractError(f"the {which} stream's commands counted as firmware faults (refused.firmware "
+                            f"{fw0} -> {st.refused['firmware']}): each would hold the daemon in a safe stop")
+    return st
 
 
 def check_brakes_when_stale(c: Controller, stale_timeout: float, joint: int | None = None,
@@ -277,7 +288,8 @@ def check_brakes_when_stale(c: Controller, stale_timeout: float, joint: int | No
 def check_stale_ends_the_stream(c: Controller, stale_timeout: float, joint: int | None = None,
                                 rate: float = 0.3) -> dict[str, Any]:
     """After a stale stop the stopped stream's commands (late on the way, or from a sender that
-    froze) are refused (``refused.firmware``) and the robot stays in its stop; a new stream resumes.
+    froze) are refused and counted in ``refused.ended``, not ``refused.firmware`` (the daemon faults on
+    each firmware refusal: the stop is one event); the robot stays in its stop; a new stream resumes.
 
     Args:
         stale_timeout: [s] the driver's command timeout.
@@ -287,13 +299,10 @@ def check_stale_ends_the_stream(c: Controller, stale_timeout: float, joint: int 
     brake = rate / float(c.robot.arm.acceleration_max[j])
     st0 = c.until(lambda st: st.stale_stop and _at_rest(st), stale_timeout + brake + 2 * SLACK,
                   "the robot at rest in its stale stop")
-    fw0 = st0.refused.get("firmware", 0)
-    st = _resting(c, 0.1)  # legal commands, the stopped stream
-    if st.refused.get("firmware", 0) <= fw0 or not st.stale_stop:
-        raise ContractError(f"the stale stream's commands were applied: {Controller._brief(st)}")
+    st = _ended(c, st0, lambda st: st.stale_stop, "stale")
     c.new_stream()
     st = c.until(lambda st: not st.stale_stop, 2.0, "a new stream resuming", lambda: c.send(c.zeros()))
-    return {"refused_firmware": st.refused.get("firmware", 0)}
+    return {"refused_ended": st.refused.get("ended", 0)}
 
 
 def check_all(c: Controller, min_rate_hz: float, stale_timeout: float) -> dict[str, Any]:

@@ -17,7 +17,8 @@ firmware brakes every joint and wheel to rest by itself at its acceleration limi
 (``SimState.stale_stop`` is True until the next command it accepts).
 
 A stop ends the stream it stopped: after a stale or protective stop the firmware refuses every
-further command of that stream (``SimCommand.stream``; counted in ``refused_commands``) and
+further command of that stream (``SimCommand.stream``; counted in ``ended_commands``, apart from
+the firmware's refusals in ``refused_commands``: the stop itself is what the robot reports) and
 resumes only on a new stream. A command of the old stream that reaches the robot late (it sat
 in a frozen sender's transmit queue, or in a congested link) would otherwise restart the robot
 at rates its sender computed before the stop, while the sender, having seen the stop, starts a
@@ -188,6 +189,7 @@ class SimRobot:
         self.protective_stops = 0
         self.protective_reason = ""
         self.refused = 0
+        self.ended = 0  # commands of a stream a stop ended (refused, but no new fault of the sender's)
         self.stream: int | None = None  # the stream of the last command received (and not refused for it)
         self.stopped_stream: int | None = None  # the stream a stale or protective stop ended
         self.drives = {"torque_limit": [0] * self.n_arm, "tracking": [0] * self.n_arm}
@@ -286,7 +288,7 @@ class SimRobot:
         self.t_last_command = self.t
         if (self.config.firmware and command.stream is not None and (self.stale or self.protective)
                 and command.stream == self.stopped_stream):
-            self.refused += 1  # the stop ended this stream: only a new one resumes
+            self.ended += 1  # the stop ended this stream: only a new one resumes
             return
         self.stale = False
         self.stream = command.stream
@@ -358,6 +360,7 @@ class SimRobot:
             protective_stops=self.protective_stops,
             protective_reason=self.protective_reason,
             refused_commands=self.refused,
+            ended_commands=self.ended,
             drives={k: list(v) for k, v in self.drives.items()},
             gripper_width=self.gripper.width if self.gripper is not None else float("nan"),
         )

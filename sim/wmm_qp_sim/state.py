@@ -38,7 +38,11 @@ class SimState:
             command it refused.
         protective_stops: protective stops since reset.
         protective_reason: why the last protective stop started ("" = none yet).
-        refused_commands: commands the firmware refused since reset.
+        refused_commands: commands the firmware refused since reset (past a limit, or while
+            braking in a protective stop): each one a fault of the sender's.
+        ended_commands: commands of a stream a stale or protective stop had ended, refused since
+            reset: the stop is the event (late commands of that stream are expected, e.g. a
+            frozen sender's transmit queue), not each of them.
         drives: per joint, since reset: ``torque_limit`` the steps it was at its torque limit,
             ``tracking`` the steps it could not follow its commanded rate (a physics plant only;
             the first such joint of a step is counted). Reports, not violations.
@@ -65,5 +69,6 @@ class SimState:
     protective_stops: int = 0
     protective_reason: str = ""
     refused_commands: int = 0
+    ended_commands: int = 0
     drives: dict[str, list[int]] = field(default_factory=dict)
     gripper_width: float = float("nan")

@@ -62,7 +62,8 @@ def test_a_robot_reflex_is_a_protective_stop_that_only_a_new_stream_releases(drv
     assert st.protective_stop and st.protective_stops == 1 and st.protective_reason == "robot: joint_velocity_violation"
     assert st.v_arm == [0.0] * 7  # the robot stopped: the next stream starts from rest
     assert not d.on_command(cmd(d, 2, [0.0] * 7), READY, 0.001, lambda: asked.append(2))  # the same stream
-    assert d.refused["firmware"] == 1 and asked == []  # refused, and the robot not asked to recover
+    assert d.refused["ended"] == 1 and asked == []  # refused, and the robot not asked to recover
+    assert d.refused["firmware"] == 0  # the reflex ended the stream: its late commands are no new fault
     assert d.on_command(cmd(d, 3, [0.0] * 7, stream=3), READY, 0.002, lambda: asked.append(3))  # a new stream
     assert asked == [3] and d.robot_error is None  # it recovered the robot first, then resumed
     assert not d.state_msg(READY, np.zeros(7)).protective_stop

@@ -113,6 +113,7 @@ def test_a_command_past_a_velocity_limit_is_refused_and_only_a_new_stream_at_res
         sh.step(t, READY)
         assert not sh.command(t, ok, stream=1, q=READY)  # the same stream: refused, even at rest
     assert sh.at_rest and sh.protective_stop and sh.refused == 201
+    assert sh.ended == 200  # the stop ended stream 1: its commands are not new faults (the first one was)
     assert sh.command(t, ok, stream=2, q=READY)  # a new stream, at rest: resumes
     assert not sh.protective_stop and sh.protective_stops == 1
 
@@ -140,6 +141,7 @@ def test_stale_commands_brake_to_rest_and_only_a_new_stream_resumes() -> None:
         sh.step(k * DT, READY)
         assert not sh.command(k * DT, np.full(7, 0.2), stream=1, q=READY)
     assert sh.at_rest and sh.stale_stop and sh.refused == 249 and not sh.protective_stop
+    assert sh.ended == 249  # each the stopped stream's: none a fault of the sender's
     assert sh.command(0.3, np.full(7, 0.2), stream=2, q=READY) and not sh.stale_stop  # a new stream
 
 

@@ -146,11 +146,13 @@ class FrankaDriver(LeaseGate):
         self.referee.on_command(self.t, rates, np.zeros(0), self.shaper.v, np.zeros(0), period=msg.period,
                                 seq=msg.seq, received=received, step=DT, stream=msg.stream, sent=msg.stamp)
         stream = (msg.lease, msg.stream)
+        sh = self.shaper
         if self.robot_error is not None and not self._recover(stream, recover):
-            self.refused["firmware"] += 1
+            self.refused["ended" if stream == sh.stream else "firmware"] += 1  # ended: the reflex's stream
             return False
-        if not self.shaper.command(self.t, rates, stream, q):
-            self.refused["firmware"] += 1
+        ended = sh.ended
+        if not sh.command(self.t, rates, stream, q):
+            self.refused["ended" if sh.ended > ended else "firmware"] += 1
             return False
         self.cmd_seq = msg.seq
         return True

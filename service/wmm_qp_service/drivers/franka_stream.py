@@ -13,7 +13,8 @@ Firmware duties, as the simulated robot's (``sim/wmm_qp_sim/robot.py``) and docs
 
 - **stale commands**: no command for ``stale_timeout`` → the target becomes 0: the arm brakes,
   jerk-limited, to rest (``stale_stop``). The stop ends the stream: its later commands (late on
-  the way, or from a sender that froze) are refused; a new stream resumes at once (the jump from
+  the way, or from a sender that froze) are refused (counted in ``ended`` too: the stop is the
+  event, not each of them); a new stream resumes at once (the jump from
   the braked rates is the shaper's to ramp), as the simulated robot's firmware does;
 - **protective stop**: a command past a velocity limit, or one from which a joint could not brake
   before its position limit, is refused; so is going on when the next cycle's state could not
@@ -94,6 +95,7 @@ class CommandShaper:
         self.protective_stops = 0
         self.reason = ""  # why the last protective stop happened
         self.refused = 0  # commands refused (past a limit, or during a protective stop)
+        self.ended = 0  # of which: commands of the stream a stale or protective stop ended
         self.halted = False  # halt(): braking to rest for good, every command refused
 
     @property
@@ -166,10 +168,12 @@ class CommandShaper:
         if self.protective_stop:
             if not self.releases(stream):
                 self.refused += 1
+                self.ended += stream == self.stream  # the stop ended it (else: a new one, too early)
                 return False
             self.protective_stop = False  # a new stream, the robot at rest: recover
         elif self.stale_stop and stream == self.stream:
             self.refused += 1  # the stale stop ended this stream: only a new one resumes
+            self.ended += 1
             return False
         if not np.isfinite(rates).all():
             self.refused += 1

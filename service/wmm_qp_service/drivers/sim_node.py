@@ -48,7 +48,7 @@ import sys
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any, Generic, TypeVar
 
 import numpy as np
@@ -75,6 +75,17 @@ judged as received, so none may be lost between the transport and the referee. 1
 second of commands at 1 kHz: a longer stall of the sim's process drops the oldest (counted in
 :attr:`CommandInbox.dropped`)."""
 
+
+def state_refused(gate: Mapping[str, int], st: SimState) -> dict[str, int]:
+    """A state's ``refused``: the gate's counts (lease, instance, seq, invalid), the firmware's
+    (``firmware``: past a limit, or while braking in a protective stop) and a stopped stream's
+    (``ended``: docs/protocol.md), each key only once it counts."""
+    out = dict(gate)
+    if st.refused_commands:
+        out["firmware"] = st.refused_commands
+    if st.ended_commands:
+        out["ended"] = st.ended_commands
+    return out
 
 class CommandInbox(Generic[P]):
     """Commands stamped on arrival (by Zenoh's callback thread), taken by the step loop in order.
@@ -301,7 +312,7 @@ class SimNode(LeaseGate):
             stale_stop=st.stale_stop, cmd_seq=self.cmd_seq,
             instance=self.instance, lease=self.holder, protective_stop=st.protective_stop,
             protective_stops=st.protective_stops, protective_reason=st.protective_reason,
-            refused={**self.refused, "firmware": st.refused_commands} if st.refused_commands else dict(self.refused))
+            refused=state_refused(self.refused, st))
 
     def truth_msg(self, st: SimState, seq: int) -> TruthMsg:
         """The evaluation data of a sim state (``sim/truth``), for the state of seq ``seq``."""
