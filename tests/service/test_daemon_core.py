@@ -325,6 +325,10 @@ def test_a_robot_whose_states_never_name_a_command_applied_is_said_once(robot: w
     assert all(c is cmds[0] for c in cmds)  # the first command, again and again
     assert core.faults["commands not applied"] == 1
     assert "cmd_seq -1" in core.last_fault
+    assert core.fault_active  # the status says the robot is held, not tracking
+    core.on_state(plant.msg(cmd_seq=core.seq), t)  # a state names the stream's command at last
+    tick(core, plant, t + DT)
+    assert core.stream.confirmed and not core.fault_active
 
 
 def test_only_a_command_this_daemon_sent_confirms_its_stream(robot: w.RobotConfig) -> None:

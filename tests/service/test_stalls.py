@@ -29,7 +29,7 @@ import pytest
 from support.daemon_drive import max_step_ratio
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.daemon import ControlCore
-from wmm_qp_service.drivers.sim_node import CommandInbox, SimNode
+from wmm_qp_service.drivers.sim_node import CommandInbox, SimNode, state_refused
 from wmm_qp_service.protocol import CommandMsg, ModeMsg, SetpointMsg, StateMsg, encode
 from wmm_qp_sim import load_sim_config
 from wmm_qp_sim.robot import SimCommand, SimRobot
@@ -98,7 +98,7 @@ def test_a_frozen_sim_judges_commands_over_the_time_between_their_arrivals(stamp
         st = node.advance(clock.t, inbox)
         assert st.t - before >= 0.082 - 2 * DT  # the sim lived through the freeze
         assert st.stale_stop  # and braked by itself past its command timeout
-        assert node.sim.refused == 1  # the stopped stream's late command cannot restart it
+        assert node.sim.ended == 1  # the stopped stream's late command cannot restart it
         assert sum(st.violations.values()) == 0, node.sim.referee.last_event
     else:  # the sim before: both taken after the freeze, stamped then, its clock one step on
         first = node.accept(inbox.take_until(np.inf)[0][1], clock.t)
@@ -175,7 +175,7 @@ def test_a_late_command_of_a_stopped_stream_cannot_restart_the_robot() -> None:
         counted = sim.state().violations["acceleration"]
         if stream_rule:
             assert counted == 0, sim.referee.last_event
-            assert sim.refused == 1
+            assert sim.ended == 1
         else:  # commands without stream ids: the late one restarts the robot (the old behaviour),
             # and the new stream's first command jumps from its rates
             assert counted >= 1 and "(a new stream)" in sim.referee.last_event, sim.referee.last_event
@@ -218,7 +218,7 @@ def test_a_flushed_transmit_queue_is_judged_over_the_sender_s_clock(sender_stamp
     send(112, t_sent + 0.122)
     clock.t += 0.0005
     st = node.advance(clock.t + DT, inbox)
-    assert st.stale_stop and node.sim.refused == 2
+    assert st.stale_stop and node.sim.ended == 2
     counted = st.violations["acceleration"]
     assert counted == (0 if sender_stamps else 1), node.sim.referee.last_event
 
@@ -252,7 +252,7 @@ class Wire:
                         tau=st.tau.tolist(), stale_stop=st.stale_stop, cmd_seq=self.cmd_seq, instance="sim-A",
                         lease=self.core.lease, protective_stop=st.protective_stop,
                         protective_stops=st.protective_stops, protective_reason=st.protective_reason,
-                        refused={"firmware": st.refused_commands} if st.refused_commands else {})
+                        refused=state_refused({}, st))
 
     def mode(self, name: str) -> None:
         self.core.on_mode(ModeMsg(robot="wmm", seq=1, stamp=0.0, mode=name))
@@ -400,7 +400,7 @@ def test_a_robot_that_stopped_the_stream_during_the_stall_refuses_its_braking(ro
     q_stop = wire.sim.q_arm.copy()
     cmd = wire.tick(old)
     assert cmd is not None and core.stream_start == b and max_step_ratio(robot, [last, cmd]) <= 1.0 + 1e-9
-    assert wire.sim.refused == 1  # the robot refused it: its stop ended B
+    assert wire.sim.ended == 1  # the robot refused it: its stop ended B
     cmd = wire.tick()  # its state shows the stop, with B's command applied: B breaks; at rest, a new stream
     assert core.faults["the robot stopped following the commands"] == 1
     assert cmd is not None and core.stream_start > b and np.allclose(wire.sim.q_arm, q_stop)  # from rest
@@ -449,3 +449,58 @@ def test_a_new_stream_whose_first_commands_are_lost_starts_from_rest_whichever_a
     after = [cmd for _, stream, cmd in wire.sent if stream == core.stream_start]
     assert max_step_ratio(robot, after) <= 1.0 + 1e-9
     assert not wire.sim.stale and np.abs(wire.sim.v_arm).max() > a.max()  # past its first command: following
+
+
+# ---------------------------------------------------------------- 5. a stopped stream's commands in flight
+def test_a_stopped_stream_s_commands_in_flight_are_one_stop_not_a_fault_each(robot: w.RobotConfig) -> None:
+    """Two whole stacks on the 2 cores: a starved link held the daemon's commands past the
+    robot's command timeout; the robot stopped the stream and then refused them as they arrived,
+    each counted as a firmware refusal, each a new "robot firmware" fault of the daemon's with a
+    safe stop of its own: the robot stood for most of the run. Now the stop ends the stream once
+    (``refused.ended`` counts its late commands, the daemon faults on ``refused.firmware`` and
+    protective stops only): one break, and a new stream once the robot rests."""
+    wire, _ = _tracking(robot)
+    core = wire.core
+    b = core.stream_start
+    wire.hold = True  # the link holds the commands: the robot hears nothing for 40 ms
+    for _ in range(20):
+        wire.tick()
+    assert wire.sim.stale and len(wire.queue) > 10  # it stopped the stream by itself, braking
+    wire.hold = False  # the held commands arrive, one per step, after the stop
+    for _ in range(150):
+        wire.tick()
+        if core.stream_start > b and core.stream.confirmed:
+            break
+    assert core.faults["robot firmware"] == 0, core.last_fault
+    assert core.faults["the robot stopped following the commands"] == 1
+    assert wire.sim.ended > 10 and wire.sim.refused == 0  # each refused as the stopped stream's
+    assert core.stream_start > b and core.stream.confirmed  # a new stream, followed
+    assert wire.counts() == 0, wire.sim.referee.last_event
+
+
+# ---------------------------------------------------------------- 6. a restarted daemon, the robot still moving
+def test_a_restarted_daemon_waits_for_a_moving_robot_to_rest_in_its_own_stop(robot: w.RobotConfig) -> None:
+    """A daemon that starts (or restarts) while the robot still moves under another one's
+    commands cannot know what the robot will execute when its first command arrives: the robot
+    holds the last command until its timeout, then brakes at its acceleration limits. A first
+    command computed from a state 6 ms older (a loaded link) met the robot braking 4 A·Δt further
+    on ("from the executed rates (a new stream)"). The new daemon now sends nothing until a state
+    shows the robot at rest in its own stop, then starts from rest."""
+    wire, _ = _tracking(robot)
+    wire.drop = True  # the first daemon dies: nothing more reaches the robot
+    while not wire.sim.stale:
+        wire.run(PERIOD)
+    wire.run(0.004)  # braking by itself
+    assert np.abs(wire.sim.v_arm).max() > 0.05
+    wire.drop = False
+    wire.core = core = ControlCore(ServiceConfig(), w.load_controller_config(), robot)  # a new daemon
+    core.seq = 1000  # its streams are new to the robot (a new lease holder: the sim starts a new stream)
+    wire.hold = True  # its first commands take 6 ms on the way
+    sent = [wire.tick() for _ in range(3)]
+    wire.hold = False
+    for _ in range(300):
+        wire.tick()
+    assert wire.counts() == 0, wire.sim.referee.last_event
+    assert sent == [None, None, None]  # nothing while the robot moves
+    assert core.faults["the robot moves under commands that are not this daemon's"] == 1
+    assert core.stream.confirmed and not wire.sim.stale and not core.fault_active

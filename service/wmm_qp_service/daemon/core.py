@@ -149,6 +149,11 @@ class ControlCore(CoreInputs):
             self.cmd = None  # and the last command was another robot's
             self.firmware_seen = -1
             self.truth = None
+            if any(msg.v_arm) or any(msg.wheel_speeds):
+                # it holds another daemon's last command until its timeout, then brakes: what it
+                # executes when a first command of this one's arrives is unknown until it rests
+                self.break_stream(f"the robot moves under commands that are not this daemon's (cmd_seq "
+                                  f"{msg.cmd_seq}): waiting for it to rest in its own stop")
         if not self.gate.next_seq(msg.seq):
             return False
         self.stream.applied(msg)
@@ -234,9 +239,12 @@ class ControlCore(CoreInputs):
 
     @property
     def fault_active(self) -> bool:
-        """A fault holds the robot now (a safe stop, a broken stream, a lost lease), or the
-        daemon holds in ``hold`` until a mode message resumes (``resume_needed``)."""
-        return self.safe or self.stream.broken or self.lease_lost or self.resume_needed
+        """A fault holds the robot now (a safe stop, a broken stream, a lost lease, a stream whose
+        commands the robot's states have not named applied for a second), or the daemon holds in
+        ``hold`` until a mode message resumes (``resume_needed``)."""
+        st = self.stream
+        return (self.safe or st.broken or self.lease_lost or self.resume_needed
+                or (st.unconfirmed_said and not st.confirmed))
 
     # ------------------------------------------------------------------ one tick
     def tick(self, now: float) -> w.Command | None:
