@@ -15,7 +15,7 @@ import multiprocessing as mp
 import signal
 import subprocess
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -175,10 +175,12 @@ def start_franky_sim(robot: w.RobotConfig, reflex: bool = False, timeout: float 
 
 
 @contextmanager
-def driver_stack(sim: FrankySim, logs: Path, serve: bool = True) -> Iterator[tuple[Any, dict[str, Any]]]:
-    """``wmm-qp driver franka`` on franky-sim (and ``wmm-qp serve``) on an isolated prefix, their
-    stderr in ``logs/driver.log`` and ``logs/serve.log``; yields (service config, {name: process});
-    on exit each gets SIGINT (a clean stop), then is killed after 20 s."""
+def driver_stack(sim: FrankySim, logs: Path, serve: bool = True,
+                 driver_args: Sequence[str] = ()) -> Iterator[tuple[Any, dict[str, Any]]]:
+    """``wmm-qp driver franka`` on franky-sim (with ``driver_args``, e.g. ``--embedded``; and
+    ``wmm-qp serve``) on an isolated prefix, their stderr in ``logs/driver.log`` and
+    ``logs/serve.log``; yields (service config, {name: process}); on exit each gets SIGINT (a
+    clean stop), then is killed after 20 s."""
     from wmm_qp_service.processes import isolated_config
 
     robot = w.load_robot_config(FR3)
@@ -187,7 +189,8 @@ def driver_stack(sim: FrankySim, logs: Path, serve: bool = True) -> Iterator[tup
               "--sim-endpoint", svc.zenoh.sim_endpoint]
     procs: dict[str, Any] = {}
     try:
-        for name, argv in (("driver", ["driver", "franka", "--robot-ip", sim.host]), ("serve", ["serve"])):
+        driver = ["driver", "franka", "--robot-ip", sim.host, *driver_args]
+        for name, argv in (("driver", driver), ("serve", ["serve"])):
             if name == "serve" and not serve:
                 continue
             with open(logs / f"{name}.log", "w") as err:
