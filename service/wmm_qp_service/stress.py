@@ -51,6 +51,36 @@ class CpuHogs:
                 p.kill()
 
 
+def _spin_rt(stop: mp.synchronize.Event, core: int, busy: float, idle: float) -> None:  # pragma: no cover
+    os.sched_setaffinity(0, {core})
+    with contextlib.suppress(PermissionError):  # without the privilege: an ordinary hog on the core
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(50))
+    while not stop.is_set():
+        t = time.monotonic() + busy
+        while time.monotonic() < t:
+            pass
+        time.sleep(idle)
+
+
+class RealtimeHogs(CpuHogs):
+    """One process per core, pinned, at ``SCHED_FIFO`` 50 (the priority the sim and the daemon
+    take): busy ``busy`` [s], then asleep ``idle`` [s], over and over. A second stack's real-time
+    threads, as two stacks on one host meet them: the ordinary threads (Zenoh's, franky-sim's)
+    get no CPU while a hog runs, the real-time ones share it in turn."""
+
+    def __init__(self, busy: float, idle: float) -> None:
+        super().__init__()
+        self.busy, self.idle = busy, idle
+
+    def __enter__(self) -> RealtimeHogs:
+        ctx = mp.get_context("spawn")
+        self._procs = [ctx.Process(target=_spin_rt, args=(self._stop, c, self.busy, self.idle), daemon=True)
+                       for c in sorted(os.sched_getaffinity(0))]
+        for p in self._procs:
+            p.start()
+        return self
+
+
 class DiskWriter:
     """A thread that writes ``chunk_mb`` files and fsyncs them, over and over (page cache and I/O
     pressure: the kind of load a package install or a log rotation puts on a host).
