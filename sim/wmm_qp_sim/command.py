@@ -25,6 +25,9 @@ class SimCommand:
         stream: the sender's stream id (a new one is judged against the executed rates), or
             None (then a stale or protective stop starts a new stream).
         sent: [s] the sender's stamp (its own clock), or None.
+        sender: who sent it (the lease holder): the firmware's streams are a sender's (a
+            restarted daemon numbers its streams from 1 again, and its first command is a new
+            stream, not one a stop ended).
     """
 
     wheel_speeds: FloatArray
@@ -34,10 +37,16 @@ class SimCommand:
     received: float | None = None
     stream: int | None = None
     sent: float | None = None
+    sender: str = ""
 
     def __post_init__(self) -> None:
         self.wheel_speeds = np.asarray(self.wheel_speeds, dtype=float).reshape(-1)
         self.arm_rates = np.asarray(self.arm_rates, dtype=float).reshape(-1)
+
+    @property
+    def stream_key(self) -> tuple[str, int] | None:
+        """The firmware's key of its stream: (sender, stream), or None (no stream given)."""
+        return None if self.stream is None else (self.sender, self.stream)
 
     def is_valid(self, n_wheels: int, n_arm: int) -> bool:
         """The robot's sizes and finite values."""

@@ -17,7 +17,7 @@ firmware brakes every joint and wheel to rest by itself at its acceleration limi
 (``SimState.stale_stop`` is True until the next command it accepts).
 
 A stop ends the stream it stopped: after a stale or protective stop the firmware refuses every
-further command of that stream (``SimCommand.stream``; counted in ``ended_commands``, apart from
+further command of that stream (``SimCommand.stream`` of its ``sender``; counted in ``ended_commands``, apart from
 the firmware's refusals in ``refused_commands``: the stop itself is what the robot reports) and
 resumes only on a new stream. A command of the old stream that reaches the robot late (it sat
 in a frozen sender's transmit queue, or in a congested link) would otherwise restart the robot
@@ -190,8 +190,8 @@ class SimRobot:
         self.protective_reason = ""
         self.refused = 0
         self.ended = 0  # commands of a stream a stop ended (refused, but no new fault of the sender's)
-        self.stream: int | None = None  # the stream of the last command received (and not refused for it)
-        self.stopped_stream: int | None = None  # the stream a stale or protective stop ended
+        self.stream: tuple[str, int] | None = None  # the (sender, stream) of the last command received
+        self.stopped_stream: tuple[str, int] | None = None  # the one a stale or protective stop ended
         self.drives = {"torque_limit": [0] * self.n_arm, "tracking": [0] * self.n_arm}
         g = self.model.config.gripper
         self.gripper = Gripper(g) if g is not None else None
@@ -286,28 +286,31 @@ class SimRobot:
                                 stream=command.stream, sent=command.sent)
         self.n_commands += 1
         self.t_last_command = self.t
-        if (self.config.firmware and command.stream is not None and (self.stale or self.protective)
-                and command.stream == self.stopped_stream):
-            self.ended += 1  # the stop ended this stream: only a new one resumes
-            return
-        self.stale = False
-        self.stream = command.stream
         if self.config.firmware:
             bad_v = np.flatnonzero(np.abs(arm) > self._v_tol)
             bad_w = np.flatnonzero(np.abs(wheels) > self._w_tol)
-            if bad_v.size or bad_w.size:
+            if bad_v.size or bad_w.size:  # first: an illegal command is a fault, any stream's
                 self.refused += 1
+                if not self.protective:  # (in one, the stream its stop ended stays the stopped one)
+                    self.stale = False
+                    self.stream = command.stream_key
                 what = (f"joint {bad_v[0] + 1} rate {arm[bad_v[0]]:.3g} rad/s beyond {self.v_max[bad_v[0]]:.3g}"
                         if bad_v.size else
                         f"wheel {bad_w[0] + 1} speed {wheels[bad_w[0]]:.3g} rad/s beyond {self.w_max[bad_w[0]]:.3g}")
                 self._protective_stop(f"refused command: {what}")
                 return
-            if self.protective:
-                if self.v_arm.any() or self.wheels.any():
-                    self.refused += 1  # still braking: commands wait until the robot is at rest
-                    return
-                self.protective = False  # at rest, and a legal command: resume
-                self.referee.break_stream(hard=False)
+            key = command.stream_key
+            if key is not None and (self.stale or self.protective) and key == self.stopped_stream:
+                self.ended += 1  # the stop ended this stream: only a new one resumes
+                return
+        self.stale = False
+        self.stream = command.stream_key
+        if self.config.firmware and self.protective:
+            if self.v_arm.any() or self.wheels.any():
+                self.refused += 1  # still braking: commands wait until the robot is at rest
+                return
+            self.protective = False  # at rest, and a legal command: resume
+            self.referee.break_stream(hard=False)
         self.target_arm, self.target_wheels = arm.copy(), wheels.copy()
 
     def _protective_stop(self, why: str) -> None:

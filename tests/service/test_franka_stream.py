@@ -179,3 +179,20 @@ def test_the_daemons_bounds_drive_a_joint_into_its_limit_without_a_protective_st
         q = q + sh.step(k * DT, q) * DT
         assert not sh.protective_stop, sh.reason
     assert LIM.q_hi[0] - 0.01 < q[0] <= LIM.q_hi[0] and sh.at_rest
+
+
+def test_an_illegal_command_of_a_stopped_stream_is_a_fault_not_an_ended_one() -> None:
+    """After a stale stop, the stopped stream's legal commands count in ``ended``; an illegal one
+    (past a velocity limit, or non-finite) is still refused as a fault: a protective stop."""
+    sh = CommandShaper(LIM, DT, stale_timeout=0.05)
+    sh.command(0.0, np.full(7, 0.2), stream=1, q=READY)
+    for k in range(1, 200):
+        sh.step(k * DT, READY)
+    assert sh.stale_stop and sh.at_rest
+    assert not sh.command(0.2, np.full(7, 0.2), stream=1, q=READY) and sh.ended == 1
+    bad = np.full(7, 0.2)
+    bad[4] = 5.3  # joint 5's limit is 5.26 rad/s
+    assert not sh.command(0.2, bad, stream=1, q=READY)
+    assert sh.ended == 1 and sh.refused == 2 and sh.protective_stop and "joint 5" in sh.reason
+    assert not sh.command(0.2, np.full(7, 0.2), stream=1, q=READY) and sh.ended == 2  # still ended
+    assert sh.command(0.2, np.zeros(7), stream=2, q=READY)  # a new stream at rest resumes

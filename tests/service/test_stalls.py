@@ -271,7 +271,8 @@ class Wire:
             self.sent.append((core.seq, core.stream_start, cmd))
             if not self.drop:
                 self.queue.append(SimCommand(cmd.wheel_speeds.copy(), cmd.arm_rates.copy(), period=PERIOD,
-                                             seq=core.seq, stream=core.stream_start, sent=self.t))
+                                             seq=core.seq, stream=core.stream_start, sent=self.t,
+                                             sender=core.lease))
         self.run(PERIOD)
         return cmd
 
@@ -494,7 +495,7 @@ def test_a_restarted_daemon_waits_for_a_moving_robot_to_rest_in_its_own_stop(rob
     assert np.abs(wire.sim.v_arm).max() > 0.05
     wire.drop = False
     wire.core = core = ControlCore(ServiceConfig(), w.load_controller_config(), robot)  # a new daemon
-    core.seq = 1000  # its streams are new to the robot (a new lease holder: the sim starts a new stream)
+    wire.sim.referee.break_stream()  # (the sim's lease gate does this on a new holder's first command)
     wire.hold = True  # its first commands take 6 ms on the way
     sent = [wire.tick() for _ in range(3)]
     wire.hold = False

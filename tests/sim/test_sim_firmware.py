@@ -157,3 +157,45 @@ def test_the_sim_refuses_an_old_seq_and_a_new_holder_starts_a_new_stream() -> No
     node.on_lease("d2", True)
     assert node.accept(command(node, "d2", seq=1)) is not None  # its own seq count
     assert node.sim.referee._prev is None  # judged against what the robot executes
+
+
+def _stale_stopped(model: wmm_qp.WmmModel, sender: str = "A") -> SimRobot:
+    """A robot that ran stream 1 of ``sender`` at 0.1 rad/s on joint 1, then stopped it by its
+    own timeout and braked to rest."""
+    sim = SimRobot(model, cfg(), ramp=True)
+    sim.reset()
+    arm = np.zeros(7)
+    arm[0] = 0.1
+    for k in range(100):
+        sim.step(SimCommand(np.zeros(4), arm * min(1.0, k / 50), period=DT, seq=k + 1, stream=1, sender=sender), DT)
+    while not (sim.stale and not sim.v_arm.any()):
+        sim.step(None, DT)
+    return sim
+
+
+def test_an_illegal_command_of_a_stopped_stream_is_a_firmware_fault_not_an_ended_one(
+        model: wmm_qp.WmmModel) -> None:
+    """A stopped stream's late commands are counted apart (``ended``: the stop is the event); an
+    illegal one (past a rate limit) is still the sender's fault, whatever its stream: refused,
+    counted as a firmware refusal, a protective stop. (Checked first: a rogue sender on the
+    stopped stream's id must not hide from the daemon among its late commands.)"""
+    sim = _stale_stopped(model)
+    arm = np.zeros(7)
+    arm[3] = 100.0
+    sim.step(SimCommand(np.zeros(4), arm, period=DT, seq=200, stream=1, sender="A"), DT)
+    st = sim.state()
+    assert st.refused_commands == 1 and st.ended_commands == 0
+    assert st.protective_stop and st.protective_stops == 1 and "joint 4 rate 100" in st.protective_reason
+    sim.step(SimCommand(np.zeros(4), np.zeros(7), period=DT, seq=201, stream=1, sender="A"), DT)
+    assert sim.state().ended_commands == 1  # a legal one of the stopped stream: ended
+    assert not sim.v_arm.any()
+
+
+def test_a_new_sender_s_stream_is_new_whatever_its_number(model: wmm_qp.WmmModel) -> None:
+    """A restarted daemon numbers its streams from 1 again: its stream 1 is not the old daemon's
+    stream 1 that the robot's stop ended; the old sender's stream 1 still is."""
+    sim = _stale_stopped(model, sender="A")
+    sim.step(SimCommand(np.zeros(4), np.zeros(7), period=DT, seq=300, stream=1, sender="A"), DT)
+    assert sim.ended == 1 and sim.stale  # the stopped stream: refused
+    sim.step(SimCommand(np.zeros(4), np.zeros(7), period=DT, seq=1, stream=1, sender="B"), DT)
+    assert sim.ended == 1 and not sim.stale  # another sender's stream 1: a new stream, resumed

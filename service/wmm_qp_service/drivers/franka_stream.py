@@ -124,6 +124,17 @@ class CommandShaper:
         idx = np.flatnonzero(bad)
         return int(idx[0]) if idx.size else -1
 
+    def _illegal(self, rates: FloatArray) -> str | None:
+        """Why a command's rates are illegal whatever the state (non-finite, past a velocity
+        limit), or None."""
+        if not np.isfinite(rates).all():
+            return "a command with a non-finite rate"
+        over = np.flatnonzero(np.abs(rates) > self.lim.v_max * (1.0 + self.rtol) + self.atol)
+        if over.size:
+            i = int(over[0])
+            return f"joint {i + 1} commanded at {rates[i]:.4g} rad/s, beyond its limit {self.lim.v_max[i]:.4g}"
+        return None
+
     def _protect(self, reason: str) -> None:
         if not self.protective_stop:
             self.protective_stops += 1
@@ -165,6 +176,12 @@ class CommandShaper:
         if self.halted:
             self.refused += 1
             return False
+        if (bad := self._illegal(rates)) is not None:  # first: an illegal command is a fault, any stream's
+            self.refused += 1
+            if not self.protective_stop:  # (in one, the stream its stop ended stays the stopped one)
+                self.stream = stream
+            self._protect(bad)
+            return False
         if self.protective_stop:
             if not self.releases(stream):
                 self.refused += 1
@@ -174,17 +191,6 @@ class CommandShaper:
         elif self.stale_stop and stream == self.stream:
             self.refused += 1  # the stale stop ended this stream: only a new one resumes
             self.ended += 1
-            return False
-        if not np.isfinite(rates).all():
-            self.refused += 1
-            self._protect("a command with a non-finite rate")
-            return False
-        over = np.flatnonzero(np.abs(rates) > self.lim.v_max * (1.0 + self.rtol) + self.atol)
-        if over.size:
-            i = int(over[0])
-            self.refused += 1
-            self.stream = stream
-            self._protect(f"joint {i + 1} commanded at {rates[i]:.4g} rad/s, beyond its limit {self.lim.v_max[i]:.4g}")
             return False
         i = self._cannot_stop(np.asarray(q, dtype=float), rates, np.zeros_like(rates))
         if i >= 0:

@@ -221,7 +221,7 @@ class SimNode(LeaseGate):
         return SimCommand(wheel_speeds=np.array(msg.wheel_speeds), arm_rates=np.array(msg.arm_rates),
                           period=msg.period, seq=msg.seq,
                           received=time.monotonic() if received is None else received, stream=msg.stream,
-                          sent=msg.stamp)
+                          sent=msg.stamp, sender=msg.lease)
 
     def take(self, commands: list[SimCommand], dt: float) -> SimCommand | None:
         """The commands received since the last step, oldest first: every one but the latest is
