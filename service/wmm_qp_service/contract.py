@@ -136,14 +136,20 @@ def _moving(c: Controller, joint: int | None, rate: float, ramp: float = 0.3) ->
     [rad/s] over ``ramp`` [s] and holds it. Returns the joint."""
     c.hold_lease()
     joint = c.robot.n_arm - 1 if joint is None else joint
-    c.new_stream()
-    t0 = time.monotonic()
-    while (t := time.monotonic() - t0) < ramp + 0.1:
-        v = c.zeros()
-        v[joint] = rate * min(1.0, t / ramp)
-        c.send(v)
-        c.drain()
-        time.sleep(c.period)
+    for _ in range(5):  # this process starved past the robot's command timeout: its stop ended the stream
+        c.new_stream()
+        t0 = time.monotonic()
+        while (t := time.monotonic() - t0) < ramp + 0.1:
+            v = c.zeros()
+            v[joint] = rate * min(1.0, t / ramp)
+            c.send(v)
+            st = c.drain()
+            if st is not None and st.stale_stop and st.cmd_seq >= c.stream:
+                break  # the robot stopped this stream by its own timeout: a new one, from rest
+            time.sleep(c.period)
+        else:
+            return joint
+        c.until(_at_rest, 2.0, "the robot braked to rest")
     return joint
 
 
@@ -251,6 +257,8 @@ def check_stops_the_stopped_stream(c: Controller) -> dict[str, Any]:
 def _ended(c: Controller, st0: Any, stopped: Callable[[Any], bool], which: str) -> Any:
     """Legal commands of the stream the robot's stop ended, for 0.1 s: refused and counted in
     ``refused.ended`` (not ``refused.firmware``), the robot still in its stop; the last state."""
+    time.sleep(0.1)  # what the check before sent (a stream of illegal commands: firmware) has landed
+    st0 = c.drain() or st0
     fw0, end0 = st0.refused.get("firmware", 0), st0.refused.get("ended", 0)
     st = _resting(c, 0.1)  # legal commands, the stopped stream
     if not stopped(st) or st.refused.get("ended", 0) <= end0:
