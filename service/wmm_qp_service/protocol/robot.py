@@ -31,8 +31,9 @@ class StateMsg(Msg, tag="state", kw_only=True):
             could not stop before a limit), or holds it at rest until a new command stream.
         protective_stops: protective stops since the robot process started.
         protective_reason: why the last one started.
-        refused: commands not applied, by reason (``lease``, ``instance``, ``firmware``,
-            and the validation reasons).
+        refused: commands not applied, by reason (``lease``, ``instance``, ``seq``, ``firmware``:
+            the firmware's refusals, each a fault of the sender's; ``ended``: legal commands of
+            a stream a stale or protective stop had ended; and the validation reasons).
 
     ``seq`` is the robot's step counter: consecutive states of one instance have consecutive seq.
     """

@@ -104,7 +104,8 @@ class StatusMsg(Msg, tag="status"):
         last_fault: the last fault seen ("" = none), e.g. "state stale", "sim lost"; it stays
             after the fault cleared: ``fault_active`` says whether one holds the robot now.
         fault_active: a fault holds the robot now (a safe stop, a broken command stream, a lost
-            lease), or ``resume_needed``: the robot does not follow setpoints until a client acts.
+            lease, a stream whose commands the robot's states have not named applied for 1 s), or
+            ``resume_needed``: the robot does not follow setpoints until a client acts.
         last_fault_age: [s] time since ``last_fault`` was recorded (daemon clock; nan: none).
         loop: timing figures.
         rejected: rejected messages, by reason.
