@@ -69,7 +69,8 @@ def test_a_robot_reflex_is_a_protective_stop_that_only_a_new_stream_releases(drv
     assert not d.state_msg(READY, np.zeros(7)).protective_stop
 
 
-def test_a_refused_recovery_keeps_the_stop_and_is_asked_again_once_per_new_stream(drv: FrankaDriver) -> None:
+def test_a_refused_recovery_ends_its_stream_and_is_asked_again_by_a_new_one_a_second_later(
+        drv: FrankaDriver) -> None:
     d = drv
     answers = ["CommandException: libfranka: Automatic Error Recovery command rejected: manual error recovery "
                "required!", None]
@@ -81,16 +82,61 @@ def test_a_refused_recovery_keeps_the_stop_and_is_asked_again_once_per_new_strea
 
     d.fault('libfranka: Move command aborted: motion aborted by reflex! ["cartesian_reflex"]')
     assert not d.on_command(cmd(d, 1, [0.0] * 7, stream=1), READY, 0.0, recover)
-    assert not d.on_command(cmd(d, 2, [0.0] * 7, stream=1), READY, 0.001, recover)  # the same stream: no retry
     st = d.state_msg(READY, np.zeros(7))
-    assert len(asked) == 1 and st.protective_stop and st.refused["firmware"] == 2
+    assert len(asked) == 1 and st.protective_stop and st.refused["firmware"] == 1  # the refusal: one fault
+    assert st.cmd_seq == 1  # and the state names the command: its sender sees its stream stopped
     assert st.protective_reason.startswith('robot: libfranka: Move command aborted: motion aborted by reflex! '
                                            '["cartesian_reflex"]; recovery refused: CommandException'), \
         st.protective_reason
-    assert d.on_command(cmd(d, 3, [0.0] * 7, stream=3), READY, 0.002, recover)  # a new stream asks again
+    assert not d.on_command(cmd(d, 2, [0.0] * 7, stream=1), READY, 0.001, recover)  # the stream it ended
+    assert not d.on_command(cmd(d, 3, [0.0] * 7, stream=3), READY, 0.002, recover)  # a new one, too soon
+    st = d.state_msg(READY, np.zeros(7))
+    assert len(asked) == 1 and st.refused == {"firmware": 1, "ended": 1, "recovering": 1}
+    for _ in range(1000):  # a second of the robot's cycles
+        d.cycle(1e-3, READY)
+    assert d.on_command(cmd(d, 4, [0.0] * 7, stream=3), READY, 1.0, recover)  # that stream asks again
     assert len(asked) == 2 and not d.state_msg(READY, np.zeros(7)).protective_stop
-    assert d.on_command(cmd(d, 4, [0.0] * 7, stream=3), READY, 0.003)  # running: no recovery to ask for
-    assert len(asked) == 2
+
+
+def test_under_the_daemon_a_refused_recovery_is_retried_at_the_driver_s_pace(drv: FrankaDriver) -> None:
+    """The attack (a review's): libfranka refuses the first recovery (the operator must clear the
+    robot), later ones succeed. Before, the stream that asked was refused for good, a
+    ``refused.firmware`` (a daemon fault) per command, 1,250 in 3 s, and the daemon never started
+    another: its states named an older stream's command. Now the refusal ends that stream, the
+    state names it, the daemon starts a new one, the driver asks again a second later: the robot
+    runs, with one firmware fault."""
+    from support.daemon_drive import send
+    from wmm_qp_service.daemon import ControlCore
+    from wmm_qp_service.protocol import StateMsg
+
+    d = drv
+    core = ControlCore(d.svc, w.load_controller_config(), d.robot)
+    d.on_lease("L1", False)
+    d.on_lease(core.lease, True)
+    answers = ["manual error recovery required"]
+
+    def recover() -> str | None:
+        return answers.pop(0) if answers else None
+
+    q = READY.copy()
+    t = 0.0
+    for k in range(3000):  # 3 s at 1 kHz, the daemon at 500 Hz
+        q = q + d.cycle(1e-3, q) * 1e-3
+        if k == 500:
+            d.fault("libfranka: reflex")
+        if k % 2 == 0:
+            st: StateMsg = d.state_msg(q, np.zeros(7))
+            core.on_state(st, t)
+            if (c := core.tick(t)) is not None:
+                seq = send(core, t)
+                d.on_command_msg(CommandMsg(robot=d.svc.robot, seq=seq, stamp=t, wheel_speeds=[],
+                                            arm_rates=c.arm_rates.tolist(), lease=core.lease, instance=d.instance,
+                                            period=0.002, stream=core.stream_start), q, t, recover)
+        t += 1e-3
+    assert d.robot_error is None and not answers  # asked again, and recovered
+    assert d.refused["firmware"] == 1, dict(d.refused)
+    assert core.faults["robot firmware"] == 2, dict(core.faults)  # the reflex, the refused recovery
+    assert core.stream.confirmed and not core.safe
 
 
 def test_a_reflex_judges_the_stopped_streams_late_commands_against_each_other(drv: FrankaDriver) -> None:

@@ -35,8 +35,9 @@ discontinuity) is a protective stop (``protective_reason`` ``robot: `` and libfr
 libfranka has ended the motion and the robot stays in its ``Reflex`` mode, its states still
 published (:mod:`.franka_link`). The first command of a new stream, the arm at rest, asks the
 robot to recover (libfranka's ``automatic_error_recovery``, then a new control) and, once it has,
-is followed; a refused recovery is reported in ``protective_reason`` and tried again on the
-next new stream (once per stream). A ``NetworkException`` (the connection is lost) ends the
+is followed; a refused recovery is reported in ``protective_reason``, ends the stream that asked
+(its state names that command: the daemon starts another) and is tried again by a new stream
+no sooner than :data:`RECOVERY_RETRY` later. A ``NetworkException`` (the connection is lost) ends the
 driver: it says so and exits 1.
 
 ``pylibfranka`` is imported at run time (``pip install 'wmm-qp[franka]'``) and called only by
@@ -73,6 +74,11 @@ from .franka_stream import CommandShaper, StreamLimits
 DT = 1e-3
 """[s] Franka's control cycle."""
 
+RECOVERY_RETRY = 1.0
+"""[s] of robot time: after a refused recovery the robot is asked again no sooner (by the first
+command of a new stream): a daemon starts a new stream on each refusal, and would otherwise have
+libfranka's recovery called at its tick rate."""
+
 NAN3 = [math.nan] * 3
 TRUTH_EVERY = 10
 """The driver publishes its referee's counts on ``sim/truth`` every this many cycles (100 Hz)."""
@@ -106,7 +112,7 @@ class FrankaDriver(LeaseGate):
         self.seq = 0
         self._stopped = False  # the shaper was in a stale or protective stop at the last cycle
         self.robot_error: str | None = None  # libfranka ended the motion (its message); None: it runs
-        self._recovery_stream: Hashable | None = None  # the stream that last asked the robot to recover
+        self._recovery_refused_t = -math.inf  # [s] robot time of the last refused recovery
         self.validate_gripper = Validator(GripperMsg, svc.robot, svc.validation)
         g = robot.gripper
         self.hand = FrankaHand(g.width_max, g.speed_max, g.force_max) if g is not None else None
@@ -147,8 +153,8 @@ class FrankaDriver(LeaseGate):
                                 seq=msg.seq, received=received, step=DT, stream=msg.stream, sent=msg.stamp)
         stream = (msg.lease, msg.stream)
         sh = self.shaper
-        if self.robot_error is not None and not self._recover(stream, recover):
-            self.refused["ended" if stream == sh.stream else "firmware"] += 1  # ended: the reflex's stream
+        if self.robot_error is not None and (why := self._recover(stream, msg.seq, recover)) is not None:
+            self.refused[why] += 1
             return False
         ended = sh.ended
         if not sh.command(self.t, rates, stream, q):
@@ -157,18 +163,31 @@ class FrankaDriver(LeaseGate):
         self.cmd_seq = msg.seq
         return True
 
-    def _recover(self, stream: Hashable, recover: Callable[[], str | None] | None) -> bool:
-        """After libfranka ended the motion: whether the robot runs again for this command (the
-        first of a new stream at rest asks it to recover, once per stream)."""
-        if not self.shaper.releases(stream) or stream == self._recovery_stream:
-            return False
-        self._recovery_stream = stream
+    def _recover(self, stream: Hashable, seq: int, recover: Callable[[], str | None] | None) -> str | None:
+        """After libfranka ended the motion: None when the robot runs again for this command (the
+        first of a new stream at rest asks it to recover), else the ``refused`` key.
+
+        ``ended``: the stream the reflex ended, or a refused recovery did; ``recovering``: a new
+        stream within :data:`RECOVERY_RETRY` of a refused recovery (asked by a later command of
+        it); ``firmware``: a new stream while the arm still moves, or the refused recovery itself
+        (the fault: the refusing command's stream is then ended, and the state names it, so its
+        sender sees its stream stopped and starts another)."""
+        sh = self.shaper
+        if stream == sh.stream:
+            return "ended"
+        if not sh.releases(stream):
+            return "firmware"
+        if self.t - self._recovery_refused_t < RECOVERY_RETRY:
+            return "recovering"
         why = recover() if recover is not None else "no robot to recover"
         if why is not None:
-            self.shaper.reason = f"robot: {self.robot_error}; recovery refused: {why}"
-            return False
+            sh.reason = f"robot: {self.robot_error}; recovery refused: {why}"
+            sh.stream = stream
+            self.cmd_seq = seq
+            self._recovery_refused_t = self.t
+            return "firmware"
         self.robot_error = None
-        return True
+        return None
 
     def cycle(self, elapsed: float, q: np.ndarray) -> np.ndarray:
         """One robot cycle: advance the robot's time, judge its positions, shape the next command.
@@ -218,7 +237,7 @@ class FrankaDriver(LeaseGate):
         self.shaper.reset(f"robot: {reason}")
         self.referee.break_stream(hard=False)  # the stopped stream's late commands: judged among themselves
         self.robot_error = reason
-        self._recovery_stream = None
+        self._recovery_refused_t = -math.inf
 
     def state_msg(self, q: np.ndarray, tau: np.ndarray, gripper_width: float = math.nan) -> StateMsg:
         """The wire message of this cycle's state (``v_arm``: the stream written, see the module docstring).
