@@ -33,7 +33,8 @@ class StateMsg(Msg, tag="state", kw_only=True):
         protective_reason: why the last one started.
         refused: commands not applied, by reason (``lease``, ``instance``, ``seq``, ``firmware``:
             the firmware's refusals, each a fault of the sender's; ``ended``: legal commands of
-            a stream a stale or protective stop had ended; and the validation reasons).
+            a stream a stale or protective stop had ended; the FR3's ``recovering``: a new stream
+            within a second of a refused recovery; and the validation reasons).
 
     ``seq`` is the robot's step counter: consecutive states of one instance have consecutive seq.
     """
