@@ -10,7 +10,6 @@ viewer reads but moves nothing, a session without credentials gets no link.
 from __future__ import annotations
 
 import json
-import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,7 +18,7 @@ from typing import Any
 import numpy as np
 import pytest
 import zenoh
-from support.zenoh_acl import config_value, peers, until
+from support.zenoh_acl import config_value, drive_to, peers, until, viewer_attempts
 from wmm_qp_service import acl
 from wmm_qp_service.cli import main as cli_main
 from wmm_qp_service.client import Client
@@ -234,12 +233,7 @@ def test_the_embedded_process_obeys_the_operator_only(creds: Path, tmp_path: Pat
         assert before is not None and before.status.mode == "track" and truth is not None
         x0, ee0 = np.array(before.status.x), np.array(truth.ee_true)
         # ... but its mode changes and setpoints (10 cm away) go nowhere
-        for k in range(100):
-            viewer.set_mode("dm_cartesian")
-            viewer.send_setpoint(x0 + np.array([0.1, 0.0, 0.0]))
-            if k % 10 == 0:
-                time.sleep(0.02)
-        time.sleep(1.0)
+        viewer_attempts(viewer, x0)
         after, truth = op.info(), op.wait_truth(TIMEOUT)
         assert after is not None and truth is not None
         assert after.status.mode != "dm_cartesian"  # (a fault may hold it: not the viewer's doing)
@@ -250,14 +244,7 @@ def test_the_embedded_process_obeys_the_operator_only(creds: Path, tmp_path: Pat
         # the operator's setpoints (5 cm along x) move it there
         target = x0 + np.array([0.05, 0.0, 0.0])
 
-        def there() -> bool:
-            if op.resume_needed():  # a fault on a loaded host: resumed as an operator would
-                op.resume("track", timeout=5.0)
-            op.send_setpoint(target)
-            st = op.latest_status()
-            return st is not None and float(np.linalg.norm(np.array(st.x) - target)) < 0.005
-
-        until(there, TIMEOUT, "the EE at the operator's target")
+        drive_to(op, target)
         truth = op.wait_truth(TIMEOUT)
         assert truth is not None and truth.ee_true[0] - ee0[0] > 0.04  # the robot moved
         assert sum(truth.violations.values()) == 0, truth.violations

@@ -7,13 +7,12 @@ driver's referee counts nothing. (``tests/integration/test_acl_embedded.py`` pro
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 from support.franky_rig import FR3, driver_stack, start_franky_sim
-from support.zenoh_acl import until
+from support.zenoh_acl import drive_to, viewer_attempts
 from wmm_qp_service import acl
 from wmm_qp_service.client import Client
 from wmm_qp_service.config import ServiceConfig
@@ -49,12 +48,7 @@ def test_the_fr3_s_embedded_process_obeys_the_operator_only(tmp_path: Path) -> N
             assert before is not None and before.status.mode == "track"
             x0, q0 = np.array(before.status.x), sim.q()
             # ... but its mode changes and setpoints (10 cm away) go nowhere
-            for k in range(100):
-                viewer.set_mode("dm_cartesian")
-                viewer.send_setpoint(x0 + np.array([0.1, 0.0, 0.0]))
-                if k % 10 == 0:
-                    time.sleep(0.02)
-            time.sleep(1.0)
+            viewer_attempts(viewer, x0)
             after = op.info()
             assert after is not None and after.status.mode != "dm_cartesian"
             for key in ("mode", "setpoint"):
@@ -63,14 +57,7 @@ def test_the_fr3_s_embedded_process_obeys_the_operator_only(tmp_path: Path) -> N
             # the operator's setpoints (5 cm along x) move it there
             target = x0 + np.array([0.05, 0.0, 0.0])
 
-            def there() -> bool:
-                if op.resume_needed():  # a fault on a loaded host: resumed as an operator would
-                    op.resume("track", timeout=5.0)
-                op.send_setpoint(target)
-                st = op.latest_status()
-                return st is not None and float(np.linalg.norm(np.array(st.x) - target)) < 0.005
-
-            until(there, TIMEOUT, "the EE at the operator's target")
+            drive_to(op, target)
             assert np.abs(sim.q() - q0).max() > 0.02  # the arm moved
             truth = op.wait_truth(TIMEOUT)
             assert truth is not None and sum(truth.violations.values()) == 0, truth.violations
