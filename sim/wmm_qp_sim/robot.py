@@ -291,9 +291,11 @@ class SimRobot:
             bad_w = np.flatnonzero(np.abs(wheels) > self._w_tol)
             if bad_v.size or bad_w.size:  # first: an illegal command is a fault, any stream's
                 self.refused += 1
-                if not self.protective:  # (in one, the stream its stop ended stays the stopped one)
-                    self.stale = False
-                    self.stream = command.stream_key
+                key = command.stream_key
+                at_rest = not (self.v_arm.any() or self.wheels.any())
+                if not self.protective or (at_rest and key != self.stopped_stream):  # the stop is now its stream's
+                    self.stale = False  # (else the stream the stop ended stays the stopped one)
+                    self.stream = self.stopped_stream = key
                 what = (f"joint {bad_v[0] + 1} rate {arm[bad_v[0]]:.3g} rad/s beyond {self.v_max[bad_v[0]]:.3g}"
                         if bad_v.size else
                         f"wheel {bad_w[0] + 1} speed {wheels[bad_w[0]]:.3g} rad/s beyond {self.w_max[bad_w[0]]:.3g}")

@@ -96,6 +96,24 @@ def test_a_refused_recovery_ends_its_stream_and_is_asked_again_by_a_new_one_a_se
         d.cycle(1e-3, READY)
     assert d.on_command(cmd(d, 4, [0.0] * 7, stream=3), READY, 1.0, recover)  # that stream asks again
     assert len(asked) == 2 and not d.state_msg(READY, np.zeros(7)).protective_stop
+    d.fault("another reflex")  # after a recovery (a second after the refusal at least): asked at once
+    answers.append(None)
+    assert d.on_command(cmd(d, 5, [0.0] * 7, stream=5), READY, 1.0, recover) and len(asked) == 3
+
+
+def test_after_a_reflex_an_illegal_command_is_a_firmware_fault_and_asks_nothing(drv: FrankaDriver) -> None:
+    """An illegal command (past a velocity limit) after a reflex: refused by the shaper as a
+    fault (``firmware``), not as the reflex's stream (``ended``) nor as waiting (``recovering``),
+    and the robot is not asked to recover; its stream is then the stopped one."""
+    d = drv
+    asked: list[int] = []
+    d.fault("libfranka: reflex")
+    bad = [0.0] * 7
+    bad[4] = 5.3  # joint 5's limit is 5.26 rad/s
+    assert not d.on_command(cmd(d, 1, bad, stream=1), READY, 0.0, lambda: asked.append(1))
+    assert asked == [] and d.refused == {"firmware": 1}
+    assert not d.on_command(cmd(d, 2, [0.0] * 7, stream=1), READY, 0.001, lambda: asked.append(2))
+    assert asked == [] and d.refused == {"firmware": 1, "ended": 1}  # its stream: ended by the stop
 
 
 def test_under_the_daemon_a_refused_recovery_is_retried_at_the_driver_s_pace(drv: FrankaDriver) -> None:
@@ -103,8 +121,8 @@ def test_under_the_daemon_a_refused_recovery_is_retried_at_the_driver_s_pace(drv
     robot), later ones succeed. Before, the stream that asked was refused for good, a
     ``refused.firmware`` (a daemon fault) per command, 1,250 in 3 s, and the daemon never started
     another: its states named an older stream's command. Now the refusal ends that stream, the
-    state names it, the daemon starts a new one, the driver asks again a second later: the robot
-    runs, with one firmware fault."""
+    state names it, the daemon starts a new one, the driver asks again a second later (here
+    refused twice): the robot runs, with a firmware fault per refusal."""
     from support.daemon_drive import send
     from wmm_qp_service.daemon import ControlCore
     from wmm_qp_service.protocol import StateMsg
@@ -113,9 +131,11 @@ def test_under_the_daemon_a_refused_recovery_is_retried_at_the_driver_s_pace(drv
     core = ControlCore(d.svc, w.load_controller_config(), d.robot)
     d.on_lease("L1", False)
     d.on_lease(core.lease, True)
-    answers = ["manual error recovery required"]
+    answers = ["manual error recovery required", "manual error recovery required"]
+    asked: list[float] = []
 
     def recover() -> str | None:
+        asked.append(d.t)
         return answers.pop(0) if answers else None
 
     q = READY.copy()
@@ -134,8 +154,9 @@ def test_under_the_daemon_a_refused_recovery_is_retried_at_the_driver_s_pace(drv
                                             period=0.002, stream=core.stream_start), q, t, recover)
         t += 1e-3
     assert d.robot_error is None and not answers  # asked again, and recovered
-    assert d.refused["firmware"] == 1, dict(d.refused)
-    assert core.faults["robot firmware"] == 2, dict(core.faults)  # the reflex, the refused recovery
+    assert len(asked) == 3 and min(np.diff(asked)) >= 1.0, asked  # at the driver's pace
+    assert d.refused["firmware"] == 2, dict(d.refused)
+    assert core.faults["robot firmware"] == 3, dict(core.faults)  # the reflex, the two refusals
     assert core.stream.confirmed and not core.safe
 
 

@@ -196,3 +196,16 @@ def test_an_illegal_command_of_a_stopped_stream_is_a_fault_not_an_ended_one() ->
     assert sh.ended == 1 and sh.refused == 2 and sh.protective_stop and "joint 5" in sh.reason
     assert not sh.command(0.2, np.full(7, 0.2), stream=1, q=READY) and sh.ended == 2  # still ended
     assert sh.command(0.2, np.zeros(7), stream=2, q=READY)  # a new stream at rest resumes
+
+
+def test_an_illegal_command_of_a_new_stream_in_a_stop_at_rest_ends_that_stream() -> None:
+    """The first command of a new stream at rest releases a protective stop; an illegal one is
+    refused and the stop becomes its stream's: that stream's next, legal command stays refused
+    (ended), another new stream's resumes."""
+    sh = CommandShaper(LIM, DT)
+    bad = np.full(7, 0.1)
+    bad[4] = 5.3
+    assert not sh.command(0.0, bad, stream=1, q=READY) and sh.protective_stop and sh.at_rest
+    assert not sh.command(0.0, bad, stream=2, q=READY)  # a new stream, illegal
+    assert not sh.command(0.0, np.zeros(7), stream=2, q=READY) and sh.ended == 1 and sh.protective_stop
+    assert sh.command(0.0, np.zeros(7), stream=3, q=READY) and not sh.protective_stop

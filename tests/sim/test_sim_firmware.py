@@ -199,3 +199,39 @@ def test_a_new_sender_s_stream_is_new_whatever_its_number(model: wmm_qp.WmmModel
     assert sim.ended == 1 and sim.stale  # the stopped stream: refused
     sim.step(SimCommand(np.zeros(4), np.zeros(7), period=DT, seq=1, stream=1, sender="B"), DT)
     assert sim.ended == 1 and not sim.stale  # another sender's stream 1: a new stream, resumed
+
+
+def test_an_illegal_command_of_a_new_stream_in_a_stop_at_rest_ends_that_stream(model: wmm_qp.WmmModel) -> None:
+    """In a protective stop at rest, the first command of a new stream releases the stop; if it
+    is illegal it is refused (a firmware fault) and the stop is now its stream's: that stream's
+    next, legal command does not release it; another new stream's does."""
+    sim = _stale_stopped(model)
+    bad = np.zeros(7)
+    bad[3] = 100.0
+    sim.step(SimCommand(np.zeros(4), bad, period=DT, seq=200, stream=1, sender="A"), DT)  # protective, at rest
+    assert sim.protective and not sim.v_arm.any()
+    sim.step(SimCommand(np.zeros(4), bad, period=DT, seq=201, stream=201, sender="A"), DT)  # new stream X, illegal
+    assert sim.refused == 2 and sim.protective
+    sim.step(SimCommand(np.zeros(4), np.zeros(7), period=DT, seq=202, stream=201, sender="A"), DT)
+    assert sim.protective and sim.ended == 1  # X's legal command: X is the stream the stop ended
+    sim.step(SimCommand(np.zeros(4), np.zeros(7), period=DT, seq=203, stream=203, sender="A"), DT)
+    assert not sim.protective  # a new stream Y at rest releases it
+
+
+def test_the_sim_node_keys_streams_by_the_lease_holder() -> None:
+    """The node gives each command its sender (the lease), so after a stale stop of holder d1's
+    stream 1 the next holder's stream 1 — a restarted daemon numbers from 1 — resumes, while d1's
+    own would not."""
+    node = SimNode(ServiceConfig(), cfg(), wmm_qp.load_robot_config())
+    node.on_lease("d1", True)
+    c = node.accept(command(node, "d1", seq=1))
+    assert c is not None and c.sender == "d1"
+    node.sim.step(c, DT)
+    while not node.sim.stale:  # silence: its own timeout stops stream 1
+        node.sim.step(None, DT)
+    node.on_lease("d1", False)
+    node.on_lease("d2", True)
+    c = node.accept(command(node, "d2", seq=1))  # the new holder's stream 1
+    assert c is not None and c.sender == "d2"
+    node.sim.step(c, DT)
+    assert node.sim.ended == 0 and not node.sim.stale

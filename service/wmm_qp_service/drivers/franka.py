@@ -75,9 +75,9 @@ DT = 1e-3
 """[s] Franka's control cycle."""
 
 RECOVERY_RETRY = 1.0
-"""[s] of robot time: after a refused recovery the robot is asked again no sooner (by the first
-command of a new stream): a daemon starts a new stream on each refusal, and would otherwise have
-libfranka's recovery called at its tick rate."""
+"""[s] of robot time: after a refused recovery the robot is asked again no sooner (by a command
+of a new stream, at rest: the stream that waited asks with its next one): a daemon starts a new
+stream on each refusal, and would otherwise have libfranka's recovery called at its tick rate."""
 
 NAN3 = [math.nan] * 3
 TRUTH_EVERY = 10
@@ -153,7 +153,8 @@ class FrankaDriver(LeaseGate):
                                 seq=msg.seq, received=received, step=DT, stream=msg.stream, sent=msg.stamp)
         stream = (msg.lease, msg.stream)
         sh = self.shaper
-        if self.robot_error is not None and (why := self._recover(stream, msg.seq, recover)) is not None:
+        if (self.robot_error is not None and sh.illegal(rates) is None  # (illegal: the shaper's fault, below)
+                and (why := self._recover(stream, msg.seq, recover)) is not None):
             self.refused[why] += 1
             return False
         ended = sh.ended
@@ -237,7 +238,6 @@ class FrankaDriver(LeaseGate):
         self.shaper.reset(f"robot: {reason}")
         self.referee.break_stream(hard=False)  # the stopped stream's late commands: judged among themselves
         self.robot_error = reason
-        self._recovery_refused_t = -math.inf
 
     def state_msg(self, q: np.ndarray, tau: np.ndarray, gripper_width: float = math.nan) -> StateMsg:
         """The wire message of this cycle's state (``v_arm``: the stream written, see the module docstring).

@@ -124,7 +124,7 @@ class CommandShaper:
         idx = np.flatnonzero(bad)
         return int(idx[0]) if idx.size else -1
 
-    def _illegal(self, rates: FloatArray) -> str | None:
+    def illegal(self, rates: FloatArray) -> str | None:
         """Why a command's rates are illegal whatever the state (non-finite, past a velocity
         limit), or None."""
         if not np.isfinite(rates).all():
@@ -176,10 +176,10 @@ class CommandShaper:
         if self.halted:
             self.refused += 1
             return False
-        if (bad := self._illegal(rates)) is not None:  # first: an illegal command is a fault, any stream's
+        if (bad := self.illegal(rates)) is not None:  # first: an illegal command is a fault, any stream's
             self.refused += 1
-            if not self.protective_stop:  # (in one, the stream its stop ended stays the stopped one)
-                self.stream = stream
+            if not self.protective_stop or self.releases(stream):  # the stop is now its stream's
+                self.stream = stream  # (else the stream the stop ended stays the stopped one)
             self._protect(bad)
             return False
         if self.protective_stop:
