@@ -23,7 +23,8 @@ class StateMsg(Msg, tag="state", kw_only=True):
         tau: [N·m or N] n_arm measured joint torques (the sim: from its contact model).
         gripper_width: [m] the gripper's opening (nan: no gripper).
         stale_stop: the firmware is braking because commands went stale.
-        cmd_seq: seq of the last command the robot applied (-1: none).
+        cmd_seq: seq of the last command the robot applied, or refused with a stop that names
+            it (its sender then sees the stream stopped) (-1: none).
         instance: this robot process's identity (random, fixed for its life): the daemon
             latches it and treats states of another instance as a second source (a fault).
         lease: the control lease holder whose commands the robot applies ("" = none).
