@@ -36,9 +36,13 @@ class CpuHogs:
         self._stop = mp.get_context("spawn").Event()
         self._procs: list[mp.process.BaseProcess] = []
 
+    def _spinners(self) -> list[tuple[Callable[..., None], tuple[object, ...]]]:
+        """Each hog process's target and arguments."""
+        return [(_spin, (self._stop,))] * self.n
+
     def __enter__(self) -> CpuHogs:
         ctx = mp.get_context("spawn")
-        self._procs = [ctx.Process(target=_spin, args=(self._stop,), daemon=True) for _ in range(self.n)]
+        self._procs = [ctx.Process(target=f, args=args, daemon=True) for f, args in self._spinners()]
         for p in self._procs:
             p.start()
         return self
@@ -72,13 +76,8 @@ class RealtimeHogs(CpuHogs):
         super().__init__()
         self.busy, self.idle = busy, idle
 
-    def __enter__(self) -> RealtimeHogs:
-        ctx = mp.get_context("spawn")
-        self._procs = [ctx.Process(target=_spin_rt, args=(self._stop, c, self.busy, self.idle), daemon=True)
-                       for c in sorted(os.sched_getaffinity(0))]
-        for p in self._procs:
-            p.start()
-        return self
+    def _spinners(self) -> list[tuple[Callable[..., None], tuple[object, ...]]]:
+        return [(_spin_rt, (self._stop, c, self.busy, self.idle)) for c in sorted(os.sched_getaffinity(0))]
 
 
 class DiskWriter:

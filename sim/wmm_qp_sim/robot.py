@@ -17,12 +17,13 @@ firmware brakes every joint and wheel to rest by itself at its acceleration limi
 (``SimState.stale_stop`` is True until the next command it accepts).
 
 A stop ends the stream it stopped: after a stale or protective stop the firmware refuses every
-further command of that stream (``SimCommand.stream`` of its ``sender``; counted in ``ended_commands``, apart from
-the firmware's refusals in ``refused_commands``: the stop itself is what the robot reports) and
-resumes only on a new stream. A command of the old stream that reaches the robot late (it sat
-in a frozen sender's transmit queue, or in a congested link) would otherwise restart the robot
-at rates its sender computed before the stop, while the sender, having seen the stop, starts a
-new stream from the robot at rest: the two would meet as a jump.
+further command of that stream (``SimCommand.stream`` of its ``sender``; counted in
+``ended_commands``, apart from the firmware's refusals in ``refused_commands``: the stop itself
+is what the robot reports) and resumes only on a new stream. A command of the old stream that
+reaches the robot late (it sat in a frozen sender's transmit queue, or in a congested link)
+would otherwise restart the robot at rates its sender computed before the stop, while the
+sender, having seen the stop, starts a new stream from the robot at rest: the two would meet as
+a jump.
 """
 
 from __future__ import annotations
@@ -286,12 +287,12 @@ class SimRobot:
                                 stream=command.stream, sent=command.sent)
         self.n_commands += 1
         self.t_last_command = self.t
+        key = command.stream_key
         if self.config.firmware:
             bad_v = np.flatnonzero(np.abs(arm) > self._v_tol)
             bad_w = np.flatnonzero(np.abs(wheels) > self._w_tol)
             if bad_v.size or bad_w.size:  # first: an illegal command is a fault, any stream's
                 self.refused += 1
-                key = command.stream_key
                 at_rest = not (self.v_arm.any() or self.wheels.any())
                 if not self.protective or (at_rest and key != self.stopped_stream):  # the stop is now its stream's
                     self.stale = False  # (else the stream the stop ended stays the stopped one)
@@ -301,12 +302,11 @@ class SimRobot:
                         f"wheel {bad_w[0] + 1} speed {wheels[bad_w[0]]:.3g} rad/s beyond {self.w_max[bad_w[0]]:.3g}")
                 self._protective_stop(f"refused command: {what}")
                 return
-            key = command.stream_key
             if key is not None and (self.stale or self.protective) and key == self.stopped_stream:
                 self.ended += 1  # the stop ended this stream: only a new one resumes
                 return
         self.stale = False
-        self.stream = command.stream_key
+        self.stream = key
         if self.config.firmware and self.protective:
             if self.v_arm.any() or self.wheels.any():
                 self.refused += 1  # still braking: commands wait until the robot is at rest

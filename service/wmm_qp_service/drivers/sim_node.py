@@ -87,6 +87,7 @@ def state_refused(gate: Mapping[str, int], st: SimState) -> dict[str, int]:
         out["ended"] = st.ended_commands
     return out
 
+
 class CommandInbox(Generic[P]):
     """Commands stamped on arrival (by Zenoh's callback thread), taken by the step loop in order.
 
