@@ -1,10 +1,18 @@
-"""The layer rule of the three packages, checked on their source: ``python tools/check_layers.py``.
+"""The layer rule of the four packages, checked on their source: ``python tools/check_layers.py``.
 
 The layers, lowest first: ``wmm_qp`` (computation) ← ``wmm_qp_sim`` (the simulated robot) ←
-``wmm_qp_service`` (processes, transport, CLI); an arrow reads "may be imported by". A module
-may import its own package and the packages below it, never one above: so no cycle can close
-between the packages either. Transport stays at the edge: ``zenoh`` is imported by the top
-layer only.
+``wmm_qp_service`` (processes, transport, the runtime's CLI) ← ``wmm_qp_tools`` (bench,
+experiments, drills, the contract kit); an arrow reads "may be imported by". A module may import
+its own package and the packages below it, never one above: so no cycle can close between the
+packages either. Transport stays at the edge: ``zenoh`` is imported by the service and the tools
+only.
+
+Inside and across the packages, no circle may close between files: module A importing B at load
+time while B (directly or through others) imports A. Counted here: the imports a module runs when
+it is loaded (module level, in a module-level ``if``/``try``; not under ``if TYPE_CHECKING:``,
+not inside functions), each to the module it names — ``from pkg import name`` to the submodule
+``pkg.name`` when there is one, else to ``pkg``'s ``__init__`` (so an ``__init__`` that re-exports
+its submodules closes a circle with any of them that imports a name from the package).
 
 Every import counts wherever it is written: at module level, inside a function or a class,
 under ``if TYPE_CHECKING:``, in a ``try``, and ``importlib.import_module("...")`` or
@@ -29,11 +37,12 @@ LAYERS: tuple[tuple[str, str], ...] = (
     ("wmm_qp", "wmm_qp"),
     ("wmm_qp_sim", "sim/wmm_qp_sim"),
     ("wmm_qp_service", "service/wmm_qp_service"),
+    ("wmm_qp_tools", "tools/wmm_qp_tools"),
 )
 """(package, its folder under the repository root), lowest layer first."""
 RANK = {name: i for i, (name, _) in enumerate(LAYERS)}
-EDGE_ONLY = {"zenoh": "wmm_qp_service"}
-"""Third-party packages only the named layer (the top one) may import."""
+EDGE_ONLY = {"zenoh": ("wmm_qp_service", "wmm_qp_tools")}
+"""Third-party packages only the named layers (the service and the tools above it) may import."""
 RULE = " ← ".join(name for name, _ in LAYERS)
 
 
@@ -97,7 +106,7 @@ def imports_of(tree: ast.AST, here: str, is_pkg: bool) -> Iterator[Import]:
 
 
 def breaches(root: Path) -> tuple[list[str], int, int]:
-    """Check every module of the three packages under ``root``.
+    """Check every module of the four packages under ``root``.
 
     Returns:
         the breaches (one line each, ``path:line: what``), the files read and the imports
@@ -124,10 +133,87 @@ def breaches(root: Path) -> tuple[list[str], int, int]:
                     if RANK[top] > RANK[pkg]:
                         out.append(f"{rel}:{imp.line}: {pkg} imports {top} ({imp.text!r}): a layer may import "
                                    f"only the ones below it ({RULE}; an arrow: may be imported by)")
-                elif top in EDGE_ONLY and pkg != EDGE_ONLY[top]:
+                elif top in EDGE_ONLY and pkg not in EDGE_ONLY[top]:
                     out.append(f"{rel}:{imp.line}: {pkg} imports {top} ({imp.text!r}): transport stays at the "
-                               f"edge, only {EDGE_ONLY[top]} may import {top}")
+                               f"edge, only {' and '.join(EDGE_ONLY[top])} may import {top}")
     return out, files, between
+
+
+def _load_time_imports(body: list[ast.stmt]) -> Iterator[ast.Import | ast.ImportFrom]:
+    """The import statements a module runs when loaded (``TYPE_CHECKING`` blocks and functions skipped)."""
+    for node in body:
+        if isinstance(node, ast.Import | ast.ImportFrom):
+            yield node
+        elif isinstance(node, ast.If):
+            test = node.test
+            if "TYPE_CHECKING" not in ast.unparse(test):
+                yield from _load_time_imports(node.body)
+            yield from _load_time_imports(node.orelse)
+        elif isinstance(node, ast.Try):
+            for block in (node.body, *(h.body for h in node.handlers), node.orelse, node.finalbody):
+                yield from _load_time_imports(block)
+
+
+def circles(root: Path) -> list[str]:
+    """Every circle of load-time imports between the packages' files, one line each (its modules)."""
+    modules: dict[str, tuple[Path, bool]] = {}
+    for pkg, folder in LAYERS:
+        for path in sorted((root / folder).rglob("*.py")):
+            name, is_pkg = _module_name(path, root / folder, pkg)
+            modules[name] = (path, is_pkg)
+    edges: dict[str, list[str]] = {}
+    for name, (path, is_pkg) in modules.items():
+        try:
+            tree = ast.parse(path.read_text(encoding="utf-8"))
+        except SyntaxError:
+            continue  # breaches() reports it
+        out: list[str] = []
+        for node in _load_time_imports(tree.body):
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            else:
+                base = _resolve(node.module, node.level, name, is_pkg)
+                targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in modules else base for a in node.names]
+            out += [t for t in targets if t in modules and t != name]
+        edges[name] = out
+    # Tarjan's strongly connected components, iteratively
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[str] = []
+    for start in modules:
+        if start in index:
+            continue
+        work = [(start, 0)]
+        while work:
+            v, i = work.pop()
+            if i == 0:
+                index[v] = low[v] = len(index)
+                stack.append(v)
+                on_stack.add(v)
+            if i < len(edges[v]):
+                work.append((v, i + 1))
+                w = edges[v][i]
+                if w not in index:
+                    work.append((w, 0))
+                elif w in on_stack:
+                    low[v] = min(low[v], index[w])
+                continue
+            if low[v] == index[v]:
+                comp = []
+                while True:
+                    w = stack.pop()
+                    on_stack.discard(w)
+                    comp.append(w)
+                    if w == v:
+                        break
+                if len(comp) > 1:
+                    found.append("import circle: " + " → ".join(sorted(comp)))
+            if work:
+                parent = work[-1][0]
+                low[parent] = min(low[parent], low[v])
+    return found
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -142,12 +228,17 @@ def main(argv: list[str] | None = None) -> int:
               f"(give the repository root, which holds {', '.join(f for _, f in LAYERS)})", file=sys.stderr)
         return 2
     found, files, between = breaches(args.root)
-    for line in found:
+    loops = circles(args.root)
+    for line in found + loops:
         print(line)
     if found:
         print(f"layers: FAIL: {len(found)} import(s) break {RULE} ({files} files)")
+    if loops:
+        print(f"layers: FAIL: {len(loops)} import circle(s) between files")
+    if found or loops:
         return 1
-    print(f"layers: OK: {files} files, {between} imports between the packages, each one downward ({RULE})")
+    print(f"layers: OK: {files} files, {between} imports between the packages, each one downward ({RULE}); "
+          "no import circle between files")
     return 0
 
 

@@ -12,8 +12,8 @@ import argparse
 import contextlib
 import statistics
 
-from wmm_qp_service.bench import e2e
-from wmm_qp_service.stress import CpuHogs
+from wmm_qp_tools.bench import e2e
+from wmm_qp_tools.stress import CpuHogs
 
 
 def main() -> None:

@@ -13,7 +13,7 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path[:0] = [str(ROOT), str(ROOT / "service"), str(ROOT / "sim")]
 
 from wmm_qp_service import processes  # noqa: E402
-from wmm_qp_service.bench import e2e  # noqa: E402
+from wmm_qp_tools.bench import e2e  # noqa: E402
 
 
 def main() -> None:

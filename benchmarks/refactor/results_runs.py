@@ -100,13 +100,13 @@ def _experiment_runs() -> list[Run]:
 
 def _offline_runs() -> list[Run]:
     """The arm-only reach (§1.1) and the best reachable DM (§2): ``python -m`` modules."""
-    reach = ("-m", "wmm_qp_service.experiments.arm_reach")
+    reach = ("-m", "wmm_qp_tools.experiments.arm_reach")
     runs = [Run(f"arm_reach_r{r.replace('.', '')}", "§1.1", (*reach, "--radius", r, "--json"))
             for r in ("0.2", "0.25", "0.3", "0.325", "0.6", "0.753", "0.764")]  # fmt: skip
     runs.append(Run("arm_reach_bisection", "§1.1", (*reach, "--lo", "0.6", "--hi", "0.775", "--resolution", "0.02",
                                                     "--no-check-ends", "--json")))  # fmt: skip
     runs.append(Run("arm_reach_kinematic_bound", "§1.1", (*reach, "--kinematic-bound", "--json")))
-    opt = ("-m", "wmm_qp_service.experiments.dm_optimum")
+    opt = ("-m", "wmm_qp_tools.experiments.dm_optimum")
     runs.append(Run("dm_optimum_x", "§2", (*opt, "--direction", "x", "--starts", "100", "--json")))
     runs.append(Run("dm_optimum_z", "§2", (*opt, "--direction", "z", "--z", "0.48279", "--starts", "100", "--json")))
     return runs
@@ -162,9 +162,9 @@ EXCLUDED: tuple[tuple[str, str], ...] = (
         "wmm-qp experiment push --physics mujoco --max-mass [--robot-config ...] (§7.2)",
         "a bisection on the mass, 14 pushes per robot (its JSON's trials), each as nondeterministic as the push",
     ),
-    ("python -m wmm_qp_service.experiments.latency_check 0|1 (§4)", "prints text, no JSON"),
+    ("python -m wmm_qp_tools.experiments.latency_check 0|1 (§4)", "prints text, no JSON"),
     (
-        "python -m wmm_qp_service.experiments.circle_table --radius R ... (§1.1)",
+        "python -m wmm_qp_tools.experiments.circle_table --radius R ... (§1.1)",
         "runs exactly the circle_r170_* and circle_r100_* commands (included) and prints a Markdown table",
     ),
     ("--plots DIR, --frames DIR, --log FILE.csv, --json-dir DIR", "PNG and CSV outputs, not the JSON: left off"),

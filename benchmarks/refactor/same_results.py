@@ -115,6 +115,10 @@ class Tree:
             module, func = self.entry.split(":")
             boot = f"import sys; sys.argv[0] = 'wmm-qp'; from {module} import {func}; raise SystemExit({func}())"
             return [python, "-c", boot, *args[1:]]
+        if args[0] == "-m" and args[1].startswith("wmm_qp_tools.") and not any(
+                (d / "wmm_qp_tools").is_dir() for d in self.pythonpath):
+            # a tree from before the tools left the runtime: its experiments were wmm_qp_service's
+            args[1] = "wmm_qp_service." + args[1].removeprefix("wmm_qp_tools.")
         return [python, *args]
 
     def check_imports(self, flag: str, python: str) -> None:

@@ -1,6 +1,6 @@
 """The stress drill: the demo (sim + daemon as processes on loopback) run over and over under load.
 
-Conditions (``wmm_qp_service.stress.CONDITIONS``): ``cpu`` (a spinning process per core), ``disk``
+Conditions (``wmm_qp_tools.stress.CONDITIONS``): ``cpu`` (a spinning process per core), ``disk``
 (a writer that writes and fsyncs 64 MiB files without a pause), ``freeze_sim`` / ``freeze_daemon``
 (SIGSTOP for uniform 5-500 ms, SIGCONT, every 0.3-1.5 s), ``all`` (all of them at once). Each
 condition runs demos back to back for ``--minutes``; every demo's JSON and its processes' logs are
@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 
 from wmm_qp_service.processes import CLI
-from wmm_qp_service.stress import CONDITIONS, stressed
+from wmm_qp_tools.stress import CONDITIONS, stressed
 
 
 def one_demo(out: Path, condition: str, i: int, args: argparse.Namespace) -> dict:

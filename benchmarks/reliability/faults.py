@@ -2,7 +2,7 @@
 
     .venv/bin/python benchmarks/reliability/faults.py --rate 1000 --json --out benchmarks/reliability/faults.json
 
-Each scenario runs against the real processes (``wmm_qp_service.faults``); latencies come
+Each scenario runs against the real processes (``wmm_qp_tools.faults``); latencies come
 from the publishers' wall-clock stamps. See docs/reliability.md.
 """
 

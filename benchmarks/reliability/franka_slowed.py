@@ -42,7 +42,7 @@ def main() -> int:
     a = ap.parse_args()
     from support.franky_rig import FR3, start_franky_sim
     from wmm_qp_service.processes import CLI
-    from wmm_qp_service.stress import CpuHogs, RealtimeHogs
+    from wmm_qp_tools.stress import CpuHogs, RealtimeHogs
 
     import wmm_qp as w
 

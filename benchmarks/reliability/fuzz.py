@@ -28,8 +28,8 @@ def main() -> int:
     p.add_argument("--out", metavar="FILE", help="also write the JSON here")
     args = p.parse_args()
     from wmm_qp_service.client import Client
-    from wmm_qp_service.fuzz import fuzz_wire
     from wmm_qp_service.processes import Stack, isolated_config, log_folder
+    from wmm_qp_tools.fuzz import fuzz_wire
 
     log_dir = log_folder(None, "fuzz")
     stack = Stack(isolated_config(), rate_hz=args.loop_rate, log_dir=log_dir)

@@ -34,8 +34,8 @@ BOUNDS = ("position", "velocity", "acceleration", "wheel_speed", "wheel_accelera
 def one_stack(k: int, out: dict[str, Any], start: threading.Barrier) -> None:
     """Start a stack, sweep the ball at its arm, and put what it counted in ``out``."""
     import numpy as np
-    from wmm_qp_service.bench.machine import CpuMeter
     from wmm_qp_service.client import Client
+    from wmm_qp_service.machine import CpuMeter
     from wmm_qp_service.processes import Stack, isolated_config
 
     logs = Path(tempfile.mkdtemp(prefix=f"wmm-stacks-{k}-"))

@@ -1,8 +1,10 @@
 """The ``wmm-qp`` command line.
 
-Each subcommand lives in its own module under :mod:`wmm_qp_service.commands` and exposes
-``HELP`` (one line), ``add_arguments(parser)`` and ``run(args) -> int``. Modules are
-imported only when their subcommand runs, so ``wmm-qp inspect`` never loads Zenoh.
+Each subcommand lives in its own module and exposes ``add_arguments(parser)`` and
+``run(args) -> int``. Modules are imported only when their subcommand runs, so ``wmm-qp inspect``
+never loads Zenoh. This module holds the runtime's commands (the ones a robot process runs: ``sim``,
+``serve``, ``driver``, …); the installed ``wmm-qp`` is :mod:`wmm_qp_tools.cli`, which adds the
+tools (``bench``, ``experiment``, ``contract``) to the same table.
 
 Errors a user can cause (bad arguments, a bad config, a missing solver) print one line on
 stderr and exit with status 2 — never a traceback.
@@ -18,20 +20,18 @@ from typing import Any
 
 # name → module (under wmm_qp_service.commands), in the order `wmm-qp --help` lists them.
 COMMANDS: dict[str, str] = {
-    "inspect": "inspect",
-    "verify": "verify",
-    "sim": "sim",
-    "serve": "serve",
-    "teleop": "teleop",
-    "mode": "mode",
-    "status": "status",
-    "console": "console",
-    "demo": "demo",
-    "experiment": "experiment",
-    "bench": "bench",
-    "soak": "soak",
-    "acl": "acl",
-    "driver": "driver",
+    "inspect": "wmm_qp_service.commands.inspect",
+    "verify": "wmm_qp_service.commands.verify",
+    "sim": "wmm_qp_service.commands.sim",
+    "serve": "wmm_qp_service.commands.serve",
+    "teleop": "wmm_qp_service.commands.teleop",
+    "mode": "wmm_qp_service.commands.mode",
+    "status": "wmm_qp_service.commands.status",
+    "console": "wmm_qp_service.commands.console",
+    "demo": "wmm_qp_service.commands.demo",
+    "soak": "wmm_qp_service.commands.soak",
+    "acl": "wmm_qp_service.commands.acl",
+    "driver": "wmm_qp_service.commands.driver",
 }
 
 HELP = {
@@ -44,8 +44,6 @@ HELP = {
     "status": "show the daemon's status",
     "console": "a web console: the robot live in 3D, drag its EE target, modes, status, plots (viser)",
     "demo": "start sim and daemon on loopback, drive every mode, print a summary",
-    "experiment": "reproduce one of the paper's experiments (circle, dm, push)",
-    "bench": "measure per-tick controller time and the loop over Zenoh",
     "soak": "run sim + daemon + client for a long time and report drift in time and memory",
     "acl": "write per-role Zenoh credentials with fresh secrets and their ACL configs (acl init DIR)",
     "driver": "drive a real robot behind the daemon's protocol (driver franka --robot-ip IP: a Franka FR3)",
@@ -59,41 +57,45 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
-def _load(name: str) -> Any:
+def _load(name: str, commands: dict[str, str]) -> Any:
     try:
-        return importlib.import_module(f"wmm_qp_service.commands.{COMMANDS[name]}")
+        return importlib.import_module(commands[name])
     except ModuleNotFoundError as e:
-        if e.name and e.name.startswith("wmm_qp_service.commands"):
+        if e.name and e.name == commands[name]:
             return None
         raise
 
 
-def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+def build_parser(only: str | None = None, commands: dict[str, str] = COMMANDS,
+                 helps: dict[str, str] = HELP) -> argparse.ArgumentParser:
+    """The parser of ``commands`` (name → module); ``only``: load just that command's module."""
     parser = _Parser(prog="wmm-qp", description="QP control of a wheeled mobile manipulator.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    for name in COMMANDS:
+    for name in commands:
         if only is not None and name != only:
-            sub.add_parser(name, help=HELP[name], add_help=False)
+            sub.add_parser(name, help=helps[name], add_help=False)
             continue
-        mod = _load(name)
+        mod = _load(name, commands)
         if mod is None:
             continue
-        p = sub.add_parser(name, help=HELP[name], description=HELP[name])
+        p = sub.add_parser(name, help=helps[name], description=helps[name])
         mod.add_arguments(p)
     return parser
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def main(argv: Sequence[str] | None = None, commands: dict[str, str] = COMMANDS,
+         helps: dict[str, str] = HELP) -> int:
+    """Run one command of ``commands``; the exit code (2: a user's error, one line on stderr)."""
     from wmm_qp.exceptions import WmmQpError
 
     argv = list(sys.argv[1:] if argv is None else argv)
-    only = argv[0] if argv and argv[0] in COMMANDS else None
-    parser = build_parser(only)
+    only = argv[0] if argv and argv[0] in commands else None
+    parser = build_parser(only, commands, helps)
     args = parser.parse_args(argv)
     if args.command is None:
         parser.print_help()
         return 2
-    mod = _load(args.command)
+    mod = _load(args.command, commands)
     if mod is None:
         print(f"wmm-qp: error: {args.command} is not available in this install", file=sys.stderr)
         return 2

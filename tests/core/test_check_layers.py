@@ -12,7 +12,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 TOOL = ROOT / "tools" / "check_layers.py"
-PACKAGES = ("wmm_qp", "sim/wmm_qp_sim", "service/wmm_qp_service")
+PACKAGES = ("wmm_qp", "sim/wmm_qp_sim", "service/wmm_qp_service", "tools/wmm_qp_tools")
 
 
 def check(root: Path) -> subprocess.CompletedProcess[str]:
@@ -22,7 +22,7 @@ def check(root: Path) -> subprocess.CompletedProcess[str]:
 
 @pytest.fixture(scope="module")
 def tree(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A copy of the three packages' sources (no caches), as the repository lays them out."""
+    """A copy of the four packages' sources (no caches), as the repository lays them out."""
     root = tmp_path_factory.mktemp("tree")
     for folder in PACKAGES:
         shutil.copytree(ROOT / folder, root / folder, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
@@ -53,6 +53,9 @@ def test_the_untouched_copy_passes(tree: Path) -> None:
     # by name at run time
     ("sim/wmm_qp_sim/_probe.py", "import importlib\n_d = importlib.import_module('wmm_qp_service.daemon')\n", 2,
      "wmm_qp_sim imports wmm_qp_service (\"importlib.import_module('wmm_qp_service.daemon')\")"),
+    # the runtime imports a tool (a robot process would load the bench)
+    ("service/wmm_qp_service/_probe.py", "from wmm_qp_tools.bench import run_bench\n", 1,
+     "wmm_qp_service imports wmm_qp_tools ('from wmm_qp_tools.bench import run_bench')"),
     # transport below the service layer
     ("sim/wmm_qp_sim/_probe.py", "def _open():\n    import zenoh\n    return zenoh\n", 2,
      "wmm_qp_sim imports zenoh ('import zenoh'): transport stays at the edge"),
@@ -81,7 +84,50 @@ def test_downward_and_own_imports_pass(tree: Path) -> None:
     assert r.returncode == 0, r.stdout
 
 
+def test_a_tool_may_import_every_layer_and_zenoh(tree: Path) -> None:
+    path = tree / "tools/wmm_qp_tools/_probe.py"
+    path.write_text("import zenoh\nimport wmm_qp_sim.robot\nfrom wmm_qp_service import cli\nimport wmm_qp\n")
+    try:
+        r = check(tree)
+    finally:
+        path.unlink()
+    assert r.returncode == 0, r.stdout
+
+
 def test_a_root_without_the_packages_is_bad_usage(tmp_path: Path) -> None:
     r = check(tmp_path)
     assert r.returncode == 2 and r.stdout == ""
     assert r.stderr.count("\n") == 1 and f"--root {tmp_path}" in r.stderr and "sim/wmm_qp_sim" in r.stderr
+
+
+def test_an_import_circle_between_files_fails_the_check_naming_its_modules(tree: Path) -> None:
+    """Two files of one package that import each other at load time (through the package's
+    ``__init__`` re-export: ``from wmm_qp_sim import SimRobot`` names the ``__init__``)."""
+    probe = tree / "sim/wmm_qp_sim/_probe.py"
+    probe.write_text("from wmm_qp_sim import SimRobot\n")
+    init = tree / "sim/wmm_qp_sim/__init__.py"
+    before = init.read_text()
+    init.write_text(before + "\nfrom wmm_qp_sim import _probe\n")
+    try:
+        r = check(tree)
+    finally:
+        probe.unlink()
+        init.write_text(before)
+    assert r.returncode == 1, r.stdout
+    assert "import circle: wmm_qp_sim → wmm_qp_sim._probe" in r.stdout, r.stdout
+    assert "layers: FAIL: 1 import circle(s) between files" in r.stdout
+
+
+def test_an_import_only_for_the_type_checker_or_inside_a_function_closes_no_circle(tree: Path) -> None:
+    probe = tree / "sim/wmm_qp_sim/_probe.py"
+    probe.write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from wmm_qp_sim import SimRobot\n\n\n"
+                     "def _late():\n    from wmm_qp_sim import SimRobot\n    return SimRobot\n")
+    init = tree / "sim/wmm_qp_sim/__init__.py"
+    before = init.read_text()
+    init.write_text(before + "\nfrom wmm_qp_sim import _probe\n")
+    try:
+        r = check(tree)
+    finally:
+        probe.unlink()
+        init.write_text(before)
+    assert r.returncode == 0, r.stdout

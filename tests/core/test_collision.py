@@ -329,7 +329,7 @@ def test_a_capsule_whose_segment_is_inside_a_box_is_left_to_coal() -> None:
 def test_the_collision_bench_times_both_controllers_with_rows_active() -> None:
     """``wmm-qp bench --only collisions`` on a short run: both controllers timed on the same
     states, and the scene really puts rows in the QP (no timing asserted)."""
-    from wmm_qp_service.bench import collision
+    from wmm_qp_tools.bench import collision
 
     r = collision.run(w.load_robot_config(), w.load_controller_config(), 300, 60.0)
     assert r["with_rows"]["n"] == r["without_rows"]["n"] > 0

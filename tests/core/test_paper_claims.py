@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from support.core_fixtures import Q0, config, model
-from wmm_qp_service.cli import main
-from wmm_qp_service.experiments import circle
+from wmm_qp_tools.cli import main
+from wmm_qp_tools.experiments import circle
 
 import wmm_qp as w
 from wmm_qp.controllers.traditional import TraditionalController
@@ -71,7 +71,7 @@ def test_the_preference_settles_at_an_optimum_without_oscillating() -> None:
     """From the best configuration along z that SLSQP finds (a joint at its limit), 2 s of
     null-space DM: the DM does not drop and the arm comes to rest (no limit cycle)."""
     pytest.importorskip("scipy")
-    from wmm_qp_service.experiments.dm_optimum import best_dm
+    from wmm_qp_tools.experiments.dm_optimum import best_dm
 
     u = np.array([0.0, 0.0, 1.0])
     best = best_dm(model().config, u, 0.4828, starts=4, seed=1)

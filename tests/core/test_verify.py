@@ -119,7 +119,7 @@ def test_verify_catches_the_qp_without_its_ee_box_recheck(solver: str, monkeypat
 def test_verify_command_on_any_robot_and_task(robot_file: str, task: str, capsys: pytest.CaptureFixture[str]) -> None:
     import json
 
-    from wmm_qp_service.cli import main
+    from wmm_qp_tools.cli import main
 
     path = w.default_robot_file().parent / robot_file
     argv = ["verify", "--robot-config", str(path), "--task", task, "--solver", "daqp", "--samples", "30", "--json"]

@@ -23,12 +23,12 @@ import pytest
 import zenoh
 from support.zenoh_acl import config_value, peers, until
 from wmm_qp_service import acl
-from wmm_qp_service.cli import main as cli_main
 from wmm_qp_service.client import Client
 from wmm_qp_service.config import ServiceConfig, load_service_config
 from wmm_qp_service.keys import Keys
 from wmm_qp_service.processes import isolated_config
 from wmm_qp_service.transport import ROLE_CLIENT, ROLE_DAEMON, ROLE_EMBEDDED, ROLE_SIM, session_config
+from wmm_qp_tools.cli import main as cli_main
 
 from wmm_qp import ConfigError, default_config_dir
 

@@ -20,12 +20,12 @@ import pytest
 import zenoh
 from support.zenoh_acl import config_value, drive_to, peers, until, viewer_attempts
 from wmm_qp_service import acl
-from wmm_qp_service.cli import main as cli_main
 from wmm_qp_service.client import Client
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.keys import Keys
 from wmm_qp_service.processes import Stack, isolated_config
 from wmm_qp_service.transport import ROLE_CLIENT, ROLE_EMBEDDED, session_config
+from wmm_qp_tools.cli import main as cli_main
 
 TIMEOUT = 30.0
 WAIT = 10.0  # [s] patience for a link, a declaration or a message that must arrive

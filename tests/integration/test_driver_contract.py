@@ -1,4 +1,4 @@
-"""The driver contract (docs/drivers.md) checked by its kit (``wmm_qp_service.contract``) against
+"""The driver contract (docs/drivers.md) checked by its kit (``wmm_qp_tools.contract``) against
 both drivers: the sim (``wmm-qp sim``, the reference) and the Franka FR3 driver
 (``wmm-qp driver franka``) with franky-sim in a child process (libfranka's connect holds the GIL:
 never in the test's process). Each driver is a factory: it starts the driver on an isolated
@@ -100,7 +100,7 @@ def test_after_a_stop_only_a_new_stream_resumes(controller: Any) -> None:
 
 def test_the_kit_catches_a_robot_without_firmware(tmp_path: Path) -> None:
     """The kit can fail: a sim whose firmware is off (``firmware = false``) applies a command past
-    the velocity limit, and :func:`~wmm_qp_service.contract.check_refuses_past_limits` says so."""
+    the velocity limit, and :func:`~wmm_qp_tools.contract.check_refuses_past_limits` says so."""
     from wmm_qp.config import default_config_dir as cfg_dir
 
     sim_toml = tmp_path / "sim_no_firmware.toml"

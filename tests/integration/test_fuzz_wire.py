@@ -11,7 +11,7 @@ from typing import Any
 
 import pytest
 from wmm_qp_service.client import Client
-from wmm_qp_service.fuzz import fuzz_wire
+from wmm_qp_tools.fuzz import fuzz_wire
 
 pytestmark = pytest.mark.integration
 

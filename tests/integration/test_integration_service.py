@@ -186,9 +186,9 @@ def test_a_sim_started_with_a_robot_file_is_found_under_its_name(tmp_path: Any) 
     import subprocess
 
     from support.service_robots import gen3_file
-    from wmm_qp_service.cli import build_parser
     from wmm_qp_service.cli_common import service_config
     from wmm_qp_service.processes import free_port
+    from wmm_qp_tools.cli import build_parser
 
     path = gen3_file(tmp_path, "fixed", name="cell_7")
     ends = ["--prefix", f"idtest{time.monotonic_ns() % 10**9}",

@@ -1,7 +1,7 @@
 """Faults against the real processes (integration) and the watchdogs' documented behaviour.
 
 The integration tests share one stack (module fixture) and run the scenarios of
-``wmm_qp_service.faults`` in order; they assert behaviour only. The figures (latencies) are
+``wmm_qp_tools.faults`` in order; they assert behaviour only. The figures (latencies) are
 printed here and recorded by ``benchmarks/reliability/faults.py`` in docs/reliability.md.
 The watchdog tests drive the ControlCore with a fake clock (deterministic).
 """
@@ -123,8 +123,8 @@ def test_a_state_outage_longer_than_the_timeout_is_a_safe_stop_then_resumes() ->
 # ---------------------------------------------------------------- the real processes
 @pytest.fixture(scope="module")
 def probe(tmp_path_factory: pytest.TempPathFactory) -> Iterator[object]:
-    from wmm_qp_service.faults import Probe
     from wmm_qp_service.processes import Stack, isolated_config
+    from wmm_qp_tools.faults import Probe
 
     log_dir: Path = tmp_path_factory.mktemp("faults")
     stack = Stack(isolated_config(), rate_hz=RATE, log_dir=log_dir)
@@ -141,7 +141,7 @@ def probe(tmp_path_factory: pytest.TempPathFactory) -> Iterator[object]:
 
 @pytest.mark.integration
 def test_sim_killed_mid_motion_then_restarted(probe: object) -> None:
-    from wmm_qp_service.faults import sim_kill_and_restart
+    from wmm_qp_tools.faults import sim_kill_and_restart
 
     r = sim_kill_and_restart(probe, RATE)  # type: ignore[arg-type]
     print("\nsim kill/restart:", r)
@@ -157,7 +157,7 @@ def test_sim_killed_mid_motion_then_restarted(probe: object) -> None:
 
 @pytest.mark.integration
 def test_daemon_killed_mid_motion_then_restarted(probe: object) -> None:
-    from wmm_qp_service.faults import daemon_kill_and_restart
+    from wmm_qp_tools.faults import daemon_kill_and_restart
 
     r = daemon_kill_and_restart(probe)  # type: ignore[arg-type]
     print("\ndaemon kill/restart:", r)
@@ -168,7 +168,7 @@ def test_daemon_killed_mid_motion_then_restarted(probe: object) -> None:
 
 @pytest.mark.integration
 def test_setpoint_flood_at_ten_times_the_loop_rate(probe: object) -> None:
-    from wmm_qp_service.faults import setpoint_flood
+    from wmm_qp_tools.faults import setpoint_flood
 
     r = setpoint_flood(probe, factor=10.0, seconds=4.0)  # type: ignore[arg-type]
     print("\nsetpoint flood:", r)
@@ -178,7 +178,7 @@ def test_setpoint_flood_at_ten_times_the_loop_rate(probe: object) -> None:
 
 @pytest.mark.integration
 def test_five_percent_state_loss_on_the_wire(probe: object) -> None:
-    from wmm_qp_service.faults import state_faults
+    from wmm_qp_tools.faults import state_faults
 
     r = state_faults(probe, ["--state-loss", "0.05"], seconds=2.0)  # type: ignore[arg-type]
     print("\nstate loss 5 %:", r)
@@ -189,7 +189,7 @@ def test_five_percent_state_loss_on_the_wire(probe: object) -> None:
 @pytest.mark.integration
 @pytest.mark.parametrize("peer", ["sim", "daemon"])
 def test_a_hung_peer_is_noticed_and_the_stack_resumes(probe: object, peer: str) -> None:
-    from wmm_qp_service.faults import sigstop
+    from wmm_qp_tools.faults import sigstop
 
     r = sigstop(probe, peer, hold_s=1.5)  # type: ignore[arg-type]
     print(f"\nSIGSTOP {peer}:", r)
@@ -209,8 +209,8 @@ def test_a_daemon_stalled_past_the_command_timeout_resumes_on_the_physics_plant(
     import signal
     import time
 
-    from wmm_qp_service.faults import Probe
     from wmm_qp_service.processes import Stack, isolated_config
+    from wmm_qp_tools.faults import Probe
 
     stack = Stack(isolated_config(), rate_hz=RATE, log_dir=tmp_path, extra_sim_args=["--physics", "mujoco"])
     p = None

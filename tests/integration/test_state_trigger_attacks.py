@@ -15,10 +15,10 @@ import msgspec
 import numpy as np
 import pytest
 from wmm_qp_service.client import Client
-from wmm_qp_service.faults import Probe, sigstop
-from wmm_qp_service.fuzz import fuzz_wire
 from wmm_qp_service.processes import Stack, isolated_config
 from wmm_qp_service.protocol import encode
+from wmm_qp_tools.faults import Probe, sigstop
+from wmm_qp_tools.fuzz import fuzz_wire
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 

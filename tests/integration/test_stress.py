@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 from wmm_qp_service.processes import CLI
-from wmm_qp_service.stress import CpuHogs, Freezer, child_pid, stressed
+from wmm_qp_tools.stress import CpuHogs, Freezer, child_pid, stressed
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from wmm_qp_service.bench import controller, oneshot, pink_race, scaling
-from wmm_qp_service.bench.stats import PieceTimer, summarize_ns
-from wmm_qp_service.cli import main
+from wmm_qp_tools.bench import controller, oneshot, pink_race, scaling
+from wmm_qp_tools.bench.stats import PieceTimer, summarize_ns
+from wmm_qp_tools.cli import main
 
 import wmm_qp as w
 
@@ -169,7 +169,7 @@ def test_cli_user_errors_exit_2(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def test_fastest_backend_breaks_a_p50_tie_by_p99() -> None:
-    from wmm_qp_service.bench.runner import targets
+    from wmm_qp_tools.bench.runner import targets
 
     ticks = {"osqp": {"p50": 27.60, "p99": 309.9}, "daqp": {"p50": 27.77, "p99": 81.1}}
     assert targets({"tick_us": ticks})["fastest_backend"] == "daqp"  # within 2 %: p99 decides
@@ -201,7 +201,7 @@ def test_scaling_follows_the_robot_s_arm(tmp_path) -> None:  # type: ignore[no-u
 
 
 def test_robots_section_times_every_robot_task_and_solver(tmp_path) -> None:  # type: ignore[no-untyped-def]
-    from wmm_qp_service.bench.runner import run_robots, shipped_robots
+    from wmm_qp_tools.bench.runner import run_robots, shipped_robots
 
     files = shipped_robots()
     assert files[0].name == w.default_robot_file().name and len(files) >= 4
@@ -236,7 +236,7 @@ def test_cli_robot_config_and_task(capsys: pytest.CaptureFixture[str]) -> None:
 
 def test_compare_commits_interleaves_two_trees() -> None:
     """The same tree twice: both workers follow the same trajectory and agree on every stage."""
-    from wmm_qp_service.bench.compare_commits import HERE, interleave
+    from wmm_qp_tools.bench.compare_commits import HERE, interleave
 
     r = interleave(HERE, HERE, blocks=2, ticks=20, solvers=["daqp"])
     row = r["solvers"]["daqp"]
@@ -247,8 +247,8 @@ def test_compare_commits_interleaves_two_trees() -> None:
 def test_collision_default_times_every_robot_with_and_without_its_default_rows(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """``wmm-qp bench --only collision_default`` on a short run: each robot's step with the default
     scene's rows and without rows, on the same states (no timing asserted); a broken file is named."""
-    from wmm_qp_service.bench import collision
-    from wmm_qp_service.bench.runner import shipped_robots
+    from wmm_qp_tools.bench import collision
+    from wmm_qp_tools.bench.runner import shipped_robots
 
     bad = tmp_path / "broken.toml"
     bad.write_text('name = "broken"\n')
@@ -267,7 +267,7 @@ def test_the_sections_but_collision_default_time_the_controller_without_rows(
         capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
     """The shipped config has the rows on; the sections whose figures were taken without them
     (the paper's setting) still time that, collision_default both."""
-    from wmm_qp_service.bench import runner
+    from wmm_qp_tools.bench import runner
 
     seen: list[bool] = []
     real = runner.controller.run
@@ -285,7 +285,7 @@ def test_the_sections_but_collision_default_time_the_controller_without_rows(
 
 def test_sim_section_times_every_shipped_robot_on_both_plants(capsys: pytest.CaptureFixture[str]) -> None:
     pytest.importorskip("mujoco", reason="the physics plant needs mujoco: pip install 'wmm-qp[physics]'")
-    from wmm_qp_service.bench.runner import shipped_robots
+    from wmm_qp_tools.bench.runner import shipped_robots
 
     assert main(["bench", "--json", "--only", "sim", "--ticks", "20"]) == 0
     out = json.loads(capsys.readouterr().out)
@@ -312,9 +312,9 @@ def test_tick_section_times_this_tree_and_a_baseline_tree_in_alternating_rounds(
 ) -> None:
     """``--only tick --baseline-tree DIR`` (DIR: this same tree): each round one worker run per tree,
     the first of a round alternating; the JSON's tick_compare and the report's line (no timing asserted)."""
-    from wmm_qp_service.bench.compare_commits import HERE
-    from wmm_qp_service.bench.tick_compare import round_order
-    from wmm_qp_service.commands.bench import _print_report
+    from wmm_qp_tools.bench.compare_commits import HERE
+    from wmm_qp_tools.bench.tick_compare import round_order
+    from wmm_qp_tools.commands.bench import _print_report
 
     if not (HERE / "pyproject.toml").is_file():  # CI installs the packages, not the tree
         pytest.skip("--baseline-tree times source trees: needs wmm-qp installed editable (pip install -e .)")

@@ -6,8 +6,8 @@ import json
 import subprocess
 
 import pytest
-from wmm_qp_service.cli import main
 from wmm_qp_service.processes import CLI
+from wmm_qp_tools.cli import main
 
 from wmm_qp.config import default_config_dir
 from wmm_qp.solvers import available_solvers
@@ -221,9 +221,9 @@ def test_every_command_takes_the_robot_id_from_the_robot_files_name(tmp_path, co
     """--robot-config F with F's name X: the id is X, whatever configs/service.toml's robot says
     (a sim started with F and a client given F, or --robot X, meet on <prefix>/X); --robot wins."""
     from support.service_robots import gen3_file
-    from wmm_qp_service.cli import build_parser
     from wmm_qp_service.cli_common import service_config
     from wmm_qp_service.config import load_service_config
+    from wmm_qp_tools.cli import build_parser
 
     assert load_service_config().robot == "wmm"  # the shipped service config names another id
     f = gen3_file(tmp_path, "fixed", name="cell_7")

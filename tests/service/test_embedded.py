@@ -358,7 +358,7 @@ def test_the_embedded_control_knows_no_transport() -> None:
 ])
 def test_bad_embedded_flags_are_one_line_and_exit_2(argv: list[str], says: str,
                                                      capsys: pytest.CaptureFixture[str]) -> None:
-    from wmm_qp_service.cli import main
+    from wmm_qp_tools.cli import main
 
     assert main(["sim", *argv]) == 2
     err = capsys.readouterr().err
@@ -375,7 +375,7 @@ def test_bad_embedded_flags_are_one_line_and_exit_2(argv: list[str], says: str,
 ])
 def test_bad_embedded_demo_and_soak_flags_are_one_line_and_exit_2(argv: list[str], says: str,
                                                                   capsys: pytest.CaptureFixture[str]) -> None:
-    from wmm_qp_service.cli import main
+    from wmm_qp_tools.cli import main
 
     assert main(argv) == 2
     err = capsys.readouterr().err

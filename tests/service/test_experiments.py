@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 from support.core_fixtures import robot
-from wmm_qp_service.cli import main
-from wmm_qp_service.experiments.log import columns
+from wmm_qp_tools.cli import main
+from wmm_qp_tools.experiments.log import columns
 
 EXPECTED_COLUMNS = [
     "t", "mode", *(f"q{i}" for i in range(1, 8)), *(f"qd_cmd{i}" for i in range(1, 8)),

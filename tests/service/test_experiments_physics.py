@@ -9,11 +9,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from wmm_qp_service.cli import main
-from wmm_qp_service.experiments import circle
-from wmm_qp_service.experiments.runner import anchored
-from wmm_qp_service.experiments.setup import make_setup
 from wmm_qp_service.processes import CLI
+from wmm_qp_tools.cli import main
+from wmm_qp_tools.experiments import circle
+from wmm_qp_tools.experiments.runner import anchored
+from wmm_qp_tools.experiments.setup import make_setup
 
 import wmm_qp as w
 
@@ -92,7 +92,7 @@ def test_the_demo_in_physics_on_a_robot_file_the_suite_writes(tmp_path: Path) ->
 
 
 def test_max_mass_bisects_to_the_threshold_of_each_run(monkeypatch: pytest.MonkeyPatch) -> None:
-    from wmm_qp_service.experiments import max_mass
+    from wmm_qp_tools.experiments import max_mass
 
     limit = {"with_dm": 47.3, "without_dm": 31.9}  # [kg] what each configuration pushes, faked
     dm = {"with_dm": 5.8, "without_dm": 3.8}

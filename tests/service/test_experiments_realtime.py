@@ -8,12 +8,12 @@ from typing import Any
 
 import numpy as np
 import pytest
-from wmm_qp_service.experiments.realtime import ClientProbe, Window, build_trace, run_phase
-from wmm_qp_service.experiments.recorder import Recorder
-from wmm_qp_service.experiments.scenario import Anchor, Phase, Probe, Target
-from wmm_qp_service.experiments.setup import make_setup
 from wmm_qp_service.protocol import StateMsg, TelemetryMsg, TruthMsg, encode
 from wmm_qp_sim import BoxConfig
+from wmm_qp_tools.experiments.realtime import ClientProbe, Window, build_trace, run_phase
+from wmm_qp_tools.experiments.recorder import Recorder
+from wmm_qp_tools.experiments.scenario import Anchor, Phase, Probe, Target
+from wmm_qp_tools.experiments.setup import make_setup
 
 import wmm_qp as w
 

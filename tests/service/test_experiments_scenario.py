@@ -7,10 +7,10 @@ import math
 
 import numpy as np
 import pytest
-from wmm_qp_service.experiments import dm, push
-from wmm_qp_service.experiments.runner import phase_ticks, run
-from wmm_qp_service.experiments.scenario import Anchor, Phase, Scenario, Target
-from wmm_qp_service.experiments.setup import make_setup
+from wmm_qp_tools.experiments import dm, push
+from wmm_qp_tools.experiments.runner import phase_ticks, run
+from wmm_qp_tools.experiments.scenario import Anchor, Phase, Scenario, Target
+from wmm_qp_tools.experiments.setup import make_setup
 
 import wmm_qp as w
 

@@ -19,9 +19,9 @@ from hypothesis import strategies as st
 from support.daemon_drive import send
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.daemon import ControlCore
-from wmm_qp_service.fuzz import KEYS, KINDS, Mutator, templates
 from wmm_qp_service.protocol import PROTOCOL_VERSION, CommandMsg, ModeMsg, SetpointMsg, StateMsg
 from wmm_qp_service.validation import Reject, Validator
+from wmm_qp_tools.fuzz import KEYS, KINDS, Mutator, templates
 
 import wmm_qp as w
 

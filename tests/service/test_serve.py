@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import pytest
-from wmm_qp_service.cli import build_parser, main
 from wmm_qp_service.commands import serve
+from wmm_qp_tools.cli import build_parser, main
 
 
 @pytest.mark.parametrize(("flags", "kind", "r"), [([], "position", 3), (["--task", "pose"], "pose", 6),

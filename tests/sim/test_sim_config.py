@@ -46,8 +46,8 @@ class _Started(Exception):
 def test_wmm_qp_sim_asks_for_the_configs_realtime_priority(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, text: str | None, flags: list[str], expected: int) -> None:
     import wmm_qp_service.drivers.sim_node as adapter
-    from wmm_qp_service.cli import build_parser
     from wmm_qp_service.commands import sim
+    from wmm_qp_tools.cli import build_parser
 
     def fake_node(*args: object, rt_priority: int = 0, **kw: object) -> None:
         raise _Started(rt_priority)

@@ -265,7 +265,7 @@ def test_wmm_qp_sim_physics_flag_chooses_the_plant(monkeypatch: pytest.MonkeyPat
     from types import SimpleNamespace
 
     import wmm_qp_service.drivers.sim_node as adapter
-    from wmm_qp_service.cli import main
+    from wmm_qp_tools.cli import main
 
     plants: list[str] = []
 

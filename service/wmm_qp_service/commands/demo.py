@@ -105,7 +105,8 @@ def run(args: argparse.Namespace) -> int:
     stack = Stack(svc, rate_hz=args.rate, log_dir=log_dir, robot_file=robot.path,
                   scene_file=scene.path if args.scene is not None else None,
                   extra_daemon_args=daemon_args, extra_sim_args=["--physics", plant], embedded=args.embedded)
-    from ..bench.machine import CPU_HOW, CpuMeter
+    from wmm_qp_service.machine import CPU_HOW, CpuMeter
+
     from ..readiness import NotReady
 
     meters: list[CpuMeter] = []  # started when the stack is up (start-up is not the loop's CPU)

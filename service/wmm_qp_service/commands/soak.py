@@ -67,7 +67,8 @@ def run(args: argparse.Namespace) -> int:
         return 2
     import numpy as np
 
-    from ..bench.machine import CPU_HOW, CpuMeter
+    from wmm_qp_service.machine import CPU_HOW, CpuMeter
+
     from ..client import Client
     from ..processes import Stack, isolated_config, log_folder
     from ..readiness import START_TIMEOUT, STATE_TIMEOUT, NotReady

@@ -1,0 +1,1 @@
+"""One module per tool subcommand of ``wmm-qp``: ``HELP``, ``add_arguments(parser)``, ``run(args)``."""
