@@ -58,8 +58,10 @@ class Verdict:
         return {"verdict": self.word, "verdict_reason": self.reason}
 
 
-def _counts(counts: Mapping[str, int]) -> str:
-    return ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in sorted(counts.items(), key=lambda kv: -kv[1]) if v)
+def _counts(counts: Mapping[str, int], codes: bool = False) -> str:
+    """``kind n, …``, most first; ``codes``: the keys are fault codes, shown as they are (to grep for)."""
+    return ", ".join(f"{k if codes else k.replace('_', ' ')} {v}"
+                     for k, v in sorted(counts.items(), key=lambda kv: -kv[1]) if v)
 
 
 def _plural(n: int, word: str, plural: str = "") -> str:
@@ -82,7 +84,7 @@ def judge(
         violations: the referee's counts by kind (zeros allowed).
         failures: other reasons the run fails (a process that crashed, a stack that did not come up).
         deadline_misses: the control loop's missed deadlines (reported).
-        faults: the daemon's faults by kind, each a safe stop (reported).
+        faults: the daemon's faults by code, each a safe stop (reported).
         protective_stops: the robot firmware's protective stops (reported).
         also: more context for the line (e.g. how many commands were judged).
         logs: where the processes' logs are (None: the line says there are none).
@@ -100,7 +102,7 @@ def judge(
         acted.append(_plural(deadline_misses, "deadline miss", "deadline misses"))
     n_faults = int(sum((faults or {}).values()))
     if n_faults:
-        acted.append(_plural(n_faults, "fault") + f" ({_counts(faults or {})})")
+        acted.append(_plural(n_faults, "fault") + f" ({_counts(faults or {}, codes=True)})")
     if protective_stops:
         acted.append(_plural(protective_stops, "protective stop"))
     if acted:

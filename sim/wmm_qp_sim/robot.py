@@ -35,6 +35,7 @@ import numpy as np
 
 import wmm_qp
 from wmm_qp.config import FloatArray
+from wmm_qp.fault_codes import FaultCode
 
 from .collision import CollisionReferee
 from .command import SimCommand
@@ -189,6 +190,7 @@ class SimRobot:
         self.protective = False
         self.protective_stops = 0
         self.protective_reason = ""
+        self.protective_code = ""  # its FaultCode
         self.refused = 0
         self.ended = 0  # commands of a stream a stop ended (refused, but no new fault of the sender's)
         self.stream: tuple[str, int] | None = None  # the (sender, stream) of the last command received
@@ -235,8 +237,8 @@ class SimRobot:
             v, w = self.target_arm, self.target_wheels
         if self.config.firmware and not self.protective and (j := self._cannot_stop(v, dt)) >= 0:
             side = "upper" if v[j] > 0 else "lower"
-            self._protective_stop(f"joint {j + 1} at {self.q_arm[j]:.4f} rad moving {v[j]:.3f} rad/s "
-                                  f"could not stop before its {side} limit")
+            self._protective_stop(FaultCode.CANNOT_STOP_BEFORE_LIMIT, f"joint {j + 1} at {self.q_arm[j]:.4f} rad "
+                                  f"moving {v[j]:.3f} rad/s could not stop before its {side} limit")
             v, w = self._braked(dt)
         self.v_arm, self.wheels = np.array(v, dtype=float), np.array(w, dtype=float)
         self.plant.write(self.wheels, self.v_arm)
@@ -300,7 +302,7 @@ class SimRobot:
                 what = (f"joint {bad_v[0] + 1} rate {arm[bad_v[0]]:.3g} rad/s beyond {self.v_max[bad_v[0]]:.3g}"
                         if bad_v.size else
                         f"wheel {bad_w[0] + 1} speed {wheels[bad_w[0]]:.3g} rad/s beyond {self.w_max[bad_w[0]]:.3g}")
-                self._protective_stop(f"refused command: {what}")
+                self._protective_stop(FaultCode.REFUSED_COMMAND, f"refused command: {what}")
                 return
             if key is not None and (self.stale or self.protective) and key == self.stopped_stream:
                 self.ended += 1  # the stop ended this stream: only a new one resumes
@@ -315,12 +317,13 @@ class SimRobot:
             self.referee.break_stream(hard=False)
         self.target_arm, self.target_wheels = arm.copy(), wheels.copy()
 
-    def _protective_stop(self, why: str) -> None:
+    def _protective_stop(self, code: FaultCode, why: str) -> None:
         if not self.protective:
             self.protective_stops += 1
             self.stopped_stream = self.stream
         self.protective = True
         self.protective_reason = why
+        self.protective_code = code.value
         self.referee.break_stream(hard=False)
 
     def _braked(self, dt: float) -> tuple[FloatArray, FloatArray]:
@@ -364,6 +367,7 @@ class SimRobot:
             protective_stop=self.protective,
             protective_stops=self.protective_stops,
             protective_reason=self.protective_reason,
+            protective_code=self.protective_code,
             refused_commands=self.refused,
             ended_commands=self.ended,
             drives={k: list(v) for k, v in self.drives.items()},

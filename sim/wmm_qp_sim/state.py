@@ -38,6 +38,7 @@ class SimState:
             command it refused.
         protective_stops: protective stops since reset.
         protective_reason: why the last protective stop started ("" = none yet).
+        protective_code: its code (a :class:`~wmm_qp.fault_codes.FaultCode` value; "" = none yet).
         refused_commands: commands the firmware refused since reset (past a limit, or while
             braking in a protective stop): each one a fault of the sender's.
         ended_commands: commands of a stream a stale or protective stop had ended, refused since
@@ -68,6 +69,7 @@ class SimState:
     protective_stop: bool = False
     protective_stops: int = 0
     protective_reason: str = ""
+    protective_code: str = ""
     refused_commands: int = 0
     ended_commands: int = 0
     drives: dict[str, list[int]] = field(default_factory=dict)

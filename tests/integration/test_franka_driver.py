@@ -237,8 +237,8 @@ def test_a_libfranka_reflex_is_a_protective_stop_the_arm_brakes_and_a_mode_messa
                 st.protective_reason
             assert sim.shared[REFLEXES] == 1
             status = _wait("the daemon's fault", lambda: (s := c.latest_status()) is not None
-                           and "robot firmware" in s.faults and s, 20.0, tmp_path)
-            assert status.faults["robot firmware"] >= 1, status.faults
+                           and "robot_firmware" in s.faults and s, 20.0, tmp_path)
+            assert status.faults["robot_firmware"] >= 1, status.faults
             # the arm brakes: franky-sim holds the joints; their positions stand still (its joint 7
             # chatters at about ±0.08 rad/s around a still position: rest is judged on positions)
             time.sleep(0.2)

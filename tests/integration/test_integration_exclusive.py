@@ -79,7 +79,7 @@ def test_a_second_sim_under_the_same_id_is_a_fault_not_mixed(service_stack: Any,
                 twin_state = until(lambda: (s := bridge.wait_state(2.0)) is not None
                                    and s.instance != latched and s)
                 st = until(lambda: (i := c.info()) is not None
-                           and i.status.faults.get("second state source", 0) >= 1 and i)
+                           and i.status.faults.get("second_state_source", 0) >= 1 and i)
                 assert st.status.sim_instance == latched  # never switched to the twin
                 assert "second state source" in st.status.last_fault
                 assert st.status.rejected.get("instance", 0) >= 1
@@ -122,7 +122,7 @@ def test_a_client_publishing_cmd_meets_the_robots_own_protection(service_stack: 
         assert tr.violations["position"] == 0 and np.all(np.array(after.q_arm) <= hi + 1e-9)
         assert np.linalg.norm(np.subtract(tr.base_true[:2], tr0.base_true[:2])) < 0.05
         status = until(lambda: (i := c.info()) is not None and
-                       (i.status.faults.get("robot firmware", 0) or i.status.faults.get("sim protective stop", 0))
+                       (i.status.faults.get("robot_firmware", 0) or i.status.faults.get("robot_protective_stop", 0))
                        and i)
         assert status.status.faults
 

@@ -72,7 +72,7 @@ def test_a_state_flood_at_ten_kilohertz_is_refused_and_cannot_speed_up_the_loop(
     assert sent > 3_000  # the flood happened (> 1 kHz whatever the machine)
     assert rej.get("state_seq", 0) > before.status.rejected.get("state_seq", 0)
     assert rej.get("instance", 0) > before.status.rejected.get("instance", 0)
-    assert after.status.faults.get("second state source", 0) >= 1
+    assert after.status.faults.get("second_state_source", 0) >= 1
     assert sum(rej.values()) - sum(before.status.rejected.values()) > 500
     # the loop's state ticks come at most at the robot's rate, however many states arrive (the
     # daemon's own stamps of the two statuses bracket the ticks counted between them). Watchdog

@@ -59,14 +59,16 @@ class FakeDaemon:
     def status(self) -> StatusMsg:
         return StatusMsg(robot="r", mode=self.mode, state_ok=not self.safe, safe_stop=self.safe,
                          resume_needed=self.resume_needed, fault_active=self.safe or self.resume_needed,
-                         faults=dict(self.faults), last_fault="state stale" if self.faults else "")
+                         faults=dict(self.faults),
+                         last_fault="state stale (none valid for > 50 ms)" if self.faults else "",
+                         last_fault_code="state_stale" if self.faults else "")
 
     def publish(self) -> None:
         self.sub.publish(self.status())
 
     def fault(self) -> None:
         self.safe, self.resume_needed, self.mode = True, False, "track"
-        self.faults["state stale"] = self.faults.get("state stale", 0) + 1
+        self.faults["state_stale"] = self.faults.get("state_stale", 0) + 1
         self.publish()
 
     def cleared(self) -> None:
@@ -130,7 +132,7 @@ def test_a_new_fault_counted_while_another_holds_is_reported_too() -> None:
     c, daemon = fake_client(on_fault=seen.append)
     daemon.publish()
     c.latest_status()
-    daemon.faults["sim lost"] = 1  # counted, already cleared: fault_active is False again
+    daemon.faults["robot_lost"] = 1  # counted, already cleared: fault_active is False again
     daemon.publish()
     c.latest_status()
     assert len(seen) == 1 and not seen[0].fault_active

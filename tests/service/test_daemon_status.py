@@ -65,7 +65,7 @@ def test_a_starting_daemon_reports_no_fault_before_any_client(robot: w.RobotConf
     core.on_state(plant.msg(stale_stop=True, cmd_seq=applied), t)
     core.tick(t)  # (at rest already: the stream starts again at once, in hold: nothing to resume)
     assert "its command timeout" in core.last_fault
-    assert core.faults["the robot stopped following the commands"] == 1 and not status(core).fault_active
+    assert core.faults["stream_broken"] == 1 and not status(core).fault_active
 
 
 # ---------------------------------------------------------------- fault_active and the fault's age
@@ -86,7 +86,7 @@ def test_fault_active_while_a_fault_holds_and_the_age_of_a_cleared_one(robot: w.
             t_fault = t
         t += DT
     st = status(core)
-    assert st.safe_stop and st.fault_active and st.last_fault.startswith("state stale")
+    assert st.safe_stop and st.fault_active and st.last_fault_code == "state_stale"
     assert t_fault is not None and st.last_fault_age == pytest.approx(t - DT - t_fault)
     for _ in range(50):  # the sim is back: the daemon holds until a mode message
         core.on_state(plant.msg(), t)
@@ -102,7 +102,7 @@ def test_fault_active_while_a_fault_holds_and_the_age_of_a_cleared_one(robot: w.
         t += DT
     st = status(core)
     assert not st.fault_active and st.mode == "track"
-    assert st.last_fault.startswith("state stale")  # still there: the age says it is old news
+    assert st.last_fault_code == "state_stale"  # still there: the age says it is old news
     assert st.last_fault_age == pytest.approx(t - DT - t_fault) and st.last_fault_age > 0.5
 
 
@@ -119,7 +119,7 @@ def test_a_fault_that_holds_nothing_is_not_active(robot: w.RobotConfig) -> None:
         tick(core, plant, t)
         t += DT
     st = status(core)
-    assert st.last_fault.startswith("setpoint conflict") and not st.fault_active
+    assert st.last_fault_code == "setpoint_conflict" and not st.fault_active
     assert 0.0 <= st.last_fault_age <= DT + 1e-9  # recorded at the last tick (the clock of the ticks)
 
 
@@ -177,11 +177,42 @@ def test_a_fault_while_holding_clears_without_a_resume_a_fault_in_a_task_needs_o
         for _ in range(60):  # no state for 120 ms: state stale, a safe stop
             tick(core, plant, t)
             t += DT
-        assert core.safe and core.faults["state stale"] == 1
+        assert core.safe and core.faults["state_stale"] == 1
         for _ in range(50):
             core.on_state(plant.msg(), t)
             tick(core, plant, t)
             t += DT
         st = status(core)
-        assert not st.safe_stop and st.last_fault.startswith("state stale") and st.mode == "hold"
+        assert not st.safe_stop and st.last_fault_code == "state_stale" and st.mode == "hold"
         assert st.resume_needed == (task_mode != "hold") == st.fault_active, task_mode
+
+
+def test_fault_keys_are_stable_codes_with_the_message_beside_them(robot: w.RobotConfig) -> None:
+    """The status's ``faults`` are keyed by code (what clients and JSON outputs match), whatever a
+    message says: a stale state and a second operator, with numbers and names in their messages."""
+    import json
+    import re
+
+    import msgspec
+
+    from wmm_qp.fault_codes import FaultCode
+
+    core, plant = make(robot)
+    x0 = core.model.ee_position(plant.q_base, plant.q_arm)
+    mode(core, "track")
+    t = 0.0
+    for _ in range(20):
+        core.on_state(plant.msg(), t)
+        core.on_setpoint(setpoint(x0, t), t)
+        core.on_setpoint(setpoint(x0, t, source="intruder"), t)
+        tick(core, plant, t)
+        t += DT
+    for _ in range(100):  # no state: the watchdog's stale stop
+        tick(core, plant, t)
+        t += DT
+    out = json.loads(msgspec.json.encode(status(core)))
+    assert set(out["faults"]) == {"setpoint_conflict", "state_stale"}, out["faults"]
+    assert all(re.fullmatch(r"[a-z][a-z0-9_]*", k) and k in set(FaultCode) for k in out["faults"])
+    assert out["last_fault_code"] == "state_stale" and out["last_fault"].startswith("state stale (none valid for > ")
+    assert all(re.fullmatch(r"[a-z][a-z0-9_]*", c.value) for c in FaultCode)
+    assert len({c.value for c in FaultCode}) == len(FaultCode)

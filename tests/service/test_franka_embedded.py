@@ -163,7 +163,7 @@ def test_the_referee_judges_the_core_s_command_before_the_shaper_refuses_it(rig:
     assert emb.driver.referee.counts["velocity"] == 1  # judged as received
     assert emb.driver.shaper.protective_stops == 1 and emb.driver.refused["firmware"] == 1  # refused
     assert np.all(np.abs(np.array(ctl.written)[:, 0]) <= robot.arm.velocity_max[0])  # never written
-    assert core.faults["robot firmware"] >= 1
+    assert core.faults["robot_firmware"] >= 1
 
 
 def test_a_cycle_late_for_the_robot_is_a_miss(rig: Any) -> None:

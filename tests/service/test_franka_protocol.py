@@ -156,7 +156,7 @@ def test_under_the_daemon_a_refused_recovery_is_retried_at_the_driver_s_pace(drv
     assert d.robot_error is None and not answers  # asked again, and recovered
     assert len(asked) == 3 and min(np.diff(asked)) >= 1.0, asked  # at the driver's pace
     assert d.refused["firmware"] == 2, dict(d.refused)
-    assert core.faults["robot firmware"] == 3, dict(core.faults)  # the reflex, the two refusals
+    assert core.faults["robot_firmware"] == 3, dict(core.faults)  # the reflex, the two refusals
     assert core.stream.confirmed and not core.safe
 
 

@@ -139,7 +139,7 @@ def test_mutation_fuzz_through_the_validators_and_the_controller() -> None:
             q_base = q_base + dt * (core.model.base.P(float(q_base[2])) @ wheels)
             t += dt
     assert rejected > 15_000  # most of it is hostile
-    assert core.stream.confirmed and not core.faults["commands not applied"]  # the controller ran every tick
+    assert core.stream.confirmed and not core.faults["commands_not_applied"]  # the controller ran every tick
     assert all(np.isfinite(core.smoother.step()[0]))
 
 

@@ -124,7 +124,7 @@ def test_a_lost_state_takes_the_prediction_path_and_every_step_gets_one_new_comm
 def test_no_state_for_state_timeout_is_a_safe_stop(blocking: bool) -> None:
     core, _robot, cmds, _loop = drive(200, drop=set(range(50, 400)), blocking=blocking)
     assert core.safe and cmds[-1] is not None and cmds[-1].status == w.Status.SAFE_STOP
-    assert "state stale" in core.last_fault
+    assert core.fault_record.last_code == "state_stale"
     # before the timeout the watchdog ticks predicted (no safe stop within state_timeout)
     first_stop = next(i for i, c in enumerate(cmds) if c is not None and c.status == w.Status.SAFE_STOP)
     assert first_stop > 50 + 20

@@ -6,10 +6,10 @@ from wmm_qp_service.verdict import EXIT_FAIL, EXIT_PASS, judge
 
 
 def test_misses_faults_and_stops_are_reported_and_explained_but_pass() -> None:
-    v = judge({"position": 0, "velocity": 0}, deadline_misses=12, faults={"state stale": 2, "sim lost": 1},
+    v = judge({"position": 0, "velocity": 0}, deadline_misses=12, faults={"state_stale": 2, "robot_lost": 1},
               protective_stops=1, logs="/tmp/run")
     assert v.passed and v.exit_code == EXIT_PASS and v.line().startswith("PASS: 0 violations; ")
-    for part in ("12 deadline misses", "3 faults (state stale 2, sim lost 1)", "1 protective stop",
+    for part in ("12 deadline misses", "3 faults (state_stale 2, robot_lost 1)", "1 protective stop",
                  "the host was loaded", "not a failure", "logs: /tmp/run"):
         assert part in v.reason, (part, v.reason)
     assert v.json_fields() == {"verdict": "PASS", "verdict_reason": v.reason}

@@ -171,7 +171,8 @@ def sim_kill_and_restart(p: Probe, rate_hz: float) -> dict[str, Any]:
 
     Returns:
         ``detect_s``: kill → first safe-stop command; ``zero_s``: kill → first all-zero command;
-        ``fault``: the daemon's last_fault; ``resume_s``: restart → first normal command;
+        ``fault``, ``fault_code``: the daemon's last fault (message, code);
+        ``resume_s``: restart → first normal command;
         ``first_cmd_ratio``: the first normal command against the acceleration bounds around
         the measured (restarted sim's) rates, as a fraction of A·dt (≤ 1 inside);
         ``max_step_ratio``: the largest step between consecutive commands in the 0.5 s after
@@ -187,7 +188,7 @@ def sim_kill_and_restart(p: Probe, rate_hz: float) -> dict[str, Any]:
     safe = p.until(lambda: p.first_tel(lambda m: m.status == SAFE, t_kill))
     zero = p.until(lambda: p.first_tel(lambda m: m.status == SAFE and not np.any(m.arm_rates)
                                        and not np.any(m.wheel_speeds), t_kill))
-    fault = p.until(lambda: (i := p.client.info()) is not None and i.status.safe_stop and i).status.last_fault
+    held = p.until(lambda: (i := p.client.info()) is not None and i.status.safe_stop and i).status
     p.clear()
     t_start = time.time()
     p.stack.start_sim()
@@ -203,7 +204,8 @@ def sim_kill_and_restart(p: Probe, rate_hz: float) -> dict[str, Any]:
     seq = [m for m in p.tel if m.stamp >= first.stamp]
     steps = [p.step_bound_ratio(b, np.array(a.arm_rates), np.array(a.wheel_speeds), dt)
              for a, b in itertools.pairwise(seq) if b.seq == a.seq + 1]
-    return {"detect_s": safe.stamp - t_kill, "zero_s": zero.stamp - t_kill, "fault": fault,
+    return {"detect_s": safe.stamp - t_kill, "zero_s": zero.stamp - t_kill, "fault": held.last_fault,
+            "fault_code": held.last_fault_code,
             "resume_s": first.stamp - t_start, "first_cmd_ratio": ratio,
             "max_step_ratio": max(steps) if steps else float("nan"), "resumed_ticks": len(seq),
             "violations": p.violations()}

@@ -318,6 +318,7 @@ def _drive(svc: Any, duration: float, bar: ProgressLine, exited: Any = lambda: N
         "collision_summary": final.status.collision_summary,
         "rejected": final.status.rejected,
         "last_fault": final.status.last_fault,
+        "last_fault_code": final.status.last_fault_code,
         "faults": final.status.faults,
         "protective_stops": st.protective_stops if st is not None else None,
         "sim_refused": dict(st.refused) if st is not None else {},

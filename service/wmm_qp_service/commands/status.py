@@ -51,8 +51,11 @@ def run(args: argparse.Namespace) -> int:
           f"max {lp.tick_max_us:.0f} µs")
     rej = ", ".join(f"{k} {v}" for k, v in sorted(s.rejected.items())) or "none"
     print(f"rejected   {rej}")
-    print(f"last fault {s.last_fault or 'none'}"
+    last = f"{s.last_fault_code}: {s.last_fault}" if s.last_fault_code else s.last_fault
+    print(f"last fault {last or 'none'}"
           f"{'   RESUME NEEDED (send a mode)' if s.resume_needed else ''}")
+    if s.faults:
+        print(f"faults     {', '.join(f'{k} {v}' for k, v in sorted(s.faults.items()))}")
     lease = ("held" if s.lease_holder == s.lease else
              f"NOT HELD (the sim applies {s.lease_holder}'s commands)" if s.lease_holder else "not yet granted")
     print(f"lease      {lease}   sim instance {s.sim_instance or 'none'}   round trip {s.round_trip_ms:.1f} ms"

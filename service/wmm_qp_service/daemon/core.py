@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 import wmm_qp as w
+from wmm_qp.fault_codes import FaultCode
 from wmm_qp.scene import Scene, load_scene
 from wmm_qp.tasks import rotation_to_quat
 
@@ -35,7 +36,7 @@ from .inputs import CoreInputs
 from .obstacles import LiveObstacles
 from .setpoints import Setpoints
 from .state_gate import Latch, StateGate
-from .watchdog import FaultRecord, hazard, say, second_source
+from .watchdog import Fault, FaultRecord, hazard, say, second_source
 
 UNCONFIRMED = 1.0
 """[s] a stream whose first command no state has named applied for this long, while states come,
@@ -140,11 +141,12 @@ class ControlCore(CoreInputs):
             # recorded as it appears, whatever the daemon is doing (already in a safe stop, its
             # stream broken): the status names the second robot; the tick's hazard holds the stop
             if now - seen > self.svc.watchdog.state_timeout:
-                self._fault(second_source(self.gate))
+                self._fault(*second_source(self.gate))
             return False
         if latch is Latch.NEW:
             if self.gate.previous:
-                self._fault(f"sim instance changed ({self.gate.previous} -> {msg.instance}: a restarted sim)")
+                self._fault(FaultCode.ROBOT_INSTANCE_CHANGED,
+                            f"robot instance changed ({self.gate.previous} -> {msg.instance}: a restarted robot)")
             self.stream.new_robot(msg.cmd_seq)  # its last command is another daemon's (or none, -1)
             self.cmd = None  # and the last command was another robot's
             self.firmware_seen = -1
@@ -152,8 +154,8 @@ class ControlCore(CoreInputs):
             if any(msg.v_arm) or any(msg.wheel_speeds):
                 # it holds another daemon's last command until its timeout, then brakes: what it
                 # executes when a first command of this one's arrives is unknown until it rests
-                self.break_stream(f"the robot moves under commands that are not this daemon's (cmd_seq "
-                                  f"{msg.cmd_seq}): waiting for it to rest in its own stop")
+                self.break_stream(FaultCode.FOREIGN_COMMANDS, f"the robot moves under commands that are not this "
+                                  f"daemon's (cmd_seq {msg.cmd_seq}): waiting for it to rest in its own stop")
         if not self.gate.next_seq(msg.seq):
             return False
         self.stream.applied(msg)
@@ -165,40 +167,42 @@ class ControlCore(CoreInputs):
         self.lease_holder = msg.lease
         total = msg.protective_stops + msg.refused.get("firmware", 0)
         if 0 <= self.firmware_seen < total:  # the robot's own reports, not an evaluation's
-            self._event(f"robot firmware reported {total - self.firmware_seen} new protective stop(s) or "
-                        f"refused command(s) ({msg.protective_reason or 'no reason given'})", "robot firmware", now)
+            code = f"{msg.protective_code}: " if msg.protective_code else ""
+            self._event(Fault(FaultCode.ROBOT_FIRMWARE, f"robot firmware reported {total - self.firmware_seen} new "
+                              f"protective stop(s) or refused command(s) ({code}"
+                              f"{msg.protective_reason or 'no reason given'})"), now)
         self.firmware_seen = total
         self.protective = msg.protective_reason if msg.protective_stop else ""
         self.stream.observe(msg, now)
         return True
 
     # ------------------------------------------------------------------ faults
-    def _fault(self, what: str, kind: str | None = None) -> None:
+    def _fault(self, code: FaultCode, what: str) -> None:
         """Record a fault (and say it once on stderr when it is new).
 
         Args:
-            what: the fault, as the status shows it.
-            kind: its key in ``status.faults`` (default: ``what`` up to its first " (").
+            code: its stable code, the key in ``status.faults``.
+            what: its message, as the status's ``last_fault`` shows it.
         """
         if what != self.fault_record.last:
             st = self.state
             where = (f" [t={self.now - self.t0:.3f} s, mode {self.mode.value}, q_base "
                      f"{np.round(st.q_base, 4).tolist()}, q_arm {np.round(st.q_arm, 4).tolist()}]"
                      if st is not None else "")
-            self.say(f"wmm-qp serve: fault: {what}{where}")
-        self.fault_record.record(what, kind, self.now)
+            self.say(f"{self.who}: fault: {code}: {what}{where}")
+        self.fault_record.record(code, what, self.now)
 
-    def _event(self, what: str, kind: str, now: float) -> None:
+    def _event(self, fault: Fault, now: float) -> None:
         """A fault that happened once: a safe stop for ``state_timeout``, then (manual) a hold."""
-        self._fault(what, kind)
-        self.fault_record.hold(what, now + self.svc.watchdog.state_timeout)
+        self._fault(*fault)
+        self.fault_record.hold(fault, now + self.svc.watchdog.state_timeout)
 
-    def hazard(self, now: float) -> str | None:
+    def hazard(self, now: float) -> Fault | None:
         """The fault that forces a safe stop now, or None (:func:`~.watchdog.hazard`)."""
         return hazard(self.svc.watchdog, now, self.state_time, self.gate, self.protective,
                       self.stream.round_trip, self.fault_record)
 
-    def break_stream(self, why: str) -> None:
+    def break_stream(self, code: FaultCode, why: str) -> None:
         """The robot no longer follows this daemon's commands: it stopped itself (its timeout,
         a protective stop), or another daemon holds the lease.
 
@@ -207,7 +211,7 @@ class ControlCore(CoreInputs):
         nothing; then the stream starts again from the measured rates, in hold until a mode
         message resumes (``resume = "manual"``).
         """
-        self._fault(why)
+        self._fault(code, why)
         self.safe = True
         self.stream.break_off()
 
@@ -221,7 +225,7 @@ class ControlCore(CoreInputs):
         robot at rest having applied its first zero ends the braking: the stream goes on, in
         hold until a mode message resumes (``resume = "manual"``).
         """
-        self._fault(why)
+        self._fault(FaultCode.STALL_BRAKING, why)
         self.safe = True
         self.stream.stall(why)
 
@@ -256,10 +260,11 @@ class ControlCore(CoreInputs):
             return None
         if not stream.anchor_on_command:  # this tick's command starts a stream (the referee's baseline)
             stream.begin(now)
-        if (why := self.hazard(now) or stream.stalled or None) is not None:
+        fault = self.hazard(now) or (Fault(FaultCode.STALL_BRAKING, stream.stalled) if stream.stalled else None)
+        if fault is not None:
             if not stream.confirmed:
                 stream.began = now  # the wait for the robot's confirmation counts from the stop's end
-            cmd = self._safe_stop(why)
+            cmd = self._safe_stop(fault)
             if stream.stalled and not stream.rest_seq and not cmd.arm_rates.any() and not cmd.wheel_speeds.any():
                 stream.rest_seq = stream.seq + 1  # the braked stream's first command at rest
             if self.stages is not None:
@@ -271,10 +276,11 @@ class ControlCore(CoreInputs):
             # or the last of a safe stop since, braked from it)
             if now - stream.began > UNCONFIRMED and self.state_fresh and not stream.unconfirmed_said:
                 stream.unconfirmed_said = True
-                self._fault(f"the robot's states name none of this stream's commands as applied (cmd_seq "
+                self._fault(FaultCode.COMMANDS_NOT_APPLIED, f"the robot's states name none of this stream's "
+                            f"commands as applied (cmd_seq "
                             f"{self.state_msg.cmd_seq if self.state_msg is not None else -1}, the stream "
                             f"began at seq {stream.start}): the daemon repeats its first command; a driver "
-                            f"reports the last command it applied", "commands not applied")
+                            f"reports the last command it applied")
             stream.cmd_state_seq = -1
             self.state_fresh = False
             self.ee_error = math.nan
@@ -315,7 +321,7 @@ class ControlCore(CoreInputs):
             stages.lap(STEP)
         stream.anchor_on_command = True
         if cmd.status == w.Status.SAFE_STOP:
-            self._fault(f"controller: {cmd.reason}")
+            self._fault(FaultCode.CONTROLLER_FAILED, f"controller: {cmd.reason}")
             self.smoother.reset(cmd.x if np.isfinite(cmd.x).all() else x_d)
             if self.pose:
                 self._latch_orientation()
@@ -332,10 +338,11 @@ class ControlCore(CoreInputs):
                               f"a command: its commands may still reach the robot)")
         if not stream.broken and self.state_fresh and msg is not None and stream.left(msg):
             cause = f"protective stop: {msg.protective_reason}" if msg.protective_stop else "its command timeout"
-            self.break_stream(f"the robot stopped following the commands ({cause})")
+            self.break_stream(FaultCode.STREAM_BROKEN, f"the robot stopped following the commands ({cause})")
         if self.lease_taken:
             if not self.lease_lost:
-                self.break_stream(f"lease lost (the sim applies the commands of daemon {self.lease_holder})")
+                self.break_stream(FaultCode.LEASE_LOST,
+                                  f"lease lost (the robot applies the commands of daemon {self.lease_holder})")
                 self.lease_lost = True
             return False  # another daemon commands the robot: send nothing
         self.lease_lost = False
@@ -392,12 +399,12 @@ class ControlCore(CoreInputs):
         _, R = self.model.ee_pose(self.state.q_base, self.state.q_arm)
         self.orient.reset(rotation_to_quat(R))
 
-    def _safe_stop(self, why: str) -> w.Command:
+    def _safe_stop(self, fault: Fault) -> w.Command:
         """Brake at the acceleration limits from the last command while the robot follows the
         stream (the state is not trusted), else from the measured rates."""
         if not self.safe:
-            if why != self.fault_record.last:  # an event fault is recorded where it happened
-                self._fault(why)
+            if fault.message != self.fault_record.last:  # an event fault is recorded where it happened
+                self._fault(*fault)
             self.safe = True
         assert self.state is not None
         last = self.cmd if self.stream.anchor_on_command else None  # else the robot does not execute it
@@ -405,7 +412,7 @@ class ControlCore(CoreInputs):
             q_base=self.state.q_base, q_arm=self.state.q_arm,
             v_arm=last.arm_rates if last is not None else self.state.v_arm,
             wheel_speeds=last.wheel_speeds if last is not None else self.state.wheel_speeds)
-        cmd = self.ctl.safe_stop(base, why)
+        cmd = self.ctl.safe_stop(base, fault.message)
         self.cmd = cmd
         self.stream.anchor_on_command = True
         return cmd

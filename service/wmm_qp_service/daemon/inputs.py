@@ -16,6 +16,7 @@ import numpy as np
 
 import wmm_qp as w
 from wmm_qp.config import ShapeConfig
+from wmm_qp.fault_codes import FaultCode
 from wmm_qp.scene import Scene
 
 from ..protocol import ModeMsg, SetpointMsg, TruthMsg
@@ -47,8 +48,10 @@ class CoreInputs:
     state_time: float
     truth: TruthMsg | None
     say: Callable[[str], None]
+    who: str = "wmm-qp serve"
+    """The process the fault lines name (the embedded mode names its own)."""
 
-    def _fault(self, what: str, kind: str | None = None) -> None:
+    def _fault(self, code: FaultCode, what: str) -> None:
         raise NotImplementedError  # ControlCore records it
 
     def on_truth(self, msg: TruthMsg) -> None:
@@ -97,20 +100,20 @@ class CoreInputs:
         """A validated live obstacle set arrived: it replaces the previous live set, atomically
         (the controller sees it from the next tick on); the scene's obstacles stay."""
         if self.obstacles.update(shapes, now):
-            self.say(f"wmm-qp serve: live obstacles fresh again ({len(shapes)})")
+            self.say(f"{self.who}: live obstacles fresh again ({len(shapes)})")
         self.ctl.set_obstacles(self.scene.obstacles + shapes)
 
     def check_obstacles(self, now: float) -> None:
         """The live set goes stale after ``watchdog.obstacles_timeout`` without a message: it is
         kept (said once, and shown by the status)."""
         if self.obstacles.went_stale(now):
-            self.say(f"wmm-qp serve: live obstacles stale (none for {now - self.obstacles.time:.2f} s); "
+            self.say(f"{self.who}: live obstacles stale (none for {now - self.obstacles.time:.2f} s); "
                      f"the last set ({len(self.obstacles.shapes)}) is kept")
 
     def on_sim_alive(self, alive: bool) -> None:
         """The sim's liveliness token appeared or vanished."""
         if self.sim_alive and not alive:
-            self._fault("sim lost (liveliness)")
+            self._fault(FaultCode.ROBOT_LOST, "robot lost (liveliness)")
             self.state_time = -math.inf
             self.safe = self.state is not None  # the next ticks brake (see _safe_stop)
         self.sim_alive = alive

@@ -61,7 +61,7 @@ def status(core: ControlCore, loop: LoopTiming, rejected: Counter[str], accepted
         robot=core.svc.robot, stamp=time.time(), mode=core.mode.value,
         state_ok=core.state is not None and not core.safe, safe_stop=core.safe,
         controller_status=cmd.status.value if cmd else "", reason=cmd.reason if cmd else "",
-        last_fault=faults.last, fault_active=core.fault_active,
+        last_fault=faults.last, last_fault_code=faults.last_code, fault_active=core.fault_active,
         last_fault_age=core.now - faults.last_time if math.isfinite(faults.last_time) else math.nan,
         loop=loop.stats(), rejected=dict(rejected),
         accepted=accepted,

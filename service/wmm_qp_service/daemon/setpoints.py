@@ -17,6 +17,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from wmm_qp.fault_codes import FaultCode
 from wmm_qp.scene import Scene
 
 from ..config import WatchdogConfig
@@ -32,7 +33,7 @@ class Setpoints:
         z_floor: [m] targets stay above this height (the floor plus its margin).
         pose: the pose task (r = 6): setpoints' orientations are followed, else ignored and counted.
         refused: where refusals are counted (shared with the daemon's other checks).
-        fault: records a fault (``fault(what)``).
+        fault: records a fault (``fault(code, what)``).
 
     Attributes:
         operator: the source that holds the stream ("" before the first setpoint).
@@ -43,7 +44,7 @@ class Setpoints:
     """
 
     def __init__(self, wd: WatchdogConfig, scene: Scene, z_floor: float, pose: bool, refused: Counter[str],
-                 fault: Callable[[str], None]) -> None:
+                 fault: Callable[[FaultCode, str], None]) -> None:
         self.wd = wd
         self.scene = scene
         self.z_floor = z_floor
@@ -67,17 +68,18 @@ class Setpoints:
             if self.operator and now - self.operator_time < wd.operator_timeout:
                 self.refused["operator"] += 1
                 self.operator_conflicts += 1
-                self.fault(f"setpoint conflict (from {msg.source!r} refused: {self.operator!r} holds the stream)")
+                self.fault(FaultCode.SETPOINT_CONFLICT,
+                           f"setpoint conflict (from {msg.source!r} refused: {self.operator!r} holds the stream)")
                 return False
             self.operator, self.operator_stamp = msg.source, -math.inf
         if not msg.stamp > self.operator_stamp:
             if msg.stamp < self.operator_stamp - wd.setpoint_timeout:  # far behind: a new stream
-                self.fault(f"setpoint stamp jumped back (from {msg.source!r}: {msg.stamp!r} after "
-                           f"{self.operator_stamp!r}; taken as a restarted stream)")
+                self.fault(FaultCode.SETPOINT_STAMP_BACK, f"setpoint stamp jumped back (from {msg.source!r}: "
+                           f"{msg.stamp!r} after {self.operator_stamp!r}; taken as a restarted stream)")
             else:
                 self.refused["stamp"] += 1
-                self.fault(f"setpoint stamp not increasing (from {msg.source!r}: {msg.stamp!r} after "
-                           f"{self.operator_stamp!r})")
+                self.fault(FaultCode.SETPOINT_STAMP_STALE, f"setpoint stamp not increasing (from {msg.source!r}: "
+                           f"{msg.stamp!r} after {self.operator_stamp!r})")
                 return False
         self.operator_time, self.operator_stamp = now, msg.stamp
         self.time = now

@@ -10,9 +10,20 @@ import math
 import sys
 import threading
 from collections import Counter, deque
+from typing import NamedTuple
+
+from wmm_qp.fault_codes import FaultCode
 
 from ..config import WatchdogConfig
 from .state_gate import StateGate
+
+
+class Fault(NamedTuple):
+    """A fault: its stable code (the status's ``faults`` key) and its message (``last_fault``)."""
+
+    code: FaultCode
+    message: str
+
 
 ROUND_TRIPS = 50
 """States in the state-age window (each bounded by the time since the command it applied)."""
@@ -70,46 +81,49 @@ class FaultRecord:
     """The faults the daemon saw, as its status reports them.
 
     Attributes:
-        last: the last fault, as the status shows it ("" before any).
+        last: the last fault's message, as the status shows it ("" before any).
+        last_code: its code ("" before any; a note that is not a fault leaves it).
         last_time: [s] clock value when ``last`` was recorded (-inf: none).
-        counts: faults by kind (the status's ``faults``).
+        counts: faults by code (the status's ``faults``).
         event: a fault that happened once (not a condition): it holds the safe stop until
             ``event_until`` [s].
     """
 
     def __init__(self) -> None:
         self.last = ""
+        self.last_code = ""
         self.last_time = -math.inf
         self.counts: Counter[str] = Counter()
-        self.event = ""
+        self.event: Fault | None = None
         self.event_until = -math.inf
 
-    def record(self, what: str, kind: str | None, now: float) -> bool:
-        """Count fault ``what`` under ``kind`` (default: ``what`` up to its first " (") at ``now`` [s].
+    def record(self, code: FaultCode, what: str, now: float) -> bool:
+        """Count fault ``what`` under ``code`` at ``now`` [s].
 
         Returns:
             True when it differs from the last one (to be said once on stderr).
         """
         new = what != self.last
         self.last = what
+        self.last_code = code.value
         self.last_time = now
-        self.counts[kind or what.split(" (")[0]] += 1
+        self.counts[code.value] += 1
         return new
 
-    def hold(self, what: str, until: float) -> None:
-        """Event fault ``what`` holds the safe stop until ``until`` [s]."""
-        self.event = what
+    def hold(self, fault: Fault, until: float) -> None:
+        """Event ``fault`` holds the safe stop until ``until`` [s]."""
+        self.event = fault
         self.event_until = until
 
 
-def second_source(gate: StateGate) -> str:
+def second_source(gate: StateGate) -> Fault:
     """The fault of a second robot's states on the key (the gate's last foreign instance)."""
-    return (f"second state source (sim instance {gate.foreign} on the key besides the latched "
-            f"{gate.instance}: two robots under one id)")
+    return Fault(FaultCode.SECOND_STATE_SOURCE, f"second state source (robot instance {gate.foreign} on the key "
+                 f"besides the latched {gate.instance}: two robots under one id)")
 
 
 def hazard(wd: WatchdogConfig, now: float, state_time: float, gate: StateGate, protective: str,
-           round_trip: float, faults: FaultRecord) -> str | None:
+           round_trip: float, faults: FaultRecord) -> Fault | None:
     """The fault that forces a safe stop now, or None.
 
     Conditions, the first that holds named: a second sim instance on the key within
@@ -131,12 +145,12 @@ def hazard(wd: WatchdogConfig, now: float, state_time: float, gate: StateGate, p
     if now - gate.foreign_time <= wd.state_timeout:
         return second_source(gate)
     if now - state_time > wd.state_timeout:
-        return f"state stale (none valid for > {wd.state_timeout * 1e3:.0f} ms)"
+        return Fault(FaultCode.STATE_STALE, f"state stale (none valid for > {wd.state_timeout * 1e3:.0f} ms)")
     if protective:
-        return f"sim protective stop ({protective})"
+        return Fault(FaultCode.ROBOT_PROTECTIVE_STOP, f"robot protective stop ({protective})")
     if round_trip > wd.state_age_max:
-        return (f"state too old (median age bound {round_trip * 1e3:.1f} ms over {ROUND_TRIPS} "
-                f"states; bounds (13) allow {wd.state_age_max * 1e3:.1f} ms)")
-    if now < faults.event_until:
+        return Fault(FaultCode.STATE_TOO_OLD, f"state too old (median age bound {round_trip * 1e3:.1f} ms over "
+                     f"{ROUND_TRIPS} states; bounds (13) allow {wd.state_age_max * 1e3:.1f} ms)")
+    if now < faults.event_until and faults.event is not None:
         return faults.event
     return None

@@ -61,6 +61,7 @@ from wmm_qp_sim.lease_gate import LeaseGate
 from wmm_qp_sim.referee import Referee
 
 import wmm_qp as w
+from wmm_qp.fault_codes import FaultCode
 
 from ..config import ServiceConfig
 from ..keys import Keys
@@ -183,6 +184,7 @@ class FrankaDriver(LeaseGate):
         why = recover() if recover is not None else "no robot to recover"
         if why is not None:
             sh.reason = f"robot: {self.robot_error}; recovery refused: {why}"
+            sh.code = FaultCode.RECOVERY_REFUSED.value
             sh.stream = stream
             self.cmd_seq = seq
             self._recovery_refused_t = self.t
@@ -235,7 +237,7 @@ class FrankaDriver(LeaseGate):
     def fault(self, reason: str) -> None:
         """libfranka ended the motion (a reflex): a protective stop from rest until the robot
         recovers on a new stream (:meth:`on_command`)."""
-        self.shaper.reset(f"robot: {reason}")
+        self.shaper.reset(FaultCode.ROBOT_REFLEX, f"robot: {reason}")
         self.referee.break_stream(hard=False)  # the stopped stream's late commands: judged among themselves
         self.robot_error = reason
 
@@ -256,7 +258,7 @@ class FrankaDriver(LeaseGate):
             tau=tau.tolist(), gripper_width=gripper_width, stale_stop=sh.stale_stop,
             cmd_seq=self.cmd_seq, instance=self.instance, lease=self.holder,
             protective_stop=sh.protective_stop, protective_stops=sh.protective_stops,
-            protective_reason=sh.reason, refused=refused)
+            protective_reason=sh.reason, protective_code=sh.code, refused=refused)
 
     def truth_msg(self, force: np.ndarray) -> TruthMsg:
         """The referee's counts as ``sim/truth`` for the last state (no ground truth: NaN).

@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wmm_qp.config import ArmConfig, FloatArray
+from wmm_qp.fault_codes import FaultCode
 
 
 @dataclass(frozen=True)
@@ -94,6 +95,7 @@ class CommandShaper:
         self.protective_stop = False
         self.protective_stops = 0
         self.reason = ""  # why the last protective stop happened
+        self.code = ""  # its FaultCode
         self.refused = 0  # commands refused (past a limit, or during a protective stop)
         self.ended = 0  # of which: commands of the stream a stale or protective stop ended
         self.halted = False  # halt(): braking to rest for good, every command refused
@@ -135,19 +137,20 @@ class CommandShaper:
             return f"joint {i + 1} commanded at {rates[i]:.4g} rad/s, beyond its limit {self.lim.v_max[i]:.4g}"
         return None
 
-    def _protect(self, reason: str) -> None:
+    def _protect(self, code: FaultCode, reason: str) -> None:
         if not self.protective_stop:
             self.protective_stops += 1
         self.protective_stop = True
         self.reason = reason
+        self.code = code.value
         self.target = np.zeros_like(self.target)
 
-    def reset(self, reason: str) -> None:
+    def reset(self, code: FaultCode, reason: str) -> None:
         """The robot stopped the motion itself (a reflex): a new stream starts from rest, and
         the stop is reported as a protective stop (released by a new stream)."""
         self.v = np.zeros_like(self.v)
         self.a = np.zeros_like(self.a)
-        self._protect(reason)
+        self._protect(code, reason)
 
     def halt(self) -> None:
         """Brake to rest and refuse every command from now on (the driver is stopping)."""
@@ -180,7 +183,7 @@ class CommandShaper:
             self.refused += 1
             if not self.protective_stop or self.releases(stream):  # the stop is now its stream's
                 self.stream = stream  # (else the stream the stop ended stays the stopped one)
-            self._protect(bad)
+            self._protect(FaultCode.REFUSED_COMMAND, bad)
             return False
         if self.protective_stop:
             if not self.releases(stream):
@@ -196,8 +199,9 @@ class CommandShaper:
         if i >= 0:
             self.refused += 1
             self.stream = stream
-            self._protect(f"joint {i + 1} commanded at {rates[i]:.4g} rad/s from {q[i]:.4g} rad could not stop "
-                          f"before its limit [{self.lim.q_lo[i]:.4g}, {self.lim.q_hi[i]:.4g}]")
+            self._protect(FaultCode.CANNOT_STOP_BEFORE_LIMIT, f"joint {i + 1} commanded at {rates[i]:.4g} rad/s "
+                          f"from {q[i]:.4g} rad could not stop before its limit "
+                          f"[{self.lim.q_lo[i]:.4g}, {self.lim.q_hi[i]:.4g}]")
             return False
         self.target = rates.copy()
         self.t_cmd = t
@@ -238,8 +242,9 @@ class CommandShaper:
             self.target = np.zeros_like(self.target)
         v, a = self._track(self.target)
         if not self.protective_stop and (i := self._cannot_stop(q + v * self.dt, v, a)) >= 0:
-            self._protect(f"joint {i + 1} at {q[i]:.4g} rad moving at {v[i]:.4g} rad/s could no longer stop "
-                          f"before its limit [{self.lim.q_lo[i]:.4g}, {self.lim.q_hi[i]:.4g}]")
+            self._protect(FaultCode.CANNOT_STOP_BEFORE_LIMIT, f"joint {i + 1} at {q[i]:.4g} rad moving at "
+                          f"{v[i]:.4g} rad/s could no longer stop before its limit "
+                          f"[{self.lim.q_lo[i]:.4g}, {self.lim.q_hi[i]:.4g}]")
             v, a = self._track(self.target)
         self.v, self.a = v, a
         return v.copy()

@@ -313,6 +313,7 @@ class SimNode(LeaseGate):
             stale_stop=st.stale_stop, cmd_seq=self.cmd_seq,
             instance=self.instance, lease=self.holder, protective_stop=st.protective_stop,
             protective_stops=st.protective_stops, protective_reason=st.protective_reason,
+            protective_code=st.protective_code,
             refused=state_refused(self.refused, st))
 
     def truth_msg(self, st: SimState, seq: int) -> TruthMsg:

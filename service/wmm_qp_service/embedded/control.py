@@ -138,6 +138,7 @@ class EmbeddedControl:
         self.core = core = ControlCore(svc, ctl_cfg, robot, kind, scene)
         core.follow_state_age = True  # the robot's cycle is the clock: bounds (13) follow the measured age
         core.sim_alive = True  # the robot is this process
+        core.who = "wmm-qp embedded"  # its fault lines name the embedded controller, not a daemon
         lim = svc.validation
         self.v_state = Validator(StateMsg, svc.robot, lim, n_arm=robot.n_arm, n_wheels=robot.n_wheels)
         self.v_mode = Validator(ModeMsg, svc.robot, lim)

@@ -32,6 +32,8 @@ class StateMsg(Msg, tag="state", kw_only=True):
             could not stop before a limit), or holds it at rest until a new command stream.
         protective_stops: protective stops since the robot process started.
         protective_reason: why the last one started.
+        protective_code: its stable code (``refused_command``, ``cannot_stop_before_limit``,
+            ``robot_reflex``, ``recovery_refused``: :class:`wmm_qp.fault_codes.FaultCode`; "" = none yet).
         refused: commands not applied, by reason (``lease``, ``instance``, ``seq``, ``firmware``:
             the firmware's refusals, each a fault of the sender's; ``ended``: legal commands of
             a stream a stale or protective stop had ended; the FR3's ``recovering``: a new stream
@@ -54,6 +56,7 @@ class StateMsg(Msg, tag="state", kw_only=True):
     protective_stop: bool = False
     protective_stops: int = 0
     protective_reason: str = ""
+    protective_code: str = ""
     refused: dict[str, int] = msgspec.field(default_factory=dict)
 
 

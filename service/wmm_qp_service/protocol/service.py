@@ -101,8 +101,10 @@ class StatusMsg(Msg, tag="status"):
         state_ok: a fresh, valid state is arriving.
         safe_stop: the daemon is commanding a safe stop.
         controller_status, reason: of the last command.
-        last_fault: the last fault seen ("" = none), e.g. "state stale", "sim lost"; it stays
-            after the fault cleared: ``fault_active`` says whether one holds the robot now.
+        last_fault: the last fault's message ("" = none), e.g. "state stale (none valid for >
+            50 ms)"; it stays after the fault cleared: ``fault_active`` says whether one holds the
+            robot now. A note that is not a fault (a failed reply) may replace it.
+        last_fault_code: the last fault's code ("" = none), e.g. ``state_stale``, ``robot_lost``.
         fault_active: a fault holds the robot now (a safe stop, a broken command stream, a lost
             lease, a stream whose commands the robot's states have not named applied for 1 s), or
             ``resume_needed``: the robot does not follow setpoints until a client acts.
@@ -117,7 +119,8 @@ class StatusMsg(Msg, tag="status"):
             smoothed target.
         dm: directional manipulability along the active direction.
         sim_alive: the sim's liveliness token is present.
-        faults: faults seen since start, by kind.
+        faults: faults seen since start, by code (``state_stale``, ``stall_braking``, …:
+            :class:`wmm_qp.fault_codes.FaultCode`, docs/protocol.md "Fault codes").
         lease: this daemon's control lease id; ``lease_holder``: the holder the sim reports.
         sim_instance: the latched sim instance ("" = none yet).
         operator: the source holding the setpoint stream ("" = none).
@@ -150,6 +153,7 @@ class StatusMsg(Msg, tag="status"):
     controller_status: str = ""
     reason: str = ""
     last_fault: str = ""
+    last_fault_code: str = ""
     fault_active: bool = False
     last_fault_age: float = float("nan")
     loop: LoopStats = msgspec.field(default_factory=LoopStats)
