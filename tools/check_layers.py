@@ -1,6 +1,7 @@
-"""The layer rule of the four packages, checked on their source: ``python tools/check_layers.py``.
+"""The layer rule of the five packages, checked on their source: ``python tools/check_layers.py``.
 
-The layers, lowest first: ``wmm_qp`` (computation) ← ``wmm_qp_sim`` (the simulated robot) ←
+The layers, lowest first: ``wmm_qp`` (computation) ← ``wmm_qp_robot`` (the robot side every robot
+shares: hardware interface, referees, lease gate, shaper) ← ``wmm_qp_sim`` (the simulated robot) ←
 ``wmm_qp_service`` (processes, transport, the runtime's CLI) ← ``wmm_qp_tools`` (bench,
 experiments, drills, the contract kit); an arrow reads "may be imported by". A module may import
 its own package and the packages below it, never one above: so no cycle can close between the
@@ -35,6 +36,7 @@ from pathlib import Path
 
 LAYERS: tuple[tuple[str, str], ...] = (
     ("wmm_qp", "wmm_qp"),
+    ("wmm_qp_robot", "robot/wmm_qp_robot"),
     ("wmm_qp_sim", "sim/wmm_qp_sim"),
     ("wmm_qp_service", "service/wmm_qp_service"),
     ("wmm_qp_tools", "tools/wmm_qp_tools"),
@@ -43,6 +45,9 @@ LAYERS: tuple[tuple[str, str], ...] = (
 RANK = {name: i for i, (name, _) in enumerate(LAYERS)}
 EDGE_ONLY = {"zenoh": ("wmm_qp_service", "wmm_qp_tools")}
 """Third-party packages only the named layers (the service and the tools above it) may import."""
+NOT_THE_SIM = ("wmm_qp_service.drivers.", "wmm_qp_service.drivers.sim_node")
+"""A real robot's driver (a module under the prefix, but the sim's own node) never imports the sim:
+what it shares with the sim (referees, lease gate, shaper) is ``wmm_qp_robot``'s."""
 RULE = " ← ".join(name for name, _ in LAYERS)
 
 
@@ -106,7 +111,7 @@ def imports_of(tree: ast.AST, here: str, is_pkg: bool) -> Iterator[Import]:
 
 
 def breaches(root: Path) -> tuple[list[str], int, int]:
-    """Check every module of the four packages under ``root``.
+    """Check every module of the five packages under ``root``.
 
     Returns:
         the breaches (one line each, ``path:line: what``), the files read and the imports
@@ -133,6 +138,10 @@ def breaches(root: Path) -> tuple[list[str], int, int]:
                     if RANK[top] > RANK[pkg]:
                         out.append(f"{rel}:{imp.line}: {pkg} imports {top} ({imp.text!r}): a layer may import "
                                    f"only the ones below it ({RULE}; an arrow: may be imported by)")
+                if (top == "wmm_qp_sim" and here.startswith(NOT_THE_SIM[0])
+                        and not here.startswith(NOT_THE_SIM[1])):
+                    out.append(f"{rel}:{imp.line}: the driver {here} imports the sim ({imp.text!r}): a real robot's "
+                               "driver shares only wmm_qp_robot with it")
                 elif top in EDGE_ONLY and pkg not in EDGE_ONLY[top]:
                     out.append(f"{rel}:{imp.line}: {pkg} imports {top} ({imp.text!r}): transport stays at the "
                                f"edge, only {' and '.join(EDGE_ONLY[top])} may import {top}")

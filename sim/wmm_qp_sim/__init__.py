@@ -6,21 +6,22 @@ advance, read the measurements; :class:`KinematicPlant` by default) and reports 
 :class:`SimState` (odometry and ground truth, torques, the referee's violation counts). The
 physics plant, ``wmm_qp_sim.mujoco_plant.MujocoPlant``, needs ``mujoco`` (:func:`make_plant`).
 
-This package imports only ``wmm_qp`` and third-party packages (``tools/check_layers.py``); its
-Zenoh node, ``wmm-qp sim``, is a driver of the service layer (``wmm_qp_service.drivers.sim_node``).
+The firmware's shared parts — the referees, the lease gate, the command shaper — are every
+robot's, in ``wmm_qp_robot``; this package adds what only a simulated robot has (plants, slip,
+contact, the gripper). It imports only ``wmm_qp``, ``wmm_qp_robot`` and third-party packages
+(``tools/check_layers.py``); its Zenoh node, ``wmm-qp sim``, is a driver of the service layer
+(``wmm_qp_service.drivers.sim_node``).
 """
 
-from .config import BoxConfig, PhysicsConfig, RefereeConfig, SimConfig, SlipConfig, load_sim_config
+from .config import BoxConfig, PhysicsConfig, SimConfig, SlipConfig, load_sim_config
 from .contact import Box, ContactResult
 from .kinematic_plant import KinematicPlant
 from .plant import Plant, PlantState
 from .plants import PlantNotAvailable, available_plants, make_plant
-from .referee import VIOLATION_KINDS, Referee
 from .robot import SimCommand, SimRobot, SimState
 from .slip import SlipModel, integrate_pose
 
 __all__ = [
-    "VIOLATION_KINDS",
     "Box",
     "BoxConfig",
     "ContactResult",
@@ -29,8 +30,6 @@ __all__ = [
     "Plant",
     "PlantNotAvailable",
     "PlantState",
-    "Referee",
-    "RefereeConfig",
     "SimCommand",
     "SimConfig",
     "SimRobot",

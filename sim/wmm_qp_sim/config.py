@@ -10,6 +10,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from wmm_qp_robot.config import RefereeConfig
+
 from wmm_qp import default_config_dir
 from wmm_qp.config import TomlTable, read_toml
 from wmm_qp.exceptions import ConfigError
@@ -34,25 +36,6 @@ class SlipConfig:
     wheel_noise_std: float = 0.05
     wheel_noise_tau: float = 0.2
     yaw_drift_per_meter: float = 0.01
-
-
-@dataclass(frozen=True)
-class RefereeConfig:
-    """Tolerance of the limit referee: legal when ``|v| <= limit·(1 + rtol) + atol``.
-
-    Attributes:
-        rtol: [-] relative tolerance (numerical round-off of the controller's bounds).
-        atol: absolute tolerance, in the unit of the checked quantity ([rad], [rad/s]).
-        collision_distance: [m] a monitored pair (self, floor, obstacles) closer than this counts a
-            ``collision`` violation each step (the controller's dampers keep
-            ``collision.safety_distance``, 3 cm by default; 0 would count contact only).
-        collisions: check collisions every step (self, floor, obstacles: :mod:`.collision`).
-    """
-
-    rtol: float = 1e-9
-    atol: float = 1e-9
-    collision_distance: float = 0.01
-    collisions: bool = True
 
 
 @dataclass(frozen=True)

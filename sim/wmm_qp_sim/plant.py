@@ -1,6 +1,7 @@
-"""The plant: the simulated robot's hardware side, behind the firmware and the referees.
+"""The plant: the simulated robot's hardware, behind the firmware and the referees.
 
-The seam of ros2_control's hardware interface: the robot's firmware (:class:`~.robot.SimRobot`)
+A plant is a :class:`wmm_qp_robot.hardware.HardwareInterface` (the seam of ros2_control's
+hardware interface) with simulated time: the robot's firmware (:class:`~.robot.SimRobot`)
 ``write``\\ s the rates it wants the drives to follow, ``advance``\\ s the plant by one step and
 ``read``\\ s back what the hardware measured. A plant knows nothing of commands, streams, stops or
 limits to enforce; the firmware and the referees know nothing of how the motion is produced.
@@ -15,6 +16,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
+
+from wmm_qp_robot.hardware import HardwareInterface
 
 from wmm_qp.config import FloatArray
 
@@ -50,8 +53,8 @@ class PlantState:
     lagging_joint: int | None = None
 
 
-class Plant(Protocol):
-    """The hardware a :class:`~.robot.SimRobot` drives.
+class Plant(HardwareInterface, Protocol):
+    """The simulated hardware a :class:`~.robot.SimRobot` drives.
 
     Attributes:
         box: the push box (its face's world x, its config; a physics plant also its centre and

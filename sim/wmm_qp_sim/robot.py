@@ -32,19 +32,19 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
+from wmm_qp_robot.collision import CollisionReferee
+from wmm_qp_robot.referee import Referee
 
 import wmm_qp
 from wmm_qp.config import FloatArray
 from wmm_qp.fault_codes import FaultCode
 
-from .collision import CollisionReferee
 from .command import SimCommand
 from .config import BoxConfig, SimConfig
 from .contact import Box
 from .gripper import Gripper
 from .plant import Plant, PlantState
 from .plants import make_plant
-from .referee import Referee
 from .slip import integrate_pose
 from .state import SimState
 

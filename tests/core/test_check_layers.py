@@ -12,7 +12,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 TOOL = ROOT / "tools" / "check_layers.py"
-PACKAGES = ("wmm_qp", "sim/wmm_qp_sim", "service/wmm_qp_service", "tools/wmm_qp_tools")
+PACKAGES = ("wmm_qp", "robot/wmm_qp_robot", "sim/wmm_qp_sim", "service/wmm_qp_service", "tools/wmm_qp_tools")
 
 
 def check(root: Path) -> subprocess.CompletedProcess[str]:
@@ -22,7 +22,7 @@ def check(root: Path) -> subprocess.CompletedProcess[str]:
 
 @pytest.fixture(scope="module")
 def tree(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A copy of the four packages' sources (no caches), as the repository lays them out."""
+    """A copy of the five packages' sources (no caches), as the repository lays them out."""
     root = tmp_path_factory.mktemp("tree")
     for folder in PACKAGES:
         shutil.copytree(ROOT / folder, root / folder, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
@@ -53,6 +53,12 @@ def test_the_untouched_copy_passes(tree: Path) -> None:
     # by name at run time
     ("sim/wmm_qp_sim/_probe.py", "import importlib\n_d = importlib.import_module('wmm_qp_service.daemon')\n", 2,
      "wmm_qp_sim imports wmm_qp_service (\"importlib.import_module('wmm_qp_service.daemon')\")"),
+    # the robot side every robot shares imports the sim (a driver would load the sim through it)
+    ("robot/wmm_qp_robot/_probe.py", "from wmm_qp_sim.plant import Plant\n", 1,
+     "wmm_qp_robot imports wmm_qp_sim ('from wmm_qp_sim.plant import Plant')"),
+    # a real robot's driver imports the sim (it shares only wmm_qp_robot with it)
+    ("service/wmm_qp_service/drivers/_probe.py", "from wmm_qp_sim.robot import SimRobot\n", 1,
+     "the driver wmm_qp_service.drivers._probe imports the sim ('from wmm_qp_sim.robot import SimRobot')"),
     # the runtime imports a tool (a robot process would load the bench)
     ("service/wmm_qp_service/_probe.py", "from wmm_qp_tools.bench import run_bench\n", 1,
      "wmm_qp_service imports wmm_qp_tools ('from wmm_qp_tools.bench import run_bench')"),

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from wmm_qp_service.drivers.franka_stream import CommandShaper, StreamLimits
+from wmm_qp_robot.shaper import CommandShaper, StreamLimits
 
 DT = 1e-3
 # The FR3's published limits (configs/robots/fr3.toml), written out: the shaper is tested

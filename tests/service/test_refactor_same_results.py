@@ -70,7 +70,7 @@ def test_the_run_list_has_unique_names_placeholders_and_no_realtime_run() -> Non
 
 def test_this_tree_is_read_from_its_pyproject() -> None:
     tree = sr.Tree.load("--before", ROOT)
-    assert tree.pythonpath == (ROOT, ROOT / "sim", ROOT / "service", ROOT / "tools")
+    assert tree.pythonpath == (ROOT, ROOT / "robot", ROOT / "sim", ROOT / "service", ROOT / "tools")
     assert tree.entry == "wmm_qp_tools.cli:main"
     argv = tree.argv(RUN, "python")
     assert argv[:2] == ["python", "-c"] and argv[3:] == ["experiment", "circle", "--controller", "qp", "--json"]

@@ -1,4 +1,4 @@
-"""The sim referee's motion budget (``wmm_qp_sim.collision``) skips pair distances without
+"""The sim referee's motion budget (``wmm_qp_robot.collision``) skips pair distances without
 changing a single count: two sims stepped with the same commands, one with the budget and one
 computing every pair at every step, count the same collisions, by pair, at the same steps.
 

@@ -1,4 +1,4 @@
-"""The sim's independent limit referee (wmm_qp_sim.referee)."""
+"""The sim's independent limit referee (wmm_qp_robot.referee)."""
 
 from __future__ import annotations
 
@@ -168,8 +168,8 @@ def test_an_acceleration_violation_of_a_robot_without_wheels_is_counted() -> Non
     """A fixed base has empty wheel vectors: the event line's ratio must not reduce over them."""
     import dataclasses
 
-    from wmm_qp_sim.config import RefereeConfig
-    from wmm_qp_sim.referee import Referee
+    from wmm_qp_robot.config import RefereeConfig
+    from wmm_qp_robot.referee import Referee
 
     r = wmm_qp.load_robot_config()
     fixed = dataclasses.replace(r, base=dataclasses.replace(r.base, wheel_speed_max=np.zeros(0),

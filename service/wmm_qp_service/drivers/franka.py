@@ -8,7 +8,7 @@ holds the liveliness token ``alive/sim``, and obeys ``cmd`` from the lease holde
 to its instance, with increasing seq. Between the daemon's commands (500 Hz or 1 kHz, some late
 or lost) and the robot, the :class:`~.franka_stream.CommandShaper` makes the continuous,
 jerk-limited stream Franka's controller demands, brakes on stale commands and refuses commands
-past the limits (protective stop). The sim's referee (:mod:`wmm_qp_sim.referee`) judges every
+past the limits (protective stop). The sim's referee (:mod:`wmm_qp_robot.referee`) judges every
 command as received and the measured joint positions each cycle; its counts go out on
 ``sim/truth`` (:class:`~..protocol.TruthMsg`, every ``TRUTH_EVERY`` cycles), so ``violations``
 means what it means for the sim, and nothing on the control path depends on them.
@@ -56,9 +56,10 @@ from typing import Any
 
 import numpy as np
 import zenoh
-from wmm_qp_sim.config import RefereeConfig
-from wmm_qp_sim.lease_gate import LeaseGate
-from wmm_qp_sim.referee import Referee
+from wmm_qp_robot.config import RefereeConfig
+from wmm_qp_robot.lease_gate import LeaseGate
+from wmm_qp_robot.referee import Referee
+from wmm_qp_robot.shaper import CommandShaper, StreamLimits
 
 import wmm_qp as w
 from wmm_qp.fault_codes import FaultCode
@@ -70,7 +71,6 @@ from ..transport import ROLE_SIM, open_session
 from ..validation import Validator
 from .franka_hand import FrankaHand
 from .franka_link import FrankaLink
-from .franka_stream import CommandShaper, StreamLimits
 
 DT = 1e-3
 """[s] Franka's control cycle."""

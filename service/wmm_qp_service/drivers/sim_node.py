@@ -33,7 +33,7 @@ One robot, one controller:
 Drive model: like a real joint or wheel drive, the pure model ramps the executed rate towards
 the commanded one at the acceleration limit (``ramp``, on by default here); the referee judges
 every command as it was received, before the ramp and before the firmware's protective stop
-(:mod:`wmm_qp_sim.robot`, :mod:`wmm_qp_sim.referee`). ``ramp=False`` executes each command at once.
+(:mod:`wmm_qp_sim.robot`, :mod:`wmm_qp_robot.referee`). ``ramp=False`` executes each command at once.
 
 Fault injection (reliability tests, docs/reliability.md): ``state_loss`` drops each state
 publication with that probability (seeded), ``state_delay`` holds every state back for a
@@ -53,8 +53,8 @@ from typing import Any, Generic, TypeVar
 
 import numpy as np
 import zenoh
+from wmm_qp_robot.lease_gate import LeaseGate
 from wmm_qp_sim.config import BoxConfig, SimConfig
-from wmm_qp_sim.lease_gate import LeaseGate
 from wmm_qp_sim.robot import SimCommand, SimRobot, SimState
 
 import wmm_qp as w

@@ -7,7 +7,7 @@ joint's velocity, acceleration and jerk limits from the previous one, or it abor
 **target** and moves its output towards it, one cycle at a time, at most ``jerk_max·dt`` of
 acceleration change and ``acceleration_max·dt`` of velocity change per cycle (a jerk-limited
 velocity tracker, below). Pure: no libfranka, no clock, no transport — the driver
-(:mod:`.franka`) feeds it commands and the robot's cycles.
+(``wmm_qp_service.drivers.franka``) feeds it commands and the robot's cycles.
 
 Firmware duties, as the simulated robot's (``sim/wmm_qp_sim/robot.py``) and docs/protocol.md's:
 

@@ -1,4 +1,5 @@
-"""The sim's own limit referee: counts every limit violation, independently of the controller.
+"""Every robot's limit referee (the sim's, a driver's): counts every limit violation, independently
+of the controller.
 
 It deliberately does not use :mod:`wmm_qp.limits`: the limits come straight from the robot
 config and the checks are written out here. A value is legal when
@@ -6,7 +7,8 @@ config and the checks are written out here. A value is legal when
 
 The referee judges each **command as it was received** — before the robot's own protections
 (the firmware's refusal and protective stop, the drive's acceleration ramp, see
-:mod:`.robot`) act on it — and the **executed joint positions** after every step. Kinds and
+:class:`wmm_qp_sim.robot.SimRobot`, a driver) act on it — and the **executed joint positions** after
+every step. Kinds and
 what one count means:
 
 - ``position``: a (sim step, joint) pair whose executed angle is outside
