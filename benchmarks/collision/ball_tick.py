@@ -61,10 +61,10 @@ def main() -> None:
         c = None
         if cmd is not None:
             seq += 1
-            core.seq = seq
-            core.sent(seq, t)
+            core.stream.seq = seq
+            core.stream.sent(seq, t)
             c = SimCommand(cmd.wheel_speeds.copy(), cmd.arm_rates.copy(), period=PERIOD, seq=seq,
-                           stream=core.stream_start, sent=t, received=sim.t)
+                           stream=core.stream.start, sent=t, received=sim.t)
             applied = seq
         sim.step(c, DT)
         sim.step(None, DT)

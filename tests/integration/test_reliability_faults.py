@@ -78,7 +78,7 @@ def _core_run(loss: float, burst: tuple[int, int] | None, n: int = 1500) -> tupl
         if k == 0 or not lost:
             core.on_state(StateMsg(robot="wmm", seq=k + 1, stamp=t, t=t, q_base=q_base.tolist(),
                                    q_arm=q_arm.tolist(), v_arm=v_arm.tolist(), wheel_speeds=wheels.tolist(),
-                                   tau=[0.0] * robot.n_arm, instance="sim", cmd_seq=core.seq), t)
+                                   tau=[0.0] * robot.n_arm, instance="sim", cmd_seq=core.stream.seq), t)
         if k == 1:
             core.on_mode(ModeMsg(robot="wmm", seq=1, stamp=t, mode="track"))
         x = x0 + 0.05 * np.array([np.sin(2 * t), 1 - np.cos(2 * t), 0.0])
@@ -105,7 +105,7 @@ def _max_step(cmds: list[w.Command], dt: float) -> float:
 def test_five_percent_state_loss_never_trips_the_state_watchdog() -> None:
     core, cmds = _core_run(loss=0.05, burst=None)
     assert not any(c.status == w.Status.SAFE_STOP for c in cmds)
-    assert core.faults == {}
+    assert core.fault_record.counts == {}
     assert _max_step(cmds, core.dt) <= 1.0 + 1e-6  # the predicted state keeps the bounds exact
     assert np.abs(cmds[-1].v).max() > 1e-3  # still tracking the circle
 
@@ -116,7 +116,7 @@ def test_a_state_outage_longer_than_the_timeout_is_a_safe_stop_then_resumes() ->
     safe = [k for k, c in enumerate(cmds) if c.status == w.Status.SAFE_STOP]
     assert safe and 600 + timeout_ticks - 1 <= safe[0] <= 600 + timeout_ticks + 1
     assert safe[-1] < 600 + 3 * timeout_ticks + 2  # resumes as soon as states are back
-    assert core.faults["state_stale"] == 1
+    assert core.fault_record.counts["state_stale"] == 1
     assert _max_step(cmds, core.dt) <= 1.0 + 1e-6
 
 

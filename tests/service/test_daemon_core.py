@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from support.daemon_drive import DT, Plant, max_step_ratio, rotated, send, tick
 from wmm_qp_service.config import ServiceConfig
-from wmm_qp_service.daemon import ControlCore
+from wmm_qp_service.daemon import ControlCore, reports
 from wmm_qp_service.protocol import ModeMsg, SetpointMsg
 
 import wmm_qp as w
@@ -148,7 +148,7 @@ def test_info_names_the_joints_and_wheels(tmp_path, name: str) -> None:  # type:
 
     robot = w.load_robot_config() if name == "gen3_mecanum" else load_other(name, tmp_path)
     core, _ = make(robot)
-    info = decode(InfoMsg, encode(core.info(RateLoop(500.0, 0.0), Counter(), {})))
+    info = decode(InfoMsg, encode(reports.info(core, RateLoop(500.0, 0.0), Counter(), {})))
     assert info.joints == list(robot.arm.joints) and info.n_arm == robot.n_arm == len(info.joints)
     assert info.wheels == list(core.model.base.wheel_names) and info.n_wheels == robot.n_wheels
     assert info.base_kind == robot.base.kind and info.task == "position"
@@ -186,7 +186,7 @@ def test_pose_task_hold_latches_the_ee_orientation(robot: w.RobotConfig) -> None
 
     from wmm_qp_service.rate_loop import RateLoop
 
-    st = core.status(RateLoop(500.0, 0.0), Counter(), {})
+    st = reports.status(core, RateLoop(500.0, 0.0), Counter(), {})
     assert np.allclose(st.quat_d, q0)
 
 
@@ -208,7 +208,7 @@ def test_pose_task_reaches_a_streamed_orientation_and_hold_relatches(robot: w.Ro
     assert orientation_error(core, plant, target) < 1e-3
     assert np.linalg.norm(core.model.ee_position(plant.q_base, plant.q_arm) - x0) < 2e-3
     assert max_step_ratio(robot, cmds) <= 1.0 + 1e-6
-    assert core.orientation_ignored == 0
+    assert core.setpoints.orientation_ignored == 0
     # hold: the orientation target is the EE's own again (latched), not the streamed one
     core.on_mode(ModeMsg(robot="wmm", seq=1, stamp=0.0, mode="hold"))
     _, R = core.model.ee_pose(plant.q_base, plant.q_arm)
@@ -260,12 +260,12 @@ def test_position_task_ignores_a_setpoints_orientation_and_counts_it(robot: w.Ro
         t += DT
     assert core.ref.quat_d is None and np.allclose(core.ref.omega_d, 0.0)
     assert np.linalg.norm(core.model.ee_position(plant.q_base, plant.q_arm) - target) < 2e-3
-    assert core.orientation_ignored == 600
+    assert core.setpoints.orientation_ignored == 600
     from collections import Counter
 
     from wmm_qp_service.rate_loop import RateLoop
 
-    st = core.status(RateLoop(500.0, 0.0), Counter(), {})
+    st = reports.status(core, RateLoop(500.0, 0.0), Counter(), {})
     assert st.orientation_ignored == 600 and st.quat_d == []
 
 
@@ -277,13 +277,13 @@ def test_the_status_position_is_finite_during_a_safe_stop(robot: w.RobotConfig) 
     from wmm_qp_service.rate_loop import RateLoop
 
     core, plant = make(robot)
-    assert core.status(RateLoop(500.0, 0.0), Counter(), {}).x == []
+    assert reports.status(core, RateLoop(500.0, 0.0), Counter(), {}).x == []
     t, _ = run(core, plant, 0.0, 10)
     for _ in range(40):  # no state any more: safe stop
         cmd = core.tick(t)
         t += DT
     assert cmd is not None and cmd.status == w.Status.SAFE_STOP and not np.isfinite(cmd.x).all()
-    x = core.status(RateLoop(500.0, 0.0), Counter(), {}).x
+    x = reports.status(core, RateLoop(500.0, 0.0), Counter(), {}).x
     assert np.allclose(x, core.model.ee_position(plant.q_base, plant.q_arm))
 
 
@@ -296,17 +296,17 @@ def test_the_status_and_info_say_whether_the_collision_rows_are_on(robot: w.Robo
 
     core, plant = make(robot)
     run(core, plant, 0.0, 3)
-    st = core.status(RateLoop(500.0, 0.0), Counter(), {})
-    info = core.info(RateLoop(500.0, 0.0), Counter(), {})
+    st = reports.status(core, RateLoop(500.0, 0.0), Counter(), {})
+    info = reports.info(core, RateLoop(500.0, 0.0), Counter(), {})
     assert st.collision is True and info.collision is True
     assert st.collision_summary.startswith("collision rows on") and "fence" in st.collision_summary
     assert info.collision_summary == st.collision_summary
     assert st.collision_pair != "" and math.isfinite(st.collision_distance)
     off, plant = make(robot, w.load_controller_config().with_(collision={"enabled": False}))
     run(off, plant, 0.0, 3)
-    st = off.status(RateLoop(500.0, 0.0), Counter(), {})
+    st = reports.status(off, RateLoop(500.0, 0.0), Counter(), {})
     assert st.collision is False and st.collision_summary == "no collision rows"
-    assert off.info(RateLoop(500.0, 0.0), Counter(), {}).collision is False
+    assert reports.info(off, RateLoop(500.0, 0.0), Counter(), {}).collision is False
 
 
 def test_a_robot_whose_states_never_name_a_command_applied_is_said_once(robot: w.RobotConfig) -> None:
@@ -323,10 +323,10 @@ def test_a_robot_whose_states_never_name_a_command_applied_is_said_once(robot: w
         cmds.append(tick(core, plant, t))
         t += DT
     assert all(c is cmds[0] for c in cmds)  # the first command, again and again
-    assert core.faults["commands_not_applied"] == 1
-    assert "cmd_seq -1" in core.last_fault
+    assert core.fault_record.counts["commands_not_applied"] == 1
+    assert "cmd_seq -1" in core.fault_record.last
     assert core.fault_active  # the status says the robot is held, not tracking
-    core.on_state(plant.msg(cmd_seq=core.seq), t)  # a state names the stream's command at last
+    core.on_state(plant.msg(cmd_seq=core.stream.seq), t)  # a state names the stream's command at last
     tick(core, plant, t + DT)
     assert core.stream.confirmed and not core.fault_active
 

@@ -74,7 +74,7 @@ def run(core: ControlCore, plant: Plant, link: MemoryLink, clock: Clock, cycle: 
 def test_each_state_in_gives_one_addressed_numbered_command_out(robot: w.RobotConfig) -> None:
     core, plant, link, clock, cycle = make(robot)
     run(core, plant, link, clock, cycle, 64)
-    assert [m.seq for m in link.sent] == list(range(1, 65)) and core.seq == 64
+    assert [m.seq for m in link.sent] == list(range(1, 65)) and core.stream.seq == 64
     assert [m.state_seq for m in link.sent] == list(range(1, 65))  # each from the state just taken
     assert {(m.robot, m.lease, m.instance, m.stream, m.period) for m in link.sent} == {
         ("wmm", core.lease, "sim-A", 1, DT)}
@@ -82,7 +82,7 @@ def test_each_state_in_gives_one_addressed_numbered_command_out(robot: w.RobotCo
     assert cycle.state_rx == pytest.approx(WALL0 + 63 * DT)  # the last state's receipt (telemetry)
     # the send bookkeeping feeds the state-age window: each state applied the command sent one
     # period before it arrived
-    assert core.round_trip == pytest.approx(DT)
+    assert core.stream.round_trip == pytest.approx(DT)
     assert np.allclose(link.sent[-1].arm_rates, plant.v_arm)
 
 
@@ -108,8 +108,8 @@ def test_a_command_its_own_tick_made_late_is_not_sent_and_the_stream_is_braked_f
     now = clock.t
     clock.t = now + 1.0  # the tick took a second: the robot stopped by itself meanwhile
     assert cycle.command(now) is None
-    assert len(link.sent) == 50 and core.seq == 50 and not core.stream_broken
-    assert core.last_fault.startswith("braking stream after a stall (the tick took 1000 ms")
+    assert len(link.sent) == 50 and core.stream.seq == 50 and not core.stream.broken
+    assert core.fault_record.last.startswith("braking stream after a stall (the tick took 1000 ms")
     sent = cycle.command(clock.t)
     assert sent is not None and link.sent[-1].stream == last.stream and sent.seq == 51
     a = np.asarray(robot.arm.acceleration_max) * DT

@@ -53,7 +53,7 @@ def test_a_second_sim_instance_is_a_fault_not_mixed(robot: w.RobotConfig) -> Non
         core.on_state(plant.msg(), t)
         tick(core, plant, t)
         t += DT
-    assert core.instance == "sim-A" and not core.safe
+    assert core.gate.instance == "sim-A" and not core.safe
     used = []
     for k in range(100):  # both sims publish on the key, interleaved
         src = plant if k % 2 else other
@@ -74,7 +74,7 @@ def test_a_second_sim_instance_is_a_fault_not_mixed(robot: w.RobotConfig) -> Non
         tick(core, plant, t)
         t += DT
     assert not core.safe and not core.resume_needed and core.mode == w.Mode.HOLD
-    assert core.faults["second_state_source"] >= 1  # reported all the same
+    assert core.fault_record.counts["second_state_source"] >= 1  # reported all the same
 
 
 def test_a_second_source_is_reported_even_while_the_daemon_is_already_in_a_safe_stop(
@@ -96,7 +96,7 @@ def test_a_second_source_is_reported_even_while_the_daemon_is_already_in_a_safe_
         core.on_state(plant.msg(protective_stop=True, protective_reason="bumper"), t)
         cmd = tick(core, plant, t)
         t += DT
-    assert core.safe and "second_state_source" not in core.faults, core.faults
+    assert core.safe and "second_state_source" not in core.fault_record.counts, core.fault_record.counts
     for k in range(40):  # and now another robot publishes on the key too
         if k % 2:
             core.on_state(plant.msg(protective_stop=True, protective_reason="bumper"), t)
@@ -105,7 +105,7 @@ def test_a_second_source_is_reported_even_while_the_daemon_is_already_in_a_safe_
         cmd = tick(core, plant, t)
         t += DT
     assert cmd.status == w.Status.SAFE_STOP
-    assert core.faults["second_state_source"] == 1  # once, as it appeared
+    assert core.fault_record.counts["second_state_source"] == 1  # once, as it appeared
 
 
 def test_a_restarted_sim_is_latched_after_the_old_one_fell_silent(robot: w.RobotConfig) -> None:
@@ -118,7 +118,7 @@ def test_a_restarted_sim_is_latched_after_the_old_one_fell_silent(robot: w.Robot
     t += 2 * core.svc.watchdog.state_timeout  # the old sim is gone
     plant.instance, plant.seq = "sim-C", 0
     assert core.on_state(plant.msg(), t)
-    assert core.instance == "sim-C" and core.fault_record.last_code == "robot_instance_changed"
+    assert core.gate.instance == "sim-C" and core.fault_record.last_code == "robot_instance_changed"
 
 
 def test_a_state_whose_seq_does_not_increase_is_refused(robot: w.RobotConfig) -> None:
@@ -145,8 +145,8 @@ def test_rising_firmware_counts_are_a_fault(robot: w.RobotConfig) -> None:
     core.on_state(plant.msg(), t)
     cmd = tick(core, plant, t)
     assert cmd.status == w.Status.SAFE_STOP and core.safe
-    assert "robot firmware reported 3 new protective stop(s) or refused command(s)" in core.last_fault
-    assert core.faults["robot_firmware"] == 1
+    assert "robot firmware reported 3 new protective stop(s) or refused command(s)" in core.fault_record.last
+    assert core.fault_record.counts["robot_firmware"] == 1
 
 
 def test_the_daemon_ignores_the_truth_on_the_control_path(robot: w.RobotConfig) -> None:
@@ -161,7 +161,7 @@ def test_the_daemon_ignores_the_truth_on_the_control_path(robot: w.RobotConfig) 
                                ee_true=x, contact_force=[0.0] * 3, violations={"velocity": 3 * k}))
         tick(core, plant, t)
         t += DT
-    assert not core.safe and not core.faults
+    assert not core.safe and not core.fault_record.counts
     assert core.truth is not None and core.truth.violations == {"velocity": 12}
     core.on_truth(TruthMsg(robot="wmm", t=t, instance="another", state_seq=1, base_true=[0.0] * 3,
                            ee_true=x, contact_force=[0.0] * 3))
@@ -180,13 +180,13 @@ def test_a_protective_stop_of_the_sim_breaks_the_stream(robot: w.RobotConfig) ->
     plant.v_arm = 0.5 * plant.v_arm  # braking by itself
     core.on_state(plant.msg(protective_stop=True, protective_reason="refused command: joint 4"), t)
     assert core.tick(t) is None
-    assert core.last_fault.startswith("the robot stopped following the commands (protective stop: refused")
+    assert core.fault_record.last.startswith("the robot stopped following the commands (protective stop: refused")
     plant.v_arm, plant.wheels = np.zeros(robot.n_arm), np.zeros(robot.n_wheels)
     t += DT
     core.on_state(plant.msg(protective_stop=True, protective_reason="refused command: joint 4"), t)
-    before = core.stream_start
+    before = core.stream.start
     cmd = tick(core, plant, t)
-    assert core.stream_start == core.seq > before  # a new stream: judged against the robot's rates
+    assert core.stream.start == core.stream.seq > before  # a new stream: judged against the robot's rates
     a = np.asarray(robot.arm.acceleration_max) * DT
     assert np.all(np.abs(cmd.arm_rates) <= a * (1 + 1e-9))  # from rest
     t += DT
@@ -208,7 +208,7 @@ def test_commands_lost_long_enough_for_the_robots_timeout_break_the_stream(robot
         core.on_setpoint(setpoint(x0 + np.array([0.2, 0.0, 0.0]), t), t)
         assert core.tick(t) is None
         t += DT
-    assert "its command timeout" in core.last_fault
+    assert "its command timeout" in core.fault_record.last
     plant.v_arm, plant.wheels = np.zeros(robot.n_arm), np.zeros(robot.n_wheels)
     for _ in range(300):
         core.on_state(plant.msg(stale_stop=plant.cmd_seq == applied, cmd_seq=plant.cmd_seq), t)
@@ -230,7 +230,7 @@ def test_a_lost_lease_sends_nothing_and_taking_it_back_needs_a_resume(robot: w.R
         core.on_state(plant.msg(lease="other-daemon"), t)
         assert core.tick(t) is None
         t += DT
-    assert core.last_fault.startswith("lease lost (the robot applies the commands of daemon other-daemon")
+    assert core.fault_record.last.startswith("lease lost (the robot applies the commands of daemon other-daemon")
     # the other one ends; the robot stopped in its stale stop; the lease is ours again
     core.on_state(plant.msg(lease="core", stale_stop=True), t)
     tick(core, plant, t)
@@ -251,9 +251,9 @@ def test_after_a_twin_was_seen_no_other_instance_is_latched(robot: w.RobotConfig
         t += DT
         assert not core.on_state(twin.msg(), t)
         if core.tick(t) is not None:
-            core.seq += 1
-            core.sent(core.seq, t)
-    assert core.instance == "sim-A" and core.safe and core.faults["second_state_source"] >= 1
+            core.stream.numbered()
+            core.stream.sent(core.stream.seq, t)
+    assert core.gate.instance == "sim-A" and core.safe and core.fault_record.counts["second_state_source"] >= 1
 
 
 # ---------------------------------------------------------------- 5. one operator per stream
@@ -273,11 +273,11 @@ def test_a_second_operator_is_refused_and_counted(robot: w.RobotConfig) -> None:
             break
     x = core.model.ee_position(plant.q_base, plant.q_arm)
     assert np.linalg.norm(x - a) < 2e-3  # alice's target, never swung towards bob's
-    assert core.refused["operator"] == 400 and core.operator_conflicts == 400
-    assert core.operator == "alice" and core.fault_record.last_code == "setpoint_conflict"
+    assert core.refused["operator"] == 400 and core.setpoints.operator_conflicts == 400
+    assert core.setpoints.operator == "alice" and core.fault_record.last_code == "setpoint_conflict"
     # alice stops; after operator_timeout bob may take the stream
     t += core.svc.watchdog.operator_timeout
-    assert core.on_setpoint(setpoint(b, t, "bob"), t) and core.operator == "bob"
+    assert core.on_setpoint(setpoint(b, t, "bob"), t) and core.setpoints.operator == "bob"
 
 
 # ---------------------------------------------------------------- 11. frozen setpoint stamps
@@ -293,7 +293,7 @@ def test_a_frozen_setpoint_stamp_is_refused_and_reported(robot: w.RobotConfig) -
         tick(core, plant, t)
         t += DT
     assert accepted == 1 and core.refused["stamp"] == 249
-    assert "setpoint stamp not increasing" in core.last_fault
+    assert "setpoint stamp not increasing" in core.fault_record.last
 
 
 # ---------------------------------------------------------------- 7. the acceleration anchor
@@ -337,7 +337,7 @@ def test_a_constant_state_delay_is_a_fault(robot: w.RobotConfig) -> None:
         core.on_state(hist[0], t)
         tick(core, plant, t)
         t += DT
-    assert core.round_trip == pytest.approx(11 * DT)
+    assert core.stream.round_trip == pytest.approx(11 * DT)
     assert core.safe and core.fault_record.last_code == "state_too_old"
 
 
@@ -368,7 +368,7 @@ def test_a_prompt_state_is_no_fault(robot: w.RobotConfig) -> None:
         core.on_state(plant.msg(), t)  # the state after the last command, one tick later
         tick(core, plant, t)
         t += DT
-    assert core.round_trip == pytest.approx(DT) and not core.safe and not core.last_fault
+    assert core.stream.round_trip == pytest.approx(DT) and not core.safe and not core.fault_record.last
 
 
 # ---------------------------------------------------------------- 15. resuming is an explicit act
@@ -497,14 +497,14 @@ def test_the_robots_own_stop_after_a_stall_is_no_state_age_for_the_next_stream(r
             plant.v_arm, plant.wheels = np.zeros(robot.n_arm), np.zeros(robot.n_wheels)
         core.on_state(plant.msg(stale_stop=True), t)
         assert core.tick(t) is None or k == 149
-    assert not core.stream_broken  # at rest: the new stream began
-    assert core.hazard(t) is None and not core.round_trip <= math.inf  # an empty window: no age yet
+    assert not core.stream.broken  # at rest: the new stream began
+    assert core.hazard(t) is None and not core.stream.round_trip <= math.inf  # an empty window: no age yet
     for _ in range(60):
         t += DT
         core.on_state(plant.msg(), t)
         tick(core, plant, t)
         assert not core.safe
-    assert "state_too_old" not in core.faults and core.round_trip < 0.01
+    assert "state_too_old" not in core.fault_record.counts and core.stream.round_trip < 0.01
 
 
 def test_after_its_own_stall_the_daemon_waits_for_the_robots_stop(robot: w.RobotConfig) -> None:
@@ -517,32 +517,32 @@ def test_after_its_own_stall_the_daemon_waits_for_the_robots_stop(robot: w.Robot
     mode(core, "track")
     t = track(core, plant, 0.0, 200, x0 + np.array([0.2, 0.0, 0.0]))
     assert core.cmd is not None and np.abs(core.cmd.v).max() > 0.05  # moving
-    last, start = core.cmd, core.stream_start
+    last, start = core.cmd, core.stream.start
     t += 0.2  # stalled for 200 ms
     core.on_state(plant.msg(), t)  # an old state, from before the stall, arrives first
     cmd = core.tick(t)
-    assert cmd is not None and cmd.status == w.Status.SAFE_STOP and core.stream_start == start
-    assert core.last_fault.startswith("braking stream after a stall (202 ms without a command")
+    assert cmd is not None and cmd.status == w.Status.SAFE_STOP and core.stream.start == start
+    assert core.fault_record.last.startswith("braking stream after a stall (202 ms without a command")
     assert max_step_ratio(robot, [last, cmd]) <= 1.0 + 1e-6  # braking the stream from its last command
-    core.seq += 1
-    core.sent(core.seq, t)
-    plant.cmd_seq = core.seq  # received, and refused: the robot's stop ended the stream
+    core.stream.numbered()
+    core.stream.sent(core.stream.seq, t)
+    plant.cmd_seq = core.stream.seq  # received, and refused: the robot's stop ended the stream
     # the robot is braking itself; its state says so, but it is not at rest yet: nothing
     plant.v_arm, plant.wheels = 0.5 * plant.v_arm, 0.5 * plant.wheels
     core.on_state(plant.msg(stale_stop=True), t + DT)
-    assert core.tick(t + DT) is None and core.stream_broken
+    assert core.tick(t + DT) is None and core.stream.broken
     plant.v_arm, plant.wheels = np.zeros(robot.n_arm), np.zeros(robot.n_wheels)  # at rest
     t += 2 * DT
     core.on_state(plant.msg(stale_stop=True), t)
     cmd = core.tick(t)
-    assert cmd is not None and not core.stream_broken
-    assert not core.late(t + 1.0)  # the new stream is not late by the old one's clock (it is published)
+    assert cmd is not None and not core.stream.broken
+    assert not core.stream.late(t + 1.0)  # the new stream is not late by the old one's clock (it is published)
     old_seq = plant.cmd_seq - 1  # states that still show the old stream's last command
     for _ in range(60):
         t += DT
         core.on_state(plant.msg(cmd_seq=old_seq), t)
         core.tick(t)
-    assert "state_too_old" not in core.faults  # their age bound says nothing about this stream
+    assert "state_too_old" not in core.fault_record.counts  # their age bound says nothing about this stream
     a = np.asarray(robot.arm.acceleration_max) * DT
     assert np.all(np.abs(cmd.arm_rates) <= a * (1 + 1e-9))  # from rest, inside A·dt
     assert np.all(np.abs(cmd.wheel_speeds) <= robot.base.wheel_acceleration_max * DT * (1 + 1e-9))
@@ -562,13 +562,13 @@ def test_a_lease_lost_while_braking_after_a_stall_sends_nothing(robot: w.RobotCo
     assert core.fault_record.last_code == "stall_braking" and core.stream.stalled
     t += DT
     core.on_state(plant.msg(lease="other-daemon"), t)
-    assert core.tick(t) is None and core.stream_broken and not core.stream.stalled
+    assert core.tick(t) is None and core.stream.broken and not core.stream.stalled
     assert core.fault_record.last_code == "lease_lost"
     plant.v_arm, plant.wheels = np.zeros(robot.n_arm), np.zeros(robot.n_wheels)
     t += DT
     core.on_state(plant.msg(lease="core", stale_stop=True), t)  # ours again, the robot at rest in its stop
-    start = core.stream_start
+    start = core.stream.start
     cmd = tick(core, plant, t)
     a = np.asarray(robot.arm.acceleration_max) * DT
-    assert core.stream_start == core.seq > start and np.all(np.abs(cmd.arm_rates) <= a * (1 + 1e-9))  # from rest
+    assert core.stream.start == core.stream.seq > start and np.all(np.abs(cmd.arm_rates) <= a * (1 + 1e-9))  # from rest
     assert core.mode == w.Mode.HOLD and core.resume_needed

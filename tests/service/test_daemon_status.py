@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from support.daemon_drive import DT, Plant, mode, setpoint, tick
 from wmm_qp_service.config import ServiceConfig
-from wmm_qp_service.daemon import ControlCore
+from wmm_qp_service.daemon import ControlCore, reports
 from wmm_qp_service.protocol import SetpointMsg, StatusMsg
 from wmm_qp_service.rate_loop import RateLoop
 
@@ -32,7 +32,7 @@ def make(robot: w.RobotConfig, ctl: w.ControllerConfig | None = None) -> tuple[C
 
 
 def status(core: ControlCore) -> StatusMsg:
-    return core.status(RateLoop(500.0, 0.0), Counter(), {})
+    return reports.status(core, RateLoop(500.0, 0.0), Counter(), {})
 
 
 # ---------------------------------------------------------------- start-up
@@ -51,12 +51,12 @@ def test_a_starting_daemon_reports_no_fault_before_any_client(robot: w.RobotConf
         ours = applied != (-1 if earlier is None else earlier)
         core.on_state(plant.msg(stale_stop=not ours, cmd_seq=applied), t)
         cmd = core.tick(t)
-        assert cmd is not None, core.last_fault
-        core.seq += 1
-        core.sent(core.seq, t)
+        assert cmd is not None, core.fault_record.last
+        core.stream.numbered()
+        core.stream.sent(core.stream.seq, t)
         if k >= 10:  # the robot applies this daemon's commands from now on
             plant.apply(cmd)
-            applied = core.seq
+            applied = core.stream.seq
         t += DT
     st = status(core)
     assert (st.mode, st.last_fault, st.fault_active, st.resume_needed) == ("hold", "", False, False)
@@ -64,8 +64,8 @@ def test_a_starting_daemon_reports_no_fault_before_any_client(robot: w.RobotConf
     # the marker of the earlier daemon's seq is gone: a stop of this stream is still seen
     core.on_state(plant.msg(stale_stop=True, cmd_seq=applied), t)
     core.tick(t)  # (at rest already: the stream starts again at once, in hold: nothing to resume)
-    assert "its command timeout" in core.last_fault
-    assert core.faults["stream_broken"] == 1 and not status(core).fault_active
+    assert "its command timeout" in core.fault_record.last
+    assert core.fault_record.counts["stream_broken"] == 1 and not status(core).fault_active
 
 
 # ---------------------------------------------------------------- fault_active and the fault's age
@@ -82,7 +82,7 @@ def test_fault_active_while_a_fault_holds_and_the_age_of_a_cleared_one(robot: w.
     t_fault = None
     for _ in range(100):  # the sim hangs: no state, a safe stop
         tick(core, plant, t)
-        if t_fault is None and core.last_fault:
+        if t_fault is None and core.fault_record.last:
             t_fault = t
         t += DT
     st = status(core)
@@ -177,7 +177,7 @@ def test_a_fault_while_holding_clears_without_a_resume_a_fault_in_a_task_needs_o
         for _ in range(60):  # no state for 120 ms: state stale, a safe stop
             tick(core, plant, t)
             t += DT
-        assert core.safe and core.faults["state_stale"] == 1
+        assert core.safe and core.fault_record.counts["state_stale"] == 1
         for _ in range(50):
             core.on_state(plant.msg(), t)
             tick(core, plant, t)

@@ -17,6 +17,7 @@ import pytest
 from support.clocks import Clock
 from support.controllers import OverLimitOnce
 from wmm_qp_service.config import ServiceConfig
+from wmm_qp_service.daemon import reports
 from wmm_qp_service.embedded import EmbeddedControl, SlackCollector, decimation
 from wmm_qp_service.embedded.sim import EmbeddedSim
 from wmm_qp_service.protocol import CommandMsg, ModeMsg, SetpointMsg, StateMsg, encode
@@ -135,8 +136,8 @@ def test_the_command_from_state_k_is_applied_at_step_k_plus_1_in_memory(host: An
     assert {c.instance for c in rec.commands} == {emb.node.instance}
     # the round trip is one period, measured: bounds (13) follow it (the robot's timeout + the age)
     core = emb.control.core
-    assert core.round_trip == pytest.approx(1e-3, abs=1e-6)
-    assert core.latency == pytest.approx(core.stream.command_timeout + 1e-3, abs=1e-5)
+    assert core.stream.round_trip == pytest.approx(1e-3, abs=1e-6)
+    assert core.stream.latency == pytest.approx(core.stream.command_timeout + 1e-3, abs=1e-5)
     assert emb.control.timing.ticks == emb.cycles and emb.control.timing.deadline_misses == 0
 
 
@@ -171,8 +172,8 @@ def test_a_tick_that_overruns_breaks_the_stream_and_the_robot_brakes_by_itself(h
     assert moving > 0.1  # the robot moves
     sent, n0 = len(rec.commands), len(rec.states)
     cycles(emb, clk, 30, rec)  # the slow tick is among these
-    assert dict(core.faults) == {"stall_braking": 1, "stream_broken": 1}
-    assert core.last_fault == "the robot stopped following the commands (its command timeout)"
+    assert dict(core.fault_record.counts) == {"stall_braking": 1, "stream_broken": 1}
+    assert core.fault_record.last == "the robot stopped following the commands (its command timeout)"
     assert emb.control.timing.deadline_misses == 1 and emb.node.caught_up >= 59  # the missed steps ran
     after = rec.states[n0:]
     stale = [s for s in after if s.stale_stop]
@@ -202,7 +203,7 @@ def test_a_slow_tick_inside_the_robots_timeout_is_sent_late_and_judged_legal(hos
     core = emb.control.core
     core.ctl = SlowOnce(core.ctl, clk, 300, 0.012)  # type: ignore[assignment]
     st = tracking(emb, clk, (0.15, 0.05, 0.0), 600)
-    assert "stream_broken" not in core.faults and not core.stream_broken
+    assert "stream_broken" not in core.fault_record.counts and not core.stream.broken
     assert emb.control.timing.deadline_misses >= 1 and emb.node.caught_up >= 10
     assert not st.stale_stop and violations(st) == 0, st.violations
 
@@ -226,7 +227,7 @@ def test_commands_applied_late_are_a_state_age_fault(host: Any) -> None:
     mode(emb, clk, "track")
     core = emb.control.core
     st = cycles(emb, clk, 300, each=release)
-    assert core.faults["state_too_old"] >= 1 and core.round_trip > 0.010
+    assert core.fault_record.counts["state_too_old"] >= 1 and core.stream.round_trip > 0.010
     assert violations(st) == 0, st.violations
 
 
@@ -240,7 +241,7 @@ def test_the_referee_judges_the_command_as_received_before_the_firmware_refuses_
     assert st.violations["velocity"] == 1  # the referee saw the command as it was received
     assert st.protective_stops == 1 and "refused command: joint 1" in st.protective_reason  # the firmware refused it
     assert not np.abs(st.v_arm[0]) > robot.arm.velocity_max[0]  # never executed
-    assert core.faults["robot_firmware"] >= 1  # the core saw the robot's report: a fault
+    assert core.fault_record.counts["robot_firmware"] >= 1  # the core saw the robot's report: a fault
 
 
 def test_a_state_the_robot_reports_with_nan_is_refused_and_the_robot_stops(host: Any) -> None:
@@ -265,16 +266,16 @@ def test_a_state_the_robot_reports_with_nan_is_refused_and_the_robot_stops(host:
 def test_one_operator_holds_the_stream_and_the_fence_clamps(host: Any) -> None:
     emb, clk = host()
     core = emb.control.core
-    assert core.collision_on()  # the rows are on by default, the fence among them
+    assert core.ctl.collision_on  # the rows are on by default, the fence among them
     st = cycles(emb, clk, 20)
     mode(emb, clk, "track")
     x = np.array(st.ee_true)
     cycles(emb, clk, 10, each=lambda k: setpoint(emb, clk, x + [0.02, 0, 0], "alice"))
     cycles(emb, clk, 10, each=lambda k: setpoint(emb, clk, x - [0.02, 0, 0], "bob"))
-    assert emb.control.rejected()["operator"] == 10 and core.operator == "alice"
+    assert emb.control.rejected()["operator"] == 10 and core.setpoints.operator == "alice"
     far = x + [50.0, 0.0, 0.0]  # 50 m away: beyond the default fence
     cycles(emb, clk, 10, each=lambda k: setpoint(emb, clk, far, "alice"))
-    status = core.status(emb.control.timing, emb.control.rejected(), emb.control.accepted())
+    status = reports.status(core, emb.control.timing, emb.control.rejected(), emb.control.accepted())
     assert status.clamped >= 1 and np.all(np.abs(core.smoother.target - x) < 3.5)
 
 

@@ -151,7 +151,7 @@ def test_each_cycle_reads_ticks_and_writes_within_the_fr3s_limits(rig: Any) -> N
     assert np.all(np.abs(v) <= np.asarray(robot.arm.velocity_max) + 1e-9)
     assert np.all(np.abs(np.diff(v, axis=0)) <= np.asarray(robot.arm.acceleration_max) * DT * (1 + 1e-6) + 1e-12)
     assert not any(emb.driver.referee.counts.values()), emb.driver.referee.counts
-    assert emb.control.core.lease == emb.driver.holder and not emb.control.core.faults
+    assert emb.control.core.lease == emb.driver.holder and not emb.control.core.fault_record.counts
 
 
 def test_the_referee_judges_the_core_s_command_before_the_shaper_refuses_it(rig: Any) -> None:
@@ -163,7 +163,7 @@ def test_the_referee_judges_the_core_s_command_before_the_shaper_refuses_it(rig:
     assert emb.driver.referee.counts["velocity"] == 1  # judged as received
     assert emb.driver.shaper.protective_stops == 1 and emb.driver.refused["firmware"] == 1  # refused
     assert np.all(np.abs(np.array(ctl.written)[:, 0]) <= robot.arm.velocity_max[0])  # never written
-    assert core.faults["robot_firmware"] >= 1
+    assert core.fault_record.counts["robot_firmware"] >= 1
 
 
 def test_a_cycle_late_for_the_robot_is_a_miss(rig: Any) -> None:

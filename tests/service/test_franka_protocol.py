@@ -151,12 +151,12 @@ def test_under_the_daemon_a_refused_recovery_is_retried_at_the_driver_s_pace(drv
                 seq = send(core, t)
                 d.on_command_msg(CommandMsg(robot=d.svc.robot, seq=seq, stamp=t, wheel_speeds=[],
                                             arm_rates=c.arm_rates.tolist(), lease=core.lease, instance=d.instance,
-                                            period=0.002, stream=core.stream_start), q, t, recover)
+                                            period=0.002, stream=core.stream.start), q, t, recover)
         t += 1e-3
     assert d.robot_error is None and not answers  # asked again, and recovered
     assert len(asked) == 3 and min(np.diff(asked)) >= 1.0, asked  # at the driver's pace
     assert d.refused["firmware"] == 2, dict(d.refused)
-    assert core.faults["robot_firmware"] == 3, dict(core.faults)  # the reflex, the two refusals
+    assert core.fault_record.counts["robot_firmware"] == 3, dict(core.fault_record.counts)  # reflex, 2 refusals
     assert core.stream.confirmed and not core.safe
 
 

@@ -127,7 +127,7 @@ def test_mutation_fuzz_through_the_validators_and_the_controller() -> None:
         if i % 4 == 3:  # one control tick per four messages, with the true state
             core.on_state(StateMsg(robot=ROBOT, seq=i + 1, stamp=t, t=t, q_base=q_base.tolist(),
                                    q_arm=q_arm.tolist(), v_arm=v_arm.tolist(), wheel_speeds=wheels.tolist(),
-                                   tau=[0.0] * robot.n_arm, instance="sim", cmd_seq=core.seq), t)
+                                   tau=[0.0] * robot.n_arm, instance="sim", cmd_seq=core.stream.seq), t)
             cmd = core.tick(t)
             assert cmd is not None
             send(core, t)  # numbered and sent, as the daemon's cycle does; the next state names it applied
@@ -139,7 +139,7 @@ def test_mutation_fuzz_through_the_validators_and_the_controller() -> None:
             q_base = q_base + dt * (core.model.base.P(float(q_base[2])) @ wheels)
             t += dt
     assert rejected > 15_000  # most of it is hostile
-    assert core.stream.confirmed and not core.faults["commands_not_applied"]  # the controller ran every tick
+    assert core.stream.confirmed and not core.fault_record.counts["commands_not_applied"]  # it ran every tick
     assert all(np.isfinite(core.smoother.step()[0]))
 
 

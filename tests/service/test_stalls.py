@@ -266,12 +266,12 @@ class Wire:
                              self.t)
         cmd = core.tick(self.t)
         if cmd is not None:
-            core.seq += 1
-            core.sent(core.seq, self.t)
-            self.sent.append((core.seq, core.stream_start, cmd))
+            core.stream.numbered()
+            core.stream.sent(core.stream.seq, self.t)
+            self.sent.append((core.stream.seq, core.stream.start, cmd))
             if not self.drop:
                 self.queue.append(SimCommand(cmd.wheel_speeds.copy(), cmd.arm_rates.copy(), period=PERIOD,
-                                             seq=core.seq, stream=core.stream_start, sent=self.t,
+                                             seq=core.stream.seq, stream=core.stream.start, sent=self.t,
                                              sender=core.lease))
         self.run(PERIOD)
         return cmd
@@ -321,20 +321,20 @@ def test_after_its_own_stall_the_daemon_brakes_its_stream_while_its_commands_may
     core = wire.core
     for _ in range(20):  # stream A, in hold, followed
         assert wire.tick() is not None
-    a_start = core.stream_start
+    a_start = core.stream.start
     wire.drop = True  # A's commands are lost: the robot stops A by itself, at rest
     while not (wire.sim.stale and not wire.sim.v_arm.any()):
         wire.tick()
     wire.drop, wire.hold = False, True  # the next stream's commands wait in the wire
     assert wire.tick() is not None  # the state shows A's stop at rest: A breaks, B starts from rest
-    assert "its command timeout" in core.last_fault and core.stream_start > a_start
-    b = core.stream_start
+    assert "its command timeout" in core.fault_record.last and core.stream.start > a_start
+    b = core.stream.start
     x0 = core.model.ee_position(wire.sim.base_odom, wire.sim.q_arm)
     wire.mode("track")
     wire.target = x0 + np.array([0.2, 0.0, 0.0])
     for _ in range(40):
         wire.tick()
-    assert core.stream_start == b and len(wire.queue) == 41 and wire.sim.stale  # none of B applied
+    assert core.stream.start == b and len(wire.queue) == 41 and wire.sim.stale  # none of B applied
     # B's first command, again and again: the robot applied none of B yet. (Before, B went on from
     # it and moved, 40 commands of a moving stream in the wire: the defect below needed that; the
     # repeat now keeps B at its first command until the robot follows, see the test of lost
@@ -350,14 +350,14 @@ def test_after_its_own_stall_the_daemon_brakes_its_stream_while_its_commands_may
     after = [(seq, stream, cmd) for seq, stream, cmd in wire.sent if stream == b]
     assert [stream for _, stream, _ in wire.sent[-150:]] == [b] * 150  # no new stream
     assert max_step_ratio(robot, [cmd for _, _, cmd in after]) <= 1.0 + 1e-9  # each inside A·Δt
-    assert core.faults["stall_braking"] == 1
+    assert core.fault_record.counts["stall_braking"] == 1
     # the robot followed B from A's stop and braked with it to rest; the daemon goes on within B
     assert not wire.sim.stale and not wire.sim.v_arm.any() and not wire.sim.wheels.any()
     assert not core.safe and core.mode == w.Mode.HOLD and core.resume_needed
     wire.mode("track")  # resume: the task goes on in B, anchored on its last command
     for _ in range(100):
         wire.tick()
-    assert core.stream_start == b and not core.fault_active and wire.counts() == 0
+    assert core.stream.start == b and not core.fault_active and wire.counts() == 0
     assert np.abs(wire.sim.v_arm).max() > 0.01  # moving again
 
 
@@ -368,13 +368,13 @@ def test_a_stall_inside_the_robots_timeout_brakes_with_the_robot_following(robot
     holding until a mode message. (Before, it went silent: the robot's timeout stopped it.)"""
     wire, _ = _tracking(robot)
     core = wire.core
-    b = core.stream_start
+    b = core.stream.start
     last = wire.sent[-1][2]
     wire.run(0.020)  # and the tick's own period: 22 ms since the last command
     cmd = wire.tick()
-    assert cmd is not None and core.stream_start == b  # braking, in the same stream
-    assert core.last_fault.startswith("braking stream after a stall (22 ms without a command")
-    assert cmd.status == w.Status.SAFE_STOP and cmd.reason == core.last_fault
+    assert cmd is not None and core.stream.start == b  # braking, in the same stream
+    assert core.fault_record.last.startswith("braking stream after a stall (22 ms without a command")
+    assert cmd.status == w.Status.SAFE_STOP and cmd.reason == core.fault_record.last
     assert max_step_ratio(robot, [last, cmd]) <= 1.0 + 1e-9  # from the last command sent
     for _ in range(200):
         wire.tick()
@@ -393,18 +393,18 @@ def test_a_robot_that_stopped_the_stream_during_the_stall_refuses_its_braking(ro
     stream starts from rest. 0 counts; the robot never moved again before the new stream."""
     wire, _ = _tracking(robot)
     core = wire.core
-    b = core.stream_start
+    b = core.stream.start
     old = wire.msg()  # a state from before the stall
     last = wire.sent[-1][2]
     wire.run(0.200)
     assert wire.sim.stale and not wire.sim.v_arm.any()  # stopped, at rest
     q_stop = wire.sim.q_arm.copy()
     cmd = wire.tick(old)
-    assert cmd is not None and core.stream_start == b and max_step_ratio(robot, [last, cmd]) <= 1.0 + 1e-9
+    assert cmd is not None and core.stream.start == b and max_step_ratio(robot, [last, cmd]) <= 1.0 + 1e-9
     assert wire.sim.ended == 1  # the robot refused it: its stop ended B
     cmd = wire.tick()  # its state shows the stop, with B's command applied: B breaks; at rest, a new stream
-    assert core.faults["stream_broken"] == 1
-    assert cmd is not None and core.stream_start > b and np.allclose(wire.sim.q_arm, q_stop)  # from rest
+    assert core.fault_record.counts["stream_broken"] == 1
+    assert cmd is not None and core.stream.start > b and np.allclose(wire.sim.q_arm, q_stop)  # from rest
     a = np.asarray(robot.arm.acceleration_max) * PERIOD
     assert np.all(np.abs(cmd.arm_rates) <= a * (1 + 1e-9))
     for _ in range(50):
@@ -428,15 +428,15 @@ def test_a_new_stream_whose_first_commands_are_lost_starts_from_rest_whichever_a
     wire.drop = True  # the robot hears nothing: it stops the stream by itself, at rest
     while not (wire.sim.stale and not wire.sim.v_arm.any()):
         wire.tick()
-    b = core.stream_start
+    b = core.stream.start
     x = core.model.ee_position(wire.sim.base_odom, wire.sim.q_arm)
     ball = ShapeConfig(name="ball", link="", kind="sphere", size=np.array([0.08, 0.0, 0.0]),
                          xyz=x + [0.0, 0.2, 0.0], rpy=np.zeros(3), velocity=np.array([0.0, -0.2, 0.0]))
     core.on_obstacles((ball,), wire.t)  # coming at the arm: its row makes the robot give way
     for _ in range(6):  # the new stream's first commands are lost
         wire.tick()
-    assert core.stream_start > b and wire.sim.stale and not wire.sim.v_arm.any()  # none of it applied
-    new = [cmd for _, stream, cmd in wire.sent if stream == core.stream_start]
+    assert core.stream.start > b and wire.sim.stale and not wire.sim.v_arm.any()  # none of it applied
+    new = [cmd for _, stream, cmd in wire.sent if stream == core.stream.start]
     assert len(new) == 6
     a = np.asarray(robot.arm.acceleration_max) * PERIOD
     wa = np.asarray(robot.base.wheel_acceleration_max) * PERIOD
@@ -447,7 +447,7 @@ def test_a_new_stream_whose_first_commands_are_lost_starts_from_rest_whichever_a
     for _ in range(100):
         wire.tick()
     assert wire.counts() == 0, wire.sim.referee.last_event
-    after = [cmd for _, stream, cmd in wire.sent if stream == core.stream_start]
+    after = [cmd for _, stream, cmd in wire.sent if stream == core.stream.start]
     assert max_step_ratio(robot, after) <= 1.0 + 1e-9
     assert not wire.sim.stale and np.abs(wire.sim.v_arm).max() > a.max()  # past its first command: following
 
@@ -462,7 +462,7 @@ def test_a_stopped_stream_s_commands_in_flight_are_one_stop_not_a_fault_each(rob
     protective stops only): one break, and a new stream once the robot rests."""
     wire, _ = _tracking(robot)
     core = wire.core
-    b = core.stream_start
+    b = core.stream.start
     wire.hold = True  # the link holds the commands: the robot hears nothing for 40 ms
     for _ in range(20):
         wire.tick()
@@ -470,12 +470,12 @@ def test_a_stopped_stream_s_commands_in_flight_are_one_stop_not_a_fault_each(rob
     wire.hold = False  # the held commands arrive, one per step, after the stop
     for _ in range(150):
         wire.tick()
-        if core.stream_start > b and core.stream.confirmed:
+        if core.stream.start > b and core.stream.confirmed:
             break
-    assert core.faults["robot_firmware"] == 0, core.last_fault
-    assert core.faults["stream_broken"] == 1
+    assert core.fault_record.counts["robot_firmware"] == 0, core.fault_record.last
+    assert core.fault_record.counts["stream_broken"] == 1
     assert wire.sim.ended > 10 and wire.sim.refused == 0  # each refused as the stopped stream's
-    assert core.stream_start > b and core.stream.confirmed  # a new stream, followed
+    assert core.stream.start > b and core.stream.confirmed  # a new stream, followed
     assert wire.counts() == 0, wire.sim.referee.last_event
 
 
@@ -503,5 +503,5 @@ def test_a_restarted_daemon_waits_for_a_moving_robot_to_rest_in_its_own_stop(rob
         wire.tick()
     assert wire.counts() == 0, wire.sim.referee.last_event
     assert sent == [None, None, None]  # nothing while the robot moves
-    assert core.faults["foreign_commands"] == 1
+    assert core.fault_record.counts["foreign_commands"] == 1
     assert core.stream.confirmed and not wire.sim.stale and not core.fault_active

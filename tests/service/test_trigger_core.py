@@ -74,7 +74,7 @@ def drive(n: int, drop: set[int], state_timeout: float = 0.05,
     svc = ServiceConfig().with_(loop={"rate_hz": RATE, "trigger": "state"},
                                 watchdog={"state_timeout": state_timeout})
     core = ControlCore(svc, w.load_controller_config(), w.load_robot_config())
-    core.follow_state_age = True
+    core.stream.follow_state_age = True
     clock = FakeClock()
     robot = Robot(core, clock, drop)
 
@@ -90,9 +90,9 @@ def drive(n: int, drop: set[int], state_timeout: float = 0.05,
     for _ in range(n):
         cmd = core.tick(now)
         if cmd is not None:
-            core.seq += 1
-            robot.inbox.append((core.seq, cmd))
-            core.sent(core.seq, clock.t)
+            core.stream.numbered()
+            robot.inbox.append((core.stream.seq, cmd))
+            core.stream.sent(core.stream.seq, clock.t)
         cmds.append(cmd)
         clock.t += 30e-6  # the tick's work
         now = loop.wait()
@@ -136,9 +136,9 @@ def test_bounds_latency_margin_follows_the_measured_state_age(blocking: bool) ->
     wd = core.svc.watchdog
     timeout = wd.command_hold - wd.state_age_max
     assert core.cfg.state_latency == pytest.approx(wd.command_hold)  # the worst case, before a measure
-    assert math.isfinite(core.round_trip)
-    assert timeout < core.latency < timeout + 5 * DT  # the robot's own timeout + the measured age
-    assert core.ctl.bounds.latency == core.latency  # type: ignore[attr-defined]
-    core._reset_age()  # a new stream: back to the worst case
+    assert math.isfinite(core.stream.round_trip)
+    assert timeout < core.stream.latency < timeout + 5 * DT  # the robot's own timeout + the measured age
+    assert core.ctl.bounds.latency == core.stream.latency  # type: ignore[attr-defined]
+    core.stream.reset_age()  # a new stream: back to the worst case
     assert core.ctl.bounds.latency == pytest.approx(wd.command_hold)  # type: ignore[attr-defined]
-    assert np.isfinite(core.latency)
+    assert np.isfinite(core.stream.latency)

@@ -73,9 +73,9 @@ def setpoint(x: np.ndarray, stamp: float, source: str = "op") -> SetpointMsg:
 def send(core: ControlCore, t: float) -> int:
     """Number the tick's command and record it sent at ``t`` [s], as the daemon's cycle does
     (a state naming that seq as ``cmd_seq`` confirms the stream); returns its seq."""
-    core.seq += 1
-    core.sent(core.seq, t)
-    return core.seq
+    core.stream.numbered()
+    core.stream.sent(core.stream.seq, t)
+    return core.stream.seq
 
 
 def tick(core: ControlCore, plant: Plant, t: float) -> w.Command:
@@ -83,5 +83,5 @@ def tick(core: ControlCore, plant: Plant, t: float) -> w.Command:
     assert cmd is not None
     send(core, t)
     plant.apply(cmd)
-    plant.cmd_seq = core.seq
+    plant.cmd_seq = core.stream.seq
     return cmd

@@ -96,5 +96,5 @@ def _run_embedded(args: argparse.Namespace, driver: Any) -> int | None:
         return None
     t = emb.control.timing
     print(f"wmm-qp driver franka: the embedded core ticked {t.ticks} times, {t.deadline_misses} deadline misses, "
-          f"faults {dict(emb.control.core.faults) or 'none'}", file=sys.stderr, flush=True)
+          f"faults {dict(emb.control.core.fault_record.counts) or 'none'}", file=sys.stderr, flush=True)
     return code

@@ -86,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"wmm-qp serve: {svc.prefix}/{svc.robot} at {svc.loop.rate_hz:g} Hz ({svc.loop.trigger} trigger) "
           f"({daemon.core.kind}, {ctl_cfg.task.kind} task; {robot.n_arm} joints, {robot.base.kind} base "
           f"with {robot.n_wheels} wheels; scene {scene.path}: {len(scene.obstacles)} obstacles, "
-          f"{daemon.core.collision_summary()}), listening on {svc.zenoh.daemon_endpoint}",
+          f"{daemon.core.ctl.collision_summary()}), listening on {svc.zenoh.daemon_endpoint}",
           file=sys.stderr, flush=True)
     try:
         final = daemon.run(stop)

@@ -125,7 +125,7 @@ def _run_embedded(args: argparse.Namespace, robot: Any, svc: Any, scene: Any, si
     print(f"wmm-qp sim: {svc.prefix}/{svc.robot} at {sim_cfg.rate_hz:g} Hz, embedded control at "
           f"{emb.control.timing.rate_hz:g} Hz ({core.kind}, {ctl_cfg.task.kind} task; {robot.n_arm} joints, "
           f"{robot.base.kind} base with {robot.n_wheels} wheels; {sim_cfg.physics.plant} plant; scene {scene.path}: "
-          f"{len(scene.obstacles)} obstacles, {core.collision_summary()}; collision referee "
+          f"{len(scene.obstacles)} obstacles, {core.ctl.collision_summary()}; collision referee "
           f"{'on' if emb.node.sim.collision is not None else 'off'}), listening on {svc.zenoh.sim_endpoint} and "
           f"{svc.zenoh.daemon_endpoint}", file=sys.stderr, flush=True)
     try:
@@ -137,5 +137,5 @@ def _run_embedded(args: argparse.Namespace, robot: Any, svc: Any, scene: Any, si
     p50, p99 = lp.percentiles_us(50.0, 99.0)
     print(f"wmm-qp sim: stopped at t = {st.t:.3f} s, violations {st.violations}, {lp.ticks} ticks, "
           f"{lp.deadline_misses} deadline misses, tick p50 {p50:.0f} µs p99 {p99:.0f} µs, faults "
-          f"{dict(core.faults) or 'none'}", file=sys.stderr, flush=True)
+          f"{dict(core.fault_record.counts) or 'none'}", file=sys.stderr, flush=True)
     return 0

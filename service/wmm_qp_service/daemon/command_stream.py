@@ -34,7 +34,16 @@ SENT = 1024
 
 
 class CommandStream:
-    """The sent ring, the state-age window and the stream's state.
+    """The sent ring, the state-age window and the stream's state: a state machine that owns its
+    seq and its states, changed only through its methods.
+
+    States: **following** (the robot applies the stream's commands: ``anchor_on_command``, the
+    bounds start from the last command), **unconfirmed** (a stream began, no state named one of
+    its commands yet: ``not confirmed``), **braking** (this daemon stalled: ``stalled``, braked to
+    rest in the same stream), **broken** (the robot stopped following it: ``broken``, nothing is
+    sent until it rests). The daemon's core asks it (:meth:`late`, :meth:`left`, :meth:`braked`)
+    and tells it what happened (:meth:`begin`, :meth:`numbered`, :meth:`sent`, :meth:`stall`,
+    :meth:`break_off`, :meth:`rejoin`, :meth:`braked_to_rest`, :meth:`safe_stop_sent`, …).
 
     Args:
         wd: the watchdog's limits (the robot's command timeout is ``command_hold − state_age_max``).
@@ -92,6 +101,51 @@ class CommandStream:
         self.stalled = ""
         self.rest_seq = 0
         self._anchor: w.RobotState | None = None  # the anchored state handed to the controller
+
+    def numbered(self) -> int:
+        """The seq of the command about to go out (the stream numbers its commands)."""
+        self.seq += 1
+        return self.seq
+
+    def follow(self) -> None:
+        """A command computed from the robot's state (or a safe stop) went out: the robot follows
+        the stream, the next bounds start from that command."""
+        self.anchor_on_command = True
+
+    def withdraw(self, anchored: bool) -> None:
+        """The command just computed was not sent: the anchoring is the last sent one's."""
+        self.anchor_on_command = anchored
+
+    def safe_stop_sent(self, now: float, at_rest: bool) -> None:
+        """A safe-stop command goes out at ``now`` [s] (``at_rest``: all its rates are zero): an
+        unconfirmed stream's wait counts from the stop's end; a braked stream's first command at
+        rest is the one whose application ends the braking (:meth:`braked`)."""
+        if not self.confirmed:
+            self.began = now
+        if self.stalled and not self.rest_seq and at_rest:
+            self.rest_seq = self.seq + 1
+
+    def unconfirmed_too_long(self, now: float, wait: float, fresh: bool) -> bool:
+        """No state named one of this stream's commands for ``wait`` [s] (``fresh``: a new state
+        came): True once per stream, to say it."""
+        if now - self.began > wait and fresh and not self.unconfirmed_said:
+            self.unconfirmed_said = True
+            return True
+        return False
+
+    def computed_from(self, state_seq: int) -> None:
+        """This tick's command comes from state ``state_seq`` (-1: a predicted or repeated one)."""
+        self.cmd_state_seq = state_seq
+
+    def rejoin(self) -> None:
+        """The robot rests in its own stop after a break: a new stream may start, from its
+        measured rates."""
+        self.broken = False
+        self.anchor_on_command = False
+
+    def braked_to_rest(self) -> None:
+        """The braked stream reached the robot at rest (:meth:`braked`): it goes on."""
+        self.stalled = ""
 
     def sent(self, seq: int, now: float) -> None:
         """Command ``seq`` was published at ``now`` [s] (for the round trip and the stream)."""

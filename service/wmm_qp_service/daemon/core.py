@@ -15,7 +15,6 @@ import math
 import time
 from collections import Counter
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 
@@ -25,13 +24,10 @@ from wmm_qp.scene import Scene, load_scene
 from wmm_qp.tasks import rotation_to_quat
 
 from ..config import ServiceConfig
-from ..protocol import InfoMsg, StateMsg, StatusMsg, TruthMsg
-from ..rate_loop import LoopTiming
+from ..protocol import StateMsg, TruthMsg
 from ..smoother import OrientationTarget, SetpointSmoother, VelocityEstimator
 from ..tick_stages import RUCKIG, STEP, WATCHDOGS, TickStages
-from . import reports
 from .command_stream import CommandStream, predicted
-from .forward import Forward
 from .inputs import CoreInputs
 from .obstacles import LiveObstacles
 from .setpoints import Setpoints
@@ -203,28 +199,16 @@ class ControlCore(CoreInputs):
                       self.stream.round_trip, self.fault_record)
 
     def break_stream(self, code: FaultCode, why: str) -> None:
-        """The robot no longer follows this daemon's commands: it stopped itself (its timeout,
-        a protective stop), or another daemon holds the lease.
-
-        The robot is braking by itself, at rates the daemon does not know: a command now would
-        jump from them. Until a state shows the robot at rest in its own stop, :meth:`tick` sends
-        nothing; then the stream starts again from the measured rates, in hold until a mode
-        message resumes (``resume = "manual"``).
-        """
+        """The robot no longer follows this daemon's commands (its own stop, another lease holder):
+        nothing is sent until a state shows it at rest in its stop; then a new stream starts from
+        the measured rates, in hold until a mode message (:meth:`.CommandStream.break_off`)."""
         self._fault(code, why)
         self.safe = True
         self.stream.break_off()
 
     def brake_stream(self, why: str) -> None:
-        """This daemon stalled past the robot's command timeout: keep the stream and brake it.
-
-        :meth:`tick` sends the controller's safe stop anchored on the last command sent, down
-        to zero, then zeros, in the same stream (:meth:`.CommandStream.stall` says why no new
-        stream may start while its commands may be on the way). A state that shows the robot's
-        own stop having applied one of them breaks it (:meth:`break_stream`); one that shows the
-        robot at rest having applied its first zero ends the braking: the stream goes on, in
-        hold until a mode message resumes (``resume = "manual"``).
-        """
+        """This daemon stalled past the robot's command timeout: :meth:`tick` brakes the stream to
+        rest with the controller's safe stop, in the same stream (:meth:`.CommandStream.stall`)."""
         self._fault(FaultCode.STALL_BRAKING, why)
         self.safe = True
         self.stream.stall(why)
@@ -233,7 +217,8 @@ class ControlCore(CoreInputs):
         """The command :meth:`tick` returned was not sent (the tick itself took past the robot's
         command timeout): the last command sent anchors again, and the stream is braked from it
         (:meth:`brake_stream`)."""
-        self.cmd, self.stream.anchor_on_command = self._sent
+        self.cmd, anchored = self._sent
+        self.stream.withdraw(anchored)
         self.brake_stream(why)
 
     @property
@@ -262,11 +247,8 @@ class ControlCore(CoreInputs):
             stream.begin(now)
         fault = self.hazard(now) or (Fault(FaultCode.STALL_BRAKING, stream.stalled) if stream.stalled else None)
         if fault is not None:
-            if not stream.confirmed:
-                stream.began = now  # the wait for the robot's confirmation counts from the stop's end
             cmd = self._safe_stop(fault)
-            if stream.stalled and not stream.rest_seq and not cmd.arm_rates.any() and not cmd.wheel_speeds.any():
-                stream.rest_seq = stream.seq + 1  # the braked stream's first command at rest
+            stream.safe_stop_sent(now, at_rest=not cmd.arm_rates.any() and not cmd.wheel_speeds.any())
             if self.stages is not None:
                 self.stages.lap(WATCHDOGS)
             return cmd
@@ -274,20 +256,19 @@ class ControlCore(CoreInputs):
         if not stream.confirmed and stream.anchor_on_command and self.cmd is not None:
             # the robot applied none of this stream's commands yet: the last one again (its first,
             # or the last of a safe stop since, braked from it)
-            if now - stream.began > UNCONFIRMED and self.state_fresh and not stream.unconfirmed_said:
-                stream.unconfirmed_said = True
+            if stream.unconfirmed_too_long(now, UNCONFIRMED, self.state_fresh):
                 self._fault(FaultCode.COMMANDS_NOT_APPLIED, f"the robot's states name none of this stream's "
                             f"commands as applied (cmd_seq "
                             f"{self.state_msg.cmd_seq if self.state_msg is not None else -1}, the stream "
                             f"began at seq {stream.start}): the daemon repeats its first command; a driver "
                             f"reports the last command it applied")
-            stream.cmd_state_seq = -1
+            stream.computed_from(-1)
             self.state_fresh = False
             self.ee_error = math.nan
             if self.stages is not None:
                 self.stages.lap(WATCHDOGS)
             return self.cmd
-        stream.cmd_state_seq = self.gate.last_seq if self.state_fresh else -1
+        stream.computed_from(self.gate.last_seq if self.state_fresh else -1)
         if not self.state_fresh and self.cmd is not None:
             self.state = predicted(self.model, self.dt, self.state, self.cmd)
         self.state_fresh = False
@@ -319,7 +300,7 @@ class ControlCore(CoreInputs):
         self.step_ns = time.perf_counter_ns() - t
         if stages is not None:
             stages.lap(STEP)
-        stream.anchor_on_command = True
+        stream.follow()
         if cmd.status == w.Status.SAFE_STOP:
             self._fault(FaultCode.CONTROLLER_FAILED, f"controller: {cmd.reason}")
             self.smoother.reset(cmd.x if np.isfinite(cmd.x).all() else x_d)
@@ -350,10 +331,9 @@ class ControlCore(CoreInputs):
             if not (self.state_fresh and msg is not None and (msg.stale_stop or msg.protective_stop)
                     and not any(msg.v_arm) and not any(msg.wheel_speeds)):
                 return False
-            stream.broken = False
-            stream.anchor_on_command = False
+            stream.rejoin()
         if stream.stalled and self.state_fresh and msg is not None and stream.braked(msg):
-            stream.stalled = ""  # the robot follows the braked stream, at rest: it goes on
+            stream.braked_to_rest()
         return True
 
     def _after_fault(self) -> None:
@@ -414,56 +394,5 @@ class ControlCore(CoreInputs):
             wheel_speeds=last.wheel_speeds if last is not None else self.state.wheel_speeds)
         cmd = self.ctl.safe_stop(base, fault.message)
         self.cmd = cmd
-        self.stream.anchor_on_command = True
+        self.stream.follow()
         return cmd
-
-    # ------------------------------------------------------------------ reports
-    def collision_on(self) -> bool:
-        """The controller has collision rows (the status's and the info's ``collision``)."""
-        return self.ctl.collision_on
-
-    def collision_summary(self) -> str:
-        """One line: whether the controller has collision rows, and what they keep apart."""
-        return self.ctl.collision_summary()
-
-    def orientation_error(self) -> float:
-        """[rad] the EE's orientation error to its target (:func:`~.reports.orientation_error`)."""
-        return reports.orientation_error(self)
-
-    def status(self, loop: LoopTiming, rejected: Counter[str], accepted: dict[str, int]) -> StatusMsg:
-        """The status message (:func:`~.reports.status`)."""
-        return reports.status(self, loop, rejected, accepted)
-
-    def info(self, loop: LoopTiming, rejected: Counter[str], accepted: dict[str, int]) -> InfoMsg:
-        """The ``info`` reply (:func:`~.reports.info`)."""
-        return reports.info(self, loop, rejected, accepted)
-
-    def config_dict(self) -> dict[str, Any]:
-        """The running configuration as plain data (:func:`~.reports.config_dict`)."""
-        return reports.config_dict(self)
-
-    # ------------------------------------------------------------------ the parts, by their old names
-    instance = Forward[str]("gate", "instance")  # the latched robot instance ("" before the first state)
-    last_fault = Forward[str]("fault_record", "last")
-    faults = Forward[Counter[str]]("fault_record", "counts")  # by kind (the status's faults)
-    seq = Forward[int]("stream", "seq", writable=True)  # the last command's; the sender numbers the next seq + 1
-    stream_start = Forward[int]("stream", "start")
-    stream_broken = Forward[bool]("stream", "broken")
-    cmd_state_seq = Forward[int]("stream", "cmd_state_seq")
-    round_trip = Forward[float]("stream", "round_trip")  # [s]
-    latency = Forward[float]("stream", "latency")  # [s] bounds (13)'s margin now
-    follow_state_age = Forward[bool]("stream", "follow_state_age", writable=True)
-    operator = Forward[str]("setpoints", "operator")
-    operator_conflicts = Forward[int]("setpoints", "operator_conflicts")
-    orientation_ignored = Forward[int]("setpoints", "orientation_ignored")
-
-    def sent(self, seq: int, now: float) -> None:
-        """Command ``seq`` was published at ``now`` [s] (:meth:`.CommandStream.sent`)."""
-        self.stream.sent(seq, now)
-
-    def late(self, now: float) -> bool:
-        """More than the robot's command timeout since the last command was published."""
-        return self.stream.late(now)
-
-    def _reset_age(self) -> None:
-        self.stream.reset_age()

@@ -91,13 +91,12 @@ class Cycle:
         cmd = core.tick(now)
         if cmd is None:
             return None
-        if core.late(t_pub := self.clock()):  # this tick itself stalled
+        if core.stream.late(t_pub := self.clock()):  # this tick itself stalled
             core.withdraw(f"braking stream after a stall (the tick took {(t_pub - now) * 1e3:.0f} ms: "
                           f"its command is too late)")
             return None
         stream = core.stream
-        stream.seq += 1
-        seq = stream.seq
+        seq = stream.numbered()
         self.link.send(CommandMsg(
             robot=self.robot, seq=seq, stamp=self.wall(),
             wheel_speeds=cmd.wheel_speeds.tolist(), arm_rates=cmd.arm_rates.tolist(),

@@ -30,6 +30,7 @@ from ..rate_loop import LoopTiming, RateLoop, StateLoop, realtime_priority
 from ..tick_stages import POLL, QUERIES, STATUS, TELEMETRY, TickStages
 from ..transport import ROLE_DAEMON, open_session
 from ..validation import Validator
+from . import reports
 from .core import ControlCore
 from .cycle import Cycle
 from .lease import LeaseHeld, LeaseRace, acquire
@@ -94,7 +95,7 @@ class ControlLoop:
 
     def _status(self) -> StatusMsg:
         d = self.daemon
-        return self.core.status(self.timing, d.rejected(), d.accepted())
+        return reports.status(self.core, self.timing, d.rejected(), d.accepted())
 
 
 class Daemon:
@@ -156,7 +157,7 @@ class Daemon:
         with open_session(self.svc, ROLE_DAEMON) as session:
             self.core.lease = str(session.info.zid())
             if not acquire(session, self.keys, self.core.lease, self.wait_lease, stop):
-                return self.core.status(self.loop, self.rejected(), self.accepted())
+                return reports.status(self.core, self.loop, self.rejected(), self.accepted())
             return self._run(session, stop, max_ticks)
 
     def answer_queries(self, queryable: Any, limit: int) -> int:
@@ -168,7 +169,7 @@ class Daemon:
         return answer_queries(queryable, limit, self.keys.info, self._info, self._reply_failed)
 
     def _info(self) -> bytes:
-        return encode(self.core.info(self.loop, self.rejected(), self.accepted()))
+        return encode(reports.info(self.core, self.loop, self.rejected(), self.accepted()))
 
     def _reply_failed(self, why: str) -> None:
         self.core.fault_record.last = why  # shown by the status; not a fault of the robot (not counted)
@@ -188,7 +189,7 @@ class Daemon:
         state_loop = StateLoop(svc.loop.rate_hz, cycle.poll_state, block=link.wait) if state_trigger else None
         timing: LoopTiming = state_loop or RateLoop(svc.loop.rate_hz, svc.loop.spin_us * 1e-6)
         self.loop = timing
-        core.follow_state_age = state_loop is not None
+        core.stream.follow_state_age = state_loop is not None
         core.say = fault_log = FaultLog()
         race = LeaseRace(self.LEASE_GRACE, self.wait_lease)
         control = ControlLoop(self, cycle, service, timing, state_loop, race)
@@ -204,7 +205,7 @@ class Daemon:
             fault_log.close()
             core.say = say
             gc.unfreeze()
-            final = core.status(timing, self.rejected(), self.accepted())
+            final = reports.status(core, timing, self.rejected(), self.accepted())
             service.close()
             link.close()
             if stages is not None and self.breakdown is not None:

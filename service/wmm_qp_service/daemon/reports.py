@@ -79,7 +79,7 @@ def status(core: ControlCore, loop: LoopTiming, rejected: Counter[str], accepted
         obstacles_live=len(obstacles.shapes), obstacles_stale=obstacles.stale,
         collision_distance=rows.min_distance if rows is not None and math.isfinite(rows.min_distance) else math.nan,
         collision_pair=rows.closest if rows is not None else "",
-        collision=core.collision_on(), collision_summary=core.collision_summary())
+        collision=core.ctl.collision_on, collision_summary=core.ctl.collision_summary())
 
 
 def config_dict(core: ControlCore) -> dict[str, Any]:
@@ -107,7 +107,7 @@ def info(core: ControlCore, loop: LoopTiming, rejected: Counter[str], accepted: 
                    config=config_dict(core), joints=list(core.robot.arm.joints),
                    wheels=list(core.model.base.wheel_names), base_kind=core.model.base.kind,
                    task=core.cfg.task.kind, n_arm=core.model.n_arm, n_wheels=core.model.n_wheels,
-                   collision=core.collision_on(), collision_summary=core.collision_summary())
+                   collision=core.ctl.collision_on, collision_summary=core.ctl.collision_summary())
 
 
 def plain(d: Any) -> Any:

@@ -35,7 +35,7 @@ import wmm_qp as w
 from wmm_qp.scene import Scene
 
 from ..config import ServiceConfig
-from ..daemon import ControlCore, Cycle, FaultLog, Sent
+from ..daemon import ControlCore, Cycle, FaultLog, Sent, reports
 from ..daemon.reports import NAN3
 from ..daemon.watchdog import say
 from ..protocol import ModeMsg, ObstaclesMsg, SetpointMsg, StateMsg, TelemetryMsg, TruthMsg
@@ -136,7 +136,7 @@ class EmbeddedControl:
         self.decimation = decimation(robot_rate_hz, rate)
         self.robot_rate_hz = robot_rate_hz
         self.core = core = ControlCore(svc, ctl_cfg, robot, kind, scene)
-        core.follow_state_age = True  # the robot's cycle is the clock: bounds (13) follow the measured age
+        core.stream.follow_state_age = True  # the robot's cycle is the clock: bounds (13) follow the measured age
         core.sim_alive = True  # the robot is this process
         core.who = "wmm-qp embedded"  # its fault lines name the embedded controller, not a daemon
         lim = svc.validation
@@ -247,13 +247,13 @@ class EmbeddedControl:
                 self.cycle.state_rx if fresh else math.nan)))
         self._apply_inputs(now)
         if timing.ticks % self.status_every == 0:
-            out.append(("status", core.status(timing, self.rejected(), self.accepted())))
+            out.append(("status", reports.status(core, timing, self.rejected(), self.accepted())))
         for _ in range(self.queries_per_tick):
             try:
                 q = self.queries.popleft()
             except IndexError:
                 break
-            out.append(("reply", q, core.info(timing, self.rejected(), self.accepted())))
+            out.append(("reply", q, reports.info(core, timing, self.rejected(), self.accepted())))
         while self.notes:
             core.fault_record.last = self.notes.popleft()  # shown by the status; not a fault of the robot
         timing.record(self.clock() - self._t_update)
