@@ -69,7 +69,7 @@ def one_stack(k: int, out: dict[str, Any], start: threading.Barrier) -> None:
         if st is None:
             out.update(error="no status", logs=str(logs))
             return
-        out.update(referee=dict(st.sim_violations), faults=dict(st.faults),
+        out.update(referee=dict(st.robot_violations), faults=dict(st.faults),
                    tick_p50_us=round(st.loop.tick_p50_us), tick_p99_us=round(st.loop.tick_p99_us),
                    cpu_percent_ball_far=shares[0], cpu_percent_rows_holding=shares[1], logs=str(logs))
     finally:

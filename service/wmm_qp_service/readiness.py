@@ -1,7 +1,7 @@
 """Waiting until a robot (sim or driver) and its daemon are ready: the one wait every caller uses
 (:meth:`~.client.Reader.wait_ready` is a call into :func:`wait_ready`).
 
-Each process says it is up with its liveliness token: ``alive/sim`` (the sim, its model built and
+Each process says it is up with its liveliness token: ``alive/robot`` (the sim, its model built and
 its step loop starting; a real robot's driver, connected) and ``alive/daemon`` (the daemon, its
 controller built and its loop starting). The stack is ready when the daemon answers with a fresh,
 valid state (``status.state_ok``); a reply lost on a loaded host is no verdict, the wait asks again.
@@ -143,7 +143,7 @@ def wait_ready(client: Peer, exited: Callable[[], str | None] | None = None, *, 
                 lasted = f"{state_timeout:g}" if state_timeout is not None else f"{now - up_at:.0f}"
                 raise fail(f"the {' and the '.join(nodes)} are up, but the daemon had no valid state for "
                            f"{lasted} s ({detail})", now - t0)
-            alive = "" if last is None else f"robot alive: {'yes' if last.status.sim_alive else 'no'}; "
+            alive = "" if last is None else f"robot alive: {'yes' if last.status.robot_alive else 'no'}; "
             raise fail(f"the daemon of robot {robot} has no valid state from its robot ({alive}{detail})", now - t0)
         if say is not None:
             say(f"waiting for the daemon's first valid state ({now - up_at:.0f} s)")

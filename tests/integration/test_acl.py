@@ -377,7 +377,7 @@ def test_only_the_controller_commands_the_sim_and_only_the_sim_states_the_daemon
 
 
 def test_only_their_owners_hold_the_sim_daemon_and_lease_tokens(mesh: Mesh) -> None:
-    forged = {"alive/sim", "alive/daemon", "lease/forged"}
+    forged = {"alive/robot", "alive/daemon", "lease/forged"}
     root = mesh.keys.root
     for folder in ("viewer", "operator"):
         with mesh.client(folder) as c:
@@ -397,8 +397,8 @@ def test_only_their_owners_hold_the_sim_daemon_and_lease_tokens(mesh: Mesh) -> N
         t.undeclare()
     # ... the sim's own reaches the daemon, but the sim may not claim the lease or the daemon's
     mesh.seen_tokens("daemon")  # (the daemon's own, just declared, seen locally)
-    owned = [mesh.sim.liveliness().declare_token(f"{root}/{k}") for k in ("alive/daemon", "lease/sim", "alive/sim")]
-    assert not _tokens_until(mesh, "daemon", "alive/sim") & {"alive/daemon", "lease/sim"}
+    owned = [mesh.sim.liveliness().declare_token(f"{root}/{k}") for k in ("alive/daemon", "lease/sim", "alive/robot")]
+    assert not _tokens_until(mesh, "daemon", "alive/robot") & {"alive/daemon", "lease/sim"}
     for t in owned:
         t.undeclare()
 
@@ -482,8 +482,8 @@ def test_acl_stack_connects_whichever_process_starts_first(tmp_path_factory: pyt
         stack.start_daemon()
         with Client(_cfg(svc, creds, "operator"), name="operator") as op:
             assert op.wait_for_daemon(TIMEOUT) is not None  # the daemon is up, the sim is not
-            assert not op.info().status.sim_alive
+            assert not op.info().status.robot_alive
             stack.start_sim()
-            until(lambda: (i := op.info()) is not None and i.status.state_ok and i.status.sim_alive)
+            until(lambda: (i := op.info()) is not None and i.status.state_ok and i.status.robot_alive)
     finally:
         stack.stop()

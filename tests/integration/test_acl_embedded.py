@@ -197,7 +197,7 @@ def test_the_operator_puts_its_inputs_the_viewer_nothing_and_nobody_cmd_or_state
 
 
 def test_nobody_brings_in_the_sim_daemon_or_lease_token(embedded: Embedded) -> None:
-    forged = {"alive/sim", "alive/daemon", "lease/forged"}
+    forged = {"alive/robot", "alive/daemon", "lease/forged"}
     root = embedded.keys.root
     for folder in ("viewer", "operator"):
         with embedded.client(folder) as c:

@@ -203,7 +203,7 @@ def test_serve_tracks_through_the_driver_and_resumes_after_the_robot_braked_in_i
             info = c.info()
         assert state is not None and not state.stale_stop and not state.protective_stop, state
         assert truth is not None and not any(truth.violations.values()), truth.violations
-        assert info is not None and not any(info.status.sim_violations.values())
+        assert info is not None and not any(info.status.robot_violations.values())
         assert sim.shared[15] == 0 and sim.shared[16] == 0, "franky-sim saw a joint past a limit"
     finally:
         sim.close()

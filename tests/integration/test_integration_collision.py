@@ -56,9 +56,9 @@ def test_an_obstacle_moved_into_the_arm_over_zenoh_is_avoided(service_stack: Any
         seen = sweep_ball(c, x0)
         st = until(lambda: (s := c.latest_status()) is not None and s)
         assert st.obstacles_live == 1 and st.obstacles == 1  # the default scene has none of its own
-        assert "collision" in st.sim_violations
-        assert st.sim_violations["collision"] == 0, st.sim_violations  # the sim's referee: no collision
-        others = {k: n for k, n in st.sim_violations.items() if k != "collision" and n}
+        assert "collision" in st.robot_violations
+        assert st.robot_violations["collision"] == 0, st.robot_violations  # the sim's referee: no collision
+        others = {k: n for k, n in st.robot_violations.items() if k != "collision" and n}
         restarts = {k: n for k, n in st.faults.items() if k in ("stream_broken", "stall_braking")}
         # Bounds (13) too, but for one open defect: on a loaded CI machine a restart of the command
         # stream (the robot stopped itself after a stall of the stack) has jumped by ~4.5 A·Δt from
@@ -82,7 +82,7 @@ def test_without_the_rows_the_sim_referee_sees_the_collision(service_stack: Any)
         x0 = np.array(info.status.x)
         sweep_ball(c, x0)
         st = until(lambda: (s := c.latest_status()) is not None and s)
-        assert st.sim_violations.get("collision", 0) > 0, st.sim_violations
+        assert st.robot_violations.get("collision", 0) > 0, st.robot_violations
 
 
 def stream_until(c: Client, x: np.ndarray, done: Any, timeout: float = 4 * TIMEOUT) -> tuple[Any, int]:
@@ -126,5 +126,5 @@ def test_setpoints_beyond_the_fence_and_below_the_floor_are_clamped(service_stac
             time.sleep(0.02)
         st = until(lambda: (s := c.latest_status()) is not None and s)
         assert st.x_d[2] >= z_stop - 1e-9 and st.x[2] >= z_stop - 1e-3, (st.x_d, st.x)
-        assert sum(st.sim_violations.values()) == 0, st.sim_violations
+        assert sum(st.robot_violations.values()) == 0, st.robot_violations
         assert st.clamped >= 100

@@ -65,7 +65,7 @@ def test_a_second_sim_under_the_same_id_is_a_fault_not_mixed(service_stack: Any,
     stack: Stack = service_stack(500.0)
     with Client(stack.svc, name="test") as c:
         info = ready(c)
-        latched = info.status.sim_instance
+        latched = info.status.robot_instance
         # a second sim for the same robot, on another port, that dials the daemon itself (a robot
         # process configured with the daemon's endpoint; every link is an explicit connect)
         twin_svc = stack.svc.with_(zenoh={"sim_endpoint": f"tcp/127.0.0.1:{free_port()}"})
@@ -80,7 +80,7 @@ def test_a_second_sim_under_the_same_id_is_a_fault_not_mixed(service_stack: Any,
                                    and s.instance != latched and s)
                 st = until(lambda: (i := c.info()) is not None
                            and i.status.faults.get("second_state_source", 0) >= 1 and i)
-                assert st.status.sim_instance == latched  # never switched to the twin
+                assert st.status.robot_instance == latched  # never switched to the twin
                 assert "second state source" in st.status.last_fault
                 assert st.status.rejected.get("instance", 0) >= 1
                 # the twin applies none of the daemon's commands: they are for the other instance

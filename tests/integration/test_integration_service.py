@@ -209,7 +209,7 @@ def test_a_sim_started_with_a_robot_file_is_found_under_its_name(tmp_path: Any) 
 def test_the_daemon_runs_every_mode_without_the_sims_truth(service_stack: Any) -> None:
     """``wmm-qp sim --no-truth``: a robot that reports only what a real one does (no ``sim/truth``
     on the wire). The daemon tracks, raises DM both ways and holds as with it; only what comes
-    from the truth is missing: telemetry's ee_error is nan, the status's sim_violations empty."""
+    from the truth is missing: telemetry's ee_error is nan, the status's robot_violations empty."""
     stack = service_stack(500.0, extra_sim_args=["--no-truth"])
     with Client(stack.svc, name="test", telemetry=True) as c:
         info = ready(c)
@@ -239,5 +239,5 @@ def test_the_daemon_runs_every_mode_without_the_sims_truth(service_stack: Any) -
         assert tel and all(np.isnan(m.ee_error) and all(np.isnan(m.ee_true)) for m in tel)
         assert c.latest_truth() is None and c.wait_truth(0.5) is None  # nothing on sim/truth
         final = c.info()
-        assert final is not None and final.status.sim_violations == {}
+        assert final is not None and final.status.robot_violations == {}
         assert final.status.dm > info.status.dm  # DM raised without any ground truth

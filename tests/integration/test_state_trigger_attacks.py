@@ -84,9 +84,9 @@ def test_a_state_flood_at_ten_kilohertz_is_refused_and_cannot_speed_up_the_loop(
     assert span >= elapsed
     assert ticks - watchdog <= RATE * span * 1.02 + 5, (ticks, watchdog, span)
     # and it comes back: the twin's states stopped, the latched sim is followed again
-    ok = probe.until(lambda: (i := c.info()) is not None and i.status.sim_instance == real.instance
+    ok = probe.until(lambda: (i := c.info()) is not None and i.status.robot_instance == real.instance
                      and i.status.state_ok and i, timeout=30.0)
-    assert ok.status.sim_instance == real.instance
+    assert ok.status.robot_instance == real.instance
     violations = probe.violations()
     assert sum(violations.values()) == 0, violations
 

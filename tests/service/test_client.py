@@ -181,7 +181,7 @@ class FakeSession:
         assert key.endswith("/info"), key
         self.queries += 1
         ok = self.ok_from is not None and self.queries >= self.ok_from
-        st = StatusMsg(robot="r", mode="hold", state_ok=ok, safe_stop=False, sim_alive=True)
+        st = StatusMsg(robot="r", mode="hold", state_ok=ok, safe_stop=False, robot_alive=True)
         return [_Reply(key, encode(InfoMsg(robot="r", status=st)))]
 
 

@@ -49,7 +49,7 @@ class Session:
         assert key.endswith("/info"), key
         self.queries += 1
         ok = self.ok_from is not None and self.queries >= self.ok_from
-        st = StatusMsg(robot="r", mode="hold", state_ok=ok, safe_stop=not ok, sim_alive="sim" in self.nodes,
+        st = StatusMsg(robot="r", mode="hold", state_ok=ok, safe_stop=not ok, robot_alive="sim" in self.nodes,
                        last_fault="" if ok else "state stale")
         return [_Reply(key, encode(InfoMsg(robot="r", status=st)))]
 

@@ -89,7 +89,7 @@ def test_status_text_shows_every_counter_and_clamped_when_present() -> None:
 
     st = StatusMsg(robot="wmm", mode="track", state_ok=True, safe_stop=True, last_fault="state stale (x)",
                    loop=LoopStats(rate_hz=500, measured_hz=499, ticks=1000, deadline_misses=7),
-                   rejected={"range": 2}, sim_violations={"velocity": 1}, x=[0.1, 0, 0.4], x_d=[0.1, 0, 0.4],
+                   rejected={"range": 2}, robot_violations={"velocity": 1}, x=[0.1, 0, 0.4], x_d=[0.1, 0, 0.4],
                    dm=1.5, operator="console-ab")
     text = status_markdown(st, None, "console-ab")
     for part in ("`track`", "SAFE STOP", "499 / 500 Hz", "deadline misses** 7", "state stale (x)",

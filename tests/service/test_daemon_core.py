@@ -99,8 +99,8 @@ def test_stale_state_gives_a_safe_stop_inside_the_bounds(robot: w.RobotConfig) -
 def test_sim_lost_is_a_fault(robot: w.RobotConfig) -> None:
     core, plant = make(robot)
     t, _ = run(core, plant, 0.0, 5)
-    core.on_sim_alive(True)
-    core.on_sim_alive(False)
+    core.on_robot_alive(True)
+    core.on_robot_alive(False)
     assert core.state_time == -math.inf
     core.tick(t)
     assert core.safe and core.fault_record.last_code == "robot_lost"

@@ -272,6 +272,7 @@ def test_one_operator_holds_the_stream_and_the_fence_clamps(host: Any) -> None:
     x = np.array(st.ee_true)
     cycles(emb, clk, 10, each=lambda k: setpoint(emb, clk, x + [0.02, 0, 0], "alice"))
     cycles(emb, clk, 10, each=lambda k: setpoint(emb, clk, x - [0.02, 0, 0], "bob"))
+    cycles(emb, clk, 1)  # the last one, validated in the last slack, is applied by the next tick
     assert emb.control.rejected()["operator"] == 10 and core.setpoints.operator == "alice"
     far = x + [50.0, 0.0, 0.0]  # 50 m away: beyond the default fence
     cycles(emb, clk, 10, each=lambda k: setpoint(emb, clk, far, "alice"))
@@ -279,15 +280,17 @@ def test_one_operator_holds_the_stream_and_the_fence_clamps(host: Any) -> None:
     assert status.clamped >= 1 and np.all(np.abs(core.smoother.target - x) < 3.5)
 
 
-def test_modes_apply_in_order_in_the_slack_and_take_effect_at_the_next_tick(host: Any) -> None:
+def test_modes_are_validated_in_the_slack_and_applied_in_order_by_the_next_tick(host: Any) -> None:
     emb, clk = host()
     core = emb.control.core
     cycles(emb, clk, 5)
     mode(emb, clk, "track")
     mode(emb, clk, "dm_nullspace")
     assert core.mode == w.Mode.HOLD  # nothing applied outside a cycle
-    cycles(emb, clk, 1)
-    assert core.mode == w.Mode.DM_NULLSPACE and emb.control.v_mode.accepted == 2
+    cycles(emb, clk, 1)  # validated in its slack, after its tick
+    assert core.mode == w.Mode.HOLD and emb.control.inputs.v_mode.accepted == 2
+    cycles(emb, clk, 1)  # applied in order by the next tick, before its command (where the daemon applies them)
+    assert core.mode == w.Mode.DM_NULLSPACE
     post(emb, "mode", ModeMsg(robot="another-robot", seq=1, stamp=clk.wall(), mode="track"))
     cycles(emb, clk, 1)
     assert core.mode == w.Mode.DM_NULLSPACE and emb.control.rejected()["robot"] == 1

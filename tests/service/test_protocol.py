@@ -169,7 +169,7 @@ def test_random_bytes_never_raise_and_never_pass(data: bytes) -> None:
 def test_keys_live_under_prefix_and_robot() -> None:
     k = Keys.of("lab/", "r1")
     assert k.state == "lab/r1/state" and k.cmd == "lab/r1/cmd" and k.setpoint == "lab/r1/setpoint"
-    assert k.mode == "lab/r1/mode" and k.info == "lab/r1/info" and k.alive("sim") == "lab/r1/alive/sim"
+    assert k.mode == "lab/r1/mode" and k.info == "lab/r1/info" and k.alive("robot") == "lab/r1/alive/robot"
 
 
 def test_box_message_round_trips_and_is_checked() -> None:

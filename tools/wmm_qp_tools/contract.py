@@ -191,10 +191,10 @@ def check_states(c: Controller, min_rate_hz: float, seconds: float = 1.0) -> dic
     instances = {s.instance for s in sts}
     if len(instances) != 1 or "" in instances:
         raise ContractError(f"states of {len(instances)} instances {sorted(instances)} from one driver")
-    names = [str(r.ok.key_expr) for r in c.session.liveliness().get(c.keys.alive("sim"), timeout=2.0)
+    names = [str(r.ok.key_expr) for r in c.session.liveliness().get(c.keys.alive("robot"), timeout=2.0)
              if r.ok is not None]
     if not names:
-        raise ContractError(f"no liveliness token {c.keys.alive('sim')}")
+        raise ContractError(f"no liveliness token {c.keys.alive('robot')}")
     return {"states": len(sts), "rate_hz": (len(sts) - 1) / span, "seq_gaps": gaps, "instance": sts[-1].instance}
 
 

@@ -358,7 +358,7 @@ def sigstop(p: Probe, name: str, hold_s: float = 3.0) -> dict[str, Any]:
     """SIGSTOP one process (``sim`` or ``daemon``) for ``hold_s``, then SIGCONT.
 
     Returns, for the sim: ``safe_s`` (first safe-stop command), ``liveliness_s`` (first status
-    with ``sim_alive`` false: the lease); for the daemon: ``sim_stop_s`` (first sim state with
+    with ``robot_alive`` false: the lease); for the daemon: ``sim_stop_s`` (first sim state with
     ``stale_stop``), ``liveliness_s`` (the daemon's token gone from a liveliness query, observer
     clock); both: ``resume_s`` (SIGCONT → the daemon answers with a fresh state again).
     """
@@ -376,7 +376,7 @@ def sigstop(p: Probe, name: str, hold_s: float = 3.0) -> dict[str, Any]:
         if name == "sim":
             safe = p.until(lambda: p.first_tel(lambda m: m.status == SAFE, t0), timeout=10.0)
             out["safe_s"] = safe.stamp - t0
-            gone = p.until(lambda: p.first_status(lambda s: not s.sim_alive, t0), timeout=15.0)
+            gone = p.until(lambda: p.first_status(lambda s: not s.robot_alive, t0), timeout=15.0)
             out["liveliness_s"] = gone.stamp - t0
         else:
             det = p.until(lambda: p.first_state(lambda s: s.stale_stop, t0), timeout=10.0)

@@ -303,7 +303,7 @@ def _drive(svc: Any, duration: float, bar: ProgressLine, exited: Any = lambda: N
         if final is None:
             return None
         elapsed = time.monotonic() - t_start
-        violations = dict(tr.violations) if tr is not None else dict(final.status.sim_violations)
+        violations = dict(tr.violations) if tr is not None else dict(final.status.robot_violations)
     import msgspec
 
     return {

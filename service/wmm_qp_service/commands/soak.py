@@ -150,7 +150,7 @@ def run(args: argparse.Namespace) -> int:
                "deadline_misses": lp.deadline_misses, "tick_p50_us": lp.tick_p50_us,
                "tick_p99_us": lp.tick_p99_us, "tick_max_us": lp.tick_max_us,
                "measured_hz": lp.measured_hz, "rss_kib_start": rss0, "rss_kib_end": rss1,
-               "violations": dict(tr.violations) if tr else final.status.sim_violations,
+               "violations": dict(tr.violations) if tr else final.status.robot_violations,
                "rejected": final.status.rejected, "last_fault": final.status.last_fault,
                "faults": final.status.faults,
                "protective_stops": st.protective_stops if st else None,

@@ -37,13 +37,13 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(msgspec.to_builtins(info), default=str))
         return 0
     s, lp = info.status, info.status.loop
-    total_viol = sum(s.sim_violations.values())
+    total_viol = sum(s.robot_violations.values())
     print(f"robot      {svc.prefix}/{svc.robot}   controller {info.config['controller']['kind']}"
           f"   task {info.task or '?'}")
     print(f"           {info.n_arm} joints [{', '.join(info.joints)}]   {info.base_kind or '?'} base, "
           f"{info.n_wheels} wheels [{', '.join(info.wheels)}]")
     print(f"mode       {s.mode}   state {'ok' if s.state_ok else 'NOT OK'}"
-          f"{'   SAFE STOP' if s.safe_stop else ''}   sim {'alive' if s.sim_alive else 'not seen'}")
+          f"{'   SAFE STOP' if s.safe_stop else ''}   robot {'alive' if s.robot_alive else 'not seen'}")
     print(f"command    {s.controller_status} {s.reason}".rstrip())
     print(f"loop       {lp.rate_hz:g} Hz (measured {lp.measured_hz:.1f})   ticks {lp.ticks}   "
           f"deadline misses {lp.deadline_misses}")
@@ -58,9 +58,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"faults     {', '.join(f'{k} {v}' for k, v in sorted(s.faults.items()))}")
     lease = ("held" if s.lease_holder == s.lease else
              f"NOT HELD (the sim applies {s.lease_holder}'s commands)" if s.lease_holder else "not yet granted")
-    print(f"lease      {lease}   sim instance {s.sim_instance or 'none'}   round trip {s.round_trip_ms:.1f} ms"
+    print(f"lease      {lease}   robot instance {s.robot_instance or 'none'}   round trip {s.round_trip_ms:.1f} ms"
           f"   operator {s.operator or 'none'} (conflicts {s.operator_conflicts})")
-    print(f"sim        violations {total_viol} {s.sim_violations if total_viol else ''}".rstrip())
+    print(f"sim        violations {total_viol} {s.robot_violations if total_viol else ''}".rstrip())
     print(f"collision  {info.collision_summary or 'unknown (an older daemon)'}")
     if s.x:
         print(f"EE         x {[round(v, 4) for v in s.x]}   x_d {[round(v, 4) for v in s.x_d]}"

@@ -45,7 +45,7 @@ def status_markdown(st: StatusMsg | None, truth: TruthMsg | None, source: str,
         return "**daemon**: no status yet"
     lp = st.loop
     rej = sum(st.rejected.values())
-    viol = sum(st.sim_violations.values())
+    viol = sum(st.robot_violations.values())
     clamped: Any = getattr(st, "clamped", None)
     if isinstance(clamped, dict):
         clamped = sum(int(v) for v in clamped.values())
@@ -65,7 +65,7 @@ def status_markdown(st: StatusMsg | None, truth: TruthMsg | None, source: str,
         f"**rejected** {rej}" + (f" {dict(st.rejected)}" if rej else "")
         + (f" · **clamped** {clamped}" if clamped is not None else "")
         + (f" (last: {last})" if (last := getattr(st, "last_clamp", "")) else ""),
-        f"**sim violations** {viol}" + (f" {dict(st.sim_violations)}" if viol else "")
+        f"**sim violations** {viol}" + (f" {dict(st.robot_violations)}" if viol else "")
         + (" · **protective stop**" if st.protective_stop else ""),
         f"**DM** {st.dm:.3f} · **stream** {stream}",
     ]

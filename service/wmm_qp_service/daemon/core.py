@@ -98,7 +98,7 @@ class ControlCore(CoreInputs):
         self.need_latch = True
         self.safe = False
         self.resume_needed = False
-        self.sim_alive = False
+        self.robot_alive = False
         self.cmd: w.Command | None = None
         self.ref = w.Reference(mode=w.Mode.HOLD)
         self._ref = w.Reference(mode=w.Mode.HOLD)  # the one tick() refills

@@ -43,7 +43,7 @@ class CoreInputs:
     need_latch: bool
     safe: bool
     resume_needed: bool
-    sim_alive: bool
+    robot_alive: bool
     state: w.RobotState | None
     state_time: float
     truth: TruthMsg | None
@@ -56,7 +56,7 @@ class CoreInputs:
 
     def on_truth(self, msg: TruthMsg) -> None:
         """A validated ``sim/truth`` message: kept for telemetry's ``ee_error`` and the status's
-        ``sim_violations`` when it is the latched instance's; the control path never reads it."""
+        ``robot_violations`` when it is the latched instance's; the control path never reads it."""
         if msg.instance == self.gate.instance:
             self.truth = msg
 
@@ -110,10 +110,10 @@ class CoreInputs:
             self.say(f"{self.who}: live obstacles stale (none for {now - self.obstacles.time:.2f} s); "
                      f"the last set ({len(self.obstacles.shapes)}) is kept")
 
-    def on_sim_alive(self, alive: bool) -> None:
+    def on_robot_alive(self, alive: bool) -> None:
         """The sim's liveliness token appeared or vanished."""
-        if self.sim_alive and not alive:
+        if self.robot_alive and not alive:
             self._fault(FaultCode.ROBOT_LOST, "robot lost (liveliness)")
             self.state_time = -math.inf
             self.safe = self.state is not None  # the next ticks brake (see _safe_stop)
-        self.sim_alive = alive
+        self.robot_alive = alive

@@ -25,14 +25,14 @@ from wmm_qp.scene import Scene
 
 from ..config import ServiceConfig
 from ..keys import Keys
-from ..protocol import ModeMsg, ObstaclesMsg, SetpointMsg, StateMsg, StatusMsg, TruthMsg, encode
+from ..protocol import StateMsg, StatusMsg, encode
 from ..rate_loop import LoopTiming, RateLoop, StateLoop, realtime_priority
 from ..tick_stages import POLL, QUERIES, STATUS, TELEMETRY, TickStages
 from ..transport import ROLE_DAEMON, open_session
-from ..validation import Validator
 from . import reports
 from .core import ControlCore
 from .cycle import Cycle
+from .host import HostInputs
 from .lease import LeaseHeld, LeaseRace, acquire
 from .robot_link import ZenohRobotLink
 from .watchdog import FaultLog, say
@@ -128,24 +128,17 @@ class Daemon:
         self.svc = svc
         self.core = ControlCore(svc, ctl_cfg, robot, kind, scene)
         self.keys = Keys.of(svc.prefix, svc.robot)
-        lim = svc.validation
-        self.v_state = Validator(StateMsg, svc.robot, lim, n_arm=robot.n_arm, n_wheels=robot.n_wheels)
-        self.v_truth = Validator(TruthMsg, svc.robot, lim)
-        self.v_mode = Validator(ModeMsg, svc.robot, lim)
-        self.v_setpoint = Validator(SetpointMsg, svc.robot, lim)
-        self.v_obstacles = Validator(ObstaclesMsg, svc.robot, lim)
+        self.inputs = HostInputs(svc, robot.n_arm, robot.n_wheels)
         self.loop: LoopTiming = RateLoop(svc.loop.rate_hz, svc.loop.spin_us * 1e-6)  # run() sets the trigger's
         self.scheduling = "not started"  # set by run(): the control thread's scheduling policy
 
     def rejected(self) -> Counter[str]:
         """Rejected and refused messages by reason, all keys together."""
-        return (self.v_state.rejected + self.v_mode.rejected + self.v_setpoint.rejected
-                + self.v_obstacles.rejected + self.v_truth.rejected + self.core.refused)
+        return self.inputs.rejected(self.core)
 
     def accepted(self) -> dict[str, int]:
         """Accepted messages by key."""
-        return {"state": self.v_state.accepted, "mode": self.v_mode.accepted,
-                "setpoint": self.v_setpoint.accepted, "obstacles": self.v_obstacles.accepted}
+        return self.inputs.accepted()
 
     def run(self, stop: threading.Event, max_ticks: int | None = None) -> StatusMsg:
         """Run until ``stop`` is set (or ``max_ticks``); returns the final status.
@@ -181,9 +174,8 @@ class Daemon:
         print(f"wmm-qp serve: control thread: {self.scheduling}; trigger {svc.loop.trigger}",
               file=sys.stderr, flush=True)
         state_trigger = svc.loop.trigger == "state"
-        link = ZenohRobotLink(session, self.keys, self.v_state, state_trigger, timed=stages is not None)
-        service = ZenohService(session, self.keys, svc, core.lease, mode=self.v_mode, setpoint=self.v_setpoint,
-                               obstacles=self.v_obstacles, truth=self.v_truth)
+        link = ZenohRobotLink(session, self.keys, self.inputs.v_state, state_trigger, timed=stages is not None)
+        service = ZenohService(session, self.keys, svc, core.lease, self.inputs)
         core.stages = stages
         cycle = Cycle(core, link, svc.robot, 1.0 / svc.loop.rate_hz, stages)
         state_loop = StateLoop(svc.loop.rate_hz, cycle.poll_state, block=link.wait) if state_trigger else None

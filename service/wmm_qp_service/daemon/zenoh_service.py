@@ -3,7 +3,7 @@
 Inputs, validated on receipt and applied to the core before each tick (:meth:`ZenohService.apply`):
 mode changes (``mode``, FIFO: none lost), the latest setpoint (``setpoint``, ring of 1), the
 latest live obstacle set (``obstacles``), the sim's evaluation data (``sim/truth``, optional:
-telemetry only) and the robot's liveliness (``alive/sim``). Outputs: the status (``status``,
+telemetry only) and the robot's liveliness (``alive/robot``). Outputs: the status (``status``,
 ``loop.status_hz``), telemetry (``telemetry``, every ``loop.telemetry_every`` commands while
 someone listens), ``info`` replies (a bounded number a tick), and the tokens ``alive/daemon``
 and ``lease/<id>``. Every call is non-blocking: a slow client costs a dropped message, never a
@@ -21,10 +21,10 @@ import zenoh
 
 from ..config import ServiceConfig
 from ..keys import Keys
-from ..protocol import ModeMsg, ObstaclesMsg, SetpointMsg, StatusMsg, TelemetryMsg, TruthMsg, encode
-from ..validation import Validator
+from ..protocol import StatusMsg, TelemetryMsg, encode
 from .core import ControlCore
 from .cycle import Sent
+from .host import HostInputs
 from .reports import NAN3, target
 
 
@@ -69,21 +69,20 @@ class ZenohService:
         keys: the robot's keys.
         svc: the service config (rates of status, telemetry and replies).
         lease: this daemon's lease id (its token ``lease/<id>``).
-        mode, setpoint, obstacles, truth: the inputs' validators (they count what they refuse).
+        inputs: the host's inputs (validated on receipt, applied to the core at one point of the tick).
     """
 
-    def __init__(self, session: zenoh.Session, keys: Keys, svc: ServiceConfig, lease: str, *,
-                 mode: Validator[ModeMsg], setpoint: Validator[SetpointMsg], obstacles: Validator[ObstaclesMsg],
-                 truth: Validator[TruthMsg]) -> None:
+    def __init__(self, session: zenoh.Session, keys: Keys, svc: ServiceConfig, lease: str,
+                 inputs: HostInputs) -> None:
         ring, fifo = zenoh.handlers.RingChannel, zenoh.handlers.FifoChannel
         self.keys, self.robot = keys, svc.robot
-        self.v_mode, self.v_setpoint, self.v_obstacles, self.v_truth = mode, setpoint, obstacles, truth
+        self.inputs = inputs
         self._setpoint = session.declare_subscriber(keys.setpoint, ring(1))
         self._mode = session.declare_subscriber(keys.mode, fifo(256))
         self._obstacles = session.declare_subscriber(keys.obstacles, ring(1))  # the latest set wins
         self._truth = session.declare_subscriber(keys.sim_truth, ring(1))  # optional: telemetry only
         self.queryable = session.declare_queryable(keys.info, fifo(64))
-        self._alive = session.liveliness().declare_subscriber(keys.alive("sim"), fifo(64), history=True)
+        self._alive = session.liveliness().declare_subscriber(keys.alive("robot"), fifo(64), history=True)
         self._token = session.liveliness().declare_token(keys.alive("daemon"))
         self._lease_token = session.liveliness().declare_token(keys.lease(lease))
         self._status = session.declare_publisher(keys.status)
@@ -96,19 +95,14 @@ class ZenohService:
 
     def apply(self, core: ControlCore, now: float) -> None:
         """Hand the core what arrived since the last tick: every mode change, the latest
-        setpoint, obstacle set and truth."""
+        setpoint, obstacle set and truth (:meth:`.HostInputs.apply`)."""
+        inputs = self.inputs
         while (s := self._mode.try_recv()) is not None:
-            if (mm := self.v_mode(s.payload.to_bytes())) is not None:
-                core.on_mode(mm)
-        s = self._setpoint.try_recv()
-        if s is not None and (sp := self.v_setpoint(s.payload.to_bytes())) is not None:
-            core.on_setpoint(sp, now)
-        s = self._obstacles.try_recv()
-        if s is not None and self.v_obstacles(s.payload.to_bytes()) is not None:
-            core.on_obstacles(self.v_obstacles.shapes, now)
-        s = self._truth.try_recv()
-        if s is not None and (tr := self.v_truth(s.payload.to_bytes())) is not None:
-            core.on_truth(tr)
+            inputs.take("mode", s.payload.to_bytes())
+        for kind, sub in (("setpoint", self._setpoint), ("obstacles", self._obstacles), ("truth", self._truth)):
+            if (s := sub.try_recv()) is not None:
+                inputs.take(kind, s.payload.to_bytes())
+        inputs.apply(core, now)
 
     def telemetry(self, core: ControlCore, sent: Sent, tick: int, t: float, tick_us: float,
                   state_rx: float) -> None:
@@ -136,7 +130,7 @@ class ZenohService:
     def liveliness(self, core: ControlCore) -> None:
         """Hand the core the robot's liveliness changes."""
         while (a := self._alive.try_recv()) is not None:
-            core.on_sim_alive(a.kind == zenoh.SampleKind.PUT)
+            core.on_robot_alive(a.kind == zenoh.SampleKind.PUT)
 
     def status(self, tick: int, build: Callable[[], StatusMsg]) -> None:
         """Publish the status on every ``status_every``-th tick (and re-read whether anyone

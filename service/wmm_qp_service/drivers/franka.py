@@ -4,7 +4,7 @@ One process, one loop: libfranka's joint velocity control (``readOnce`` / ``writ
 robot's 1 kHz cycle is the clock) and the wmm-qp protocol as the simulated robot speaks it
 (``service/wmm_qp_service/drivers/sim_node.py``, docs/protocol.md): it publishes ``state`` every cycle with
 its ``instance``, a consecutive ``seq``, the ``lease`` holder and the ``cmd_seq`` it follows,
-holds the liveliness token ``alive/sim``, and obeys ``cmd`` from the lease holder only, addressed
+holds the liveliness token ``alive/robot``, and obeys ``cmd`` from the lease holder only, addressed
 to its instance, with increasing seq. Between the daemon's commands (500 Hz or 1 kHz, some late
 or lost) and the robot, the :class:`~.franka_stream.CommandShaper` makes the continuous,
 jerk-limited stream Franka's controller demands, brakes on stale commands and refuses commands
@@ -64,6 +64,7 @@ from wmm_qp_robot.shaper import CommandShaper, StreamLimits
 import wmm_qp as w
 from wmm_qp.fault_codes import FaultCode
 
+from .. import robot_side
 from ..config import ServiceConfig
 from ..keys import Keys
 from ..protocol import CommandMsg, GripperMsg, StateMsg, TruthMsg, encode
@@ -286,13 +287,10 @@ class FrankaDriver(LeaseGate):
             return 2
         with open_session(self.svc, ROLE_SIM) as session:
             k = self.keys
-            sub = session.declare_subscriber(k.cmd, zenoh.handlers.FifoChannel(1024))
-            sub_gripper = session.declare_subscriber(k.gripper, zenoh.handlers.FifoChannel(16))
-            pub = session.declare_publisher(k.state, express=True, congestion_control=zenoh.CongestionControl.DROP,
-                                            priority=zenoh.Priority.REAL_TIME)
-            pub_truth = session.declare_publisher(k.sim_truth, congestion_control=zenoh.CongestionControl.DROP)
-            lease_sub = session.liveliness().declare_subscriber(k.lease_all, zenoh.handlers.FifoChannel(64),
-                                                                history=True)
+            sub = robot_side.command_subscriber(session, k, zenoh.handlers.FifoChannel(1024))
+            sub_gripper = robot_side.input_subscriber(session, k, "gripper")
+            pub, pub_truth = robot_side.state_publisher(session, k), robot_side.truth_publisher(session, k)
+            lease_sub = robot_side.lease_watch(session, k)
             token = None
             try:
                 try:
@@ -304,7 +302,7 @@ class FrankaDriver(LeaseGate):
                     return 1
                 if self.hand is not None:
                     self.hand.start(robot_ip)
-                token = session.liveliness().declare_token(k.alive("sim"))
+                token = robot_side.alive_token(session, k)
                 print(f"wmm-qp driver franka: {k.state.rsplit('/', 1)[0]} driving the robot at {robot_ip} "
                       f"(instance {self.instance})", file=sys.stderr, flush=True)
                 return self._loop(fr, link, (sub, sub_gripper), lease_sub, (pub, pub_truth), stop, max_cycles,

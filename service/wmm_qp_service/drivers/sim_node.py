@@ -60,6 +60,7 @@ from wmm_qp_sim.robot import SimCommand, SimRobot, SimState
 import wmm_qp as w
 from wmm_qp.scene import Scene, load_scene
 
+from .. import robot_side
 from ..config import ServiceConfig
 from ..keys import Keys
 from ..protocol import BoxMsg, CommandMsg, GripperMsg, ObstaclesMsg, StateMsg, TruthMsg, encode
@@ -352,18 +353,13 @@ class SimNode(LeaseGate):
             def on_command(sample: zenoh.Sample) -> None:  # Zenoh's thread: stamp and store only
                 inbox.put(sample.payload.to_bytes())
 
-            sub = session.declare_subscriber(k.cmd, zenoh.handlers.Callback(on_command, indirect=False))
-            sub_box = session.declare_subscriber(k.sim_box, zenoh.handlers.FifoChannel(16))
-            sub_obstacles = session.declare_subscriber(k.obstacles, zenoh.handlers.RingChannel(1))
-            sub_gripper = session.declare_subscriber(k.gripper, zenoh.handlers.FifoChannel(16))
-            pub = session.declare_publisher(k.state, express=True,
-                                            congestion_control=zenoh.CongestionControl.DROP,
-                                            priority=zenoh.Priority.REAL_TIME)
-            pub_truth = (session.declare_publisher(k.sim_truth, congestion_control=zenoh.CongestionControl.DROP)
-                         if self.truth else None)
-            token = session.liveliness().declare_token(k.alive("sim"))
-            lease_sub = session.liveliness().declare_subscriber(k.lease_all, zenoh.handlers.FifoChannel(64),
-                                                                history=True)
+            sub = robot_side.command_subscriber(session, k, zenoh.handlers.Callback(on_command, indirect=False))
+            sub_box, sub_obstacles, sub_gripper = (robot_side.input_subscriber(session, k, kind)
+                                                   for kind in ("box", "obstacles", "gripper"))
+            pub = robot_side.state_publisher(session, k)
+            pub_truth = robot_side.truth_publisher(session, k) if self.truth else None
+            token = robot_side.alive_token(session, k)
+            lease_sub = robot_side.lease_watch(session, k)
             self.scheduling = realtime_priority(self.rt_priority)
             print(f"wmm-qp sim: step loop: {self.scheduling}", file=sys.stderr, flush=True)
             st = self.sim.state()

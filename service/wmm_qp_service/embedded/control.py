@@ -36,10 +36,10 @@ from wmm_qp.scene import Scene
 
 from ..config import ServiceConfig
 from ..daemon import ControlCore, Cycle, FaultLog, Sent, reports
+from ..daemon.host import HostInputs
 from ..daemon.reports import NAN3
 from ..daemon.watchdog import say
-from ..protocol import ModeMsg, ObstaclesMsg, SetpointMsg, StateMsg, TelemetryMsg, TruthMsg
-from ..validation import Validator
+from ..protocol import StateMsg, TelemetryMsg, TruthMsg
 from .collector import SlackCollector
 from .link import InProcessLink
 from .timing import CycleTiming, decimation
@@ -137,13 +137,10 @@ class EmbeddedControl:
         self.robot_rate_hz = robot_rate_hz
         self.core = core = ControlCore(svc, ctl_cfg, robot, kind, scene)
         core.stream.follow_state_age = True  # the robot's cycle is the clock: bounds (13) follow the measured age
-        core.sim_alive = True  # the robot is this process
+        core.robot_alive = True  # the robot is this process
         core.who = "wmm-qp embedded"  # its fault lines name the embedded controller, not a daemon
-        lim = svc.validation
-        self.v_state = Validator(StateMsg, svc.robot, lim, n_arm=robot.n_arm, n_wheels=robot.n_wheels)
-        self.v_mode = Validator(ModeMsg, svc.robot, lim)
-        self.v_setpoint = Validator(SetpointMsg, svc.robot, lim)
-        self.v_obstacles = Validator(ObstaclesMsg, svc.robot, lim)
+        self.inputs = HostInputs(svc, robot.n_arm, robot.n_wheels)
+        self.v_state = self.inputs.v_state
         self.clock, self.wall = clock, wall
         self.link = InProcessLink(self.v_state, deliver)
         self.cycle = Cycle(core, self.link, svc.robot, 1.0 / rate, clock=clock, wall=wall)
@@ -204,6 +201,7 @@ class EmbeddedControl:
         self._t_update = self.clock()
         self.link.hand(state, self.wall())
         self.cycle.poll_state()  # refused (counted): the tick runs on the prediction path
+        self.inputs.apply(self.core, now)  # validated in the last slack: applied where the daemon applies them
         self.core.check_obstacles(now)
         self.sent = sent = self.cycle.command(now)
         return sent
@@ -259,39 +257,32 @@ class EmbeddedControl:
         timing.record(self.clock() - self._t_update)
 
     def _apply_inputs(self, now: float) -> None:
-        """What the service thread received since the last tick: every mode change in order,
-        the latest setpoint and obstacle set, the robot side's own inputs (validated here)."""
-        core, inbox = self.core, self.inbox
-        setpoint = obstacles = None
+        """What the service thread received since the last tick, validated here in the slack
+        (:meth:`.HostInputs.take`; the next :meth:`update` applies it before its command, as the
+        daemon does), and the robot side's own inputs (``box``, ``gripper``, the obstacles)."""
+        inputs, inbox = self.inputs, self.inbox
+        latest: dict[str, bytes] = {}  # the latest setpoint and obstacle set (as the daemon's rings keep)
         while inbox:
             kind, data = inbox.popleft()
             if kind == "mode":
-                if (m := self.v_mode(data)) is not None:
-                    core.on_mode(m)
-            elif kind == "setpoint":
-                setpoint = data
-            elif kind == "obstacles":
-                obstacles = data
+                inputs.take(kind, data)
+            elif kind in ("setpoint", "obstacles"):
+                latest[kind] = data
             elif self.on_input is not None:
                 self.on_input(kind, data)
-        if setpoint is not None and (sp := self.v_setpoint(setpoint)) is not None:
-            core.on_setpoint(sp, now)
-        if obstacles is not None:
-            if self.v_obstacles(obstacles) is not None:
-                core.on_obstacles(self.v_obstacles.shapes, now)
-            if self.on_input is not None:
-                self.on_input("obstacles", obstacles)
+        for kind, data in latest.items():
+            inputs.take(kind, data)
+            if kind == "obstacles" and self.on_input is not None:
+                self.on_input(kind, data)
 
     # ------------------------------------------------------------------ reports
     def rejected(self) -> Counter[str]:
         """Rejected and refused messages by reason (the status's ``rejected``)."""
-        return (self.v_state.rejected + self.v_mode.rejected + self.v_setpoint.rejected
-                + self.v_obstacles.rejected + self.core.refused)
+        return self.inputs.rejected(self.core)
 
     def accepted(self) -> dict[str, int]:
         """Accepted messages by key (the status's ``accepted``)."""
-        return {"state": self.v_state.accepted, "mode": self.v_mode.accepted,
-                "setpoint": self.v_setpoint.accepted, "obstacles": self.v_obstacles.accepted}
+        return self.inputs.accepted()
 
     def report(self) -> dict[str, Any]:
         """The run's cycle figures (``--cycle-report``): ticks, misses, the tick's work, the

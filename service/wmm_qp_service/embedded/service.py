@@ -8,7 +8,7 @@ side's own inputs (``sim/box``, ``gripper``), ``info`` queries; it forwards thei
 to the cycle's inbox as they are (the cycle validates and applies them in its slack). Its
 outputs are what the cycle hands over: the state (for observers only here, with the split sim's
 QoS), the evaluation data, telemetry, status and ``info`` replies, encoded and published here. It holds the tokens
-``alive/daemon``, ``alive/sim`` and ``lease/<id>``. The cycle wakes it after the command, every
+``alive/daemon``, ``alive/robot`` and ``lease/<id>``. The cycle wakes it after the command, every
 cycle (one state per pump); it wakes by itself every :data:`IDLE` at most. Where the robot's
 library holds the
 GIL while it waits for the robot (pylibfranka), no thread could run: the cycle then calls
@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 import zenoh
 
+from .. import robot_side
 from ..config import ServiceConfig
 from ..daemon.lease import acquire
 from ..daemon.zenoh_service import matching
@@ -72,23 +73,20 @@ class ServiceThread:
         self.keys, self.control, self.robot = keys, control, control.svc.robot
         inputs: dict[str, tuple[str, Channel]] = {
             "mode": (keys.mode, fifo(256)), "setpoint": (keys.setpoint, ring(1)),
-            "obstacles": (keys.obstacles, ring(1)), "box": (keys.sim_box, fifo(16)),
-            "gripper": (keys.gripper, fifo(16))}
-        self._inputs = [(kind, session.declare_subscriber(key, handler)) for kind, (key, handler) in inputs.items()
-                        if kind in ("mode", "setpoint", "obstacles") or kind in robot_inputs]
+            "obstacles": (keys.obstacles, ring(1))}
+        self._inputs = [(kind, session.declare_subscriber(key, handler)) for kind, (key, handler) in inputs.items()]
+        self._inputs += [(kind, robot_side.input_subscriber(session, keys, kind)) for kind in ("box", "gripper")
+                         if kind in robot_inputs]
         self._queryable = session.declare_queryable(keys.info, fifo(64))
         # the state's QoS as the split sim's (express, drop, real-time priority), one state per
         # pump: bursts of four express states lost ~6 % of them to the congestion drop; batched,
         # a recorder once received a state on the truth's key under a load of 17
-        self._state = session.declare_publisher(keys.state, express=True,
-                                                congestion_control=zenoh.CongestionControl.DROP,
-                                                priority=zenoh.Priority.REAL_TIME)
-        self._truth = (session.declare_publisher(keys.sim_truth, congestion_control=zenoh.CongestionControl.DROP)
-                       if truth else None)
+        self._state = robot_side.state_publisher(session, keys)
+        self._truth = robot_side.truth_publisher(session, keys) if truth else None
         self._status = session.declare_publisher(keys.status)
         self._tel = session.declare_publisher(keys.telemetry, congestion_control=zenoh.CongestionControl.DROP)
         live = session.liveliness()
-        self._tokens = [live.declare_token(keys.alive("daemon")), live.declare_token(keys.alive("sim")),
+        self._tokens = [live.declare_token(keys.alive("daemon")), robot_side.alive_token(session, keys),
                         live.declare_token(keys.lease(control.core.lease))]
         self._wake = threading.Event()
         self._stop = False

@@ -64,7 +64,7 @@ class TruthMsg(Msg, tag="truth", kw_only=True):
     """sim (or a driver's referee) → observers: evaluation data no controller may use.
 
     Published on ``<robot>/sim/truth`` with each state; the daemon runs the same without it
-    (its telemetry's ``ee_error`` is then nan and its status's ``sim_violations`` empty).
+    (its telemetry's ``ee_error`` is then nan and its status's ``robot_violations`` empty).
 
     Attributes:
         t: [s] robot time of the state this truth belongs to.

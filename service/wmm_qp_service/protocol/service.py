@@ -112,17 +112,17 @@ class StatusMsg(Msg, tag="status"):
         loop: timing figures.
         rejected: rejected messages, by reason.
         accepted: accepted messages, by key (state, setpoint, mode).
-        sim_violations: the referee's counts, by kind (from the last ``sim/truth`` message;
+        robot_violations: the referee's counts, by kind (from the last ``sim/truth`` message;
             empty without one).
         x, x_d: [m] EE position (model, odometry: of the last command, or of the last state
             when the command has none, as a safe stop's; never NaN, [] before a state) and
             smoothed target.
         dm: directional manipulability along the active direction.
-        sim_alive: the sim's liveliness token is present.
+        robot_alive: the sim's liveliness token is present.
         faults: faults seen since start, by code (``state_stale``, ``stall_braking``, …:
             :class:`wmm_qp.fault_codes.FaultCode`, docs/protocol.md "Fault codes").
         lease: this daemon's control lease id; ``lease_holder``: the holder the sim reports.
-        sim_instance: the latched sim instance ("" = none yet).
+        robot_instance: the latched sim instance ("" = none yet).
         operator: the source holding the setpoint stream ("" = none).
         operator_conflicts: setpoints refused because another operator held the stream.
         resume_needed: a safe stop ended, and the daemon holds until a mode message resumes.
@@ -159,15 +159,15 @@ class StatusMsg(Msg, tag="status"):
     loop: LoopStats = msgspec.field(default_factory=LoopStats)
     rejected: dict[str, int] = msgspec.field(default_factory=dict)
     accepted: dict[str, int] = msgspec.field(default_factory=dict)
-    sim_violations: dict[str, int] = msgspec.field(default_factory=dict)
+    robot_violations: dict[str, int] = msgspec.field(default_factory=dict)
     x: list[float] = msgspec.field(default_factory=list)
     x_d: list[float] = msgspec.field(default_factory=list)
     dm: float = float("nan")
-    sim_alive: bool = False
+    robot_alive: bool = False
     faults: dict[str, int] = msgspec.field(default_factory=dict)
     lease: str = ""
     lease_holder: str = ""
-    sim_instance: str = ""
+    robot_instance: str = ""
     operator: str = ""
     operator_conflicts: int = 0
     resume_needed: bool = False

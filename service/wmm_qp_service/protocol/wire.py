@@ -7,11 +7,15 @@ from typing import TypeVar
 
 import msgspec
 
-PROTOCOL_VERSION = 3
+PROTOCOL_VERSION = 4
 """Bumped on any incompatible change of a schema (:mod:`.robot`, :mod:`.service`; 2: the sim
 instance, the control lease, the setpoint's source and the command's period and state seq are
 required fields; 3: the state holds only what a real robot reports, the sim's evaluation data
-moved to :class:`~.robot.TruthMsg`). Optional fields with a default may be added within a
+moved to :class:`~.robot.TruthMsg`; 4: "robot", not "sim", where any robot is meant — the
+liveliness token ``alive/robot``, the status's ``robot_alive``, ``robot_instance`` and
+``robot_violations``, the faults keyed by code with ``last_fault_code``, the state's
+``protective_code``; the sim's evaluation data stays on ``sim/truth``). Optional fields with a
+default may be added within a
 version (2 gained the setpoint's ``q`` and ``w``, the status's ``quat_d``,
 ``orientation_ignored``, ``fault_active``, ``last_fault_age`` and ``orientation_error``, and the
 info reply's robot description)."""
