@@ -40,7 +40,7 @@ START_TIMEOUT = 300.0
 compiles the kernels)."""
 STATE_TIMEOUT = 30.0
 """[s] the longest the daemon may go without a valid state once both processes are up."""
-NODES = ("sim", "daemon")
+NODES = ("robot", "daemon")
 """The liveliness tokens of a started stack, waited for when ``exited`` is given."""
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from wmm_qp_service import contract
+from wmm_qp_tools import contract
 from wmm_qp_service.processes import Stack, isolated_config
 from wmm_qp_sim import load_sim_config
 

@@ -75,14 +75,14 @@ def test_with_exited_the_client_waits_for_the_sim_too_and_names_it() -> None:
     """The daemon answers with a valid state, but the sim's token is missing: a started stack is
     not up (without ``exited`` the daemon's answer alone would do)."""
     said: list[str] = []
-    with pytest.raises(NotReady, match=r"^the sim did not come up within 0\.3 s \(still running\)$"):
+    with pytest.raises(NotReady, match=r"^the robot did not come up within 0\.3 s \(still running\)$"):
         on(Session(("daemon",))).wait_ready(0.3, exited=lambda: None, say=said.append)
-    assert said and all(s.startswith("waiting for the sim to start") for s in said)
+    assert said and all(s.startswith("waiting for the robot to start") for s in said)
     assert on(Session(("daemon",))).wait_ready(0.3).status.state_ok
 
 
 def test_with_exited_both_up_the_client_returns_the_first_valid_state() -> None:
-    session = Session(("daemon", "sim"), ok_from=3)
+    session = Session(("daemon", "robot"), ok_from=3)
     said: list[str] = []
     info = on(session).wait_ready(5.0, 5.0, exited=lambda: None, say=said.append)
     assert info.status.state_ok and session.queries == 3
@@ -90,7 +90,7 @@ def test_with_exited_both_up_the_client_returns_the_first_valid_state() -> None:
 
 
 def test_with_exited_no_valid_state_names_the_processes_and_the_last_fault() -> None:
-    with pytest.raises(NotReady, match=r"^the sim and the daemon are up, but the daemon had no valid state for "
+    with pytest.raises(NotReady, match=r"^the robot and the daemon are up, but the daemon had no valid state for "
                                        r"0\.3 s \(last fault: state stale\)$") as e:
-        on(Session(("daemon", "sim"), ok_from=None)).wait_ready(5.0, 0.3, exited=lambda: None)
+        on(Session(("daemon", "robot"), ok_from=None)).wait_ready(5.0, 0.3, exited=lambda: None)
     assert e.value.info is not None and not e.value.info.status.state_ok and 0.3 <= e.value.waited < 2.0

@@ -38,7 +38,7 @@ class Peer:
 
     def alive(self, timeout: float = 1.0) -> list[str]:
         t = self.clock()
-        return [n for n, at in (("daemon", self.daemon_at), ("sim", self.sim_at)) if t >= at]
+        return [n for n, at in (("daemon", self.daemon_at), ("robot", self.sim_at)) if t >= at]
 
     def info(self, timeout: float = 2.0) -> InfoMsg | None:
         self.queries += 1
@@ -77,7 +77,7 @@ def test_a_process_that_exits_is_named_at_once() -> None:
 
 def test_a_start_that_never_ends_names_the_missing_process() -> None:
     clock = Clock()
-    with pytest.raises(NotReady, match=rf"^the sim did not come up within {START_TIMEOUT:g} s \(still running\)$"):
+    with pytest.raises(NotReady, match=rf"^the robot did not come up within {START_TIMEOUT:g} s \(still running\)$"):
         wait(Peer(clock, sim_at=1e9, daemon_at=3.0, state_at=1e9), clock)
     assert START_TIMEOUT <= clock.t < START_TIMEOUT + 1.0
 
