@@ -145,6 +145,11 @@ class CommandShaper:
         self.code = code.value
         self.target = np.zeros_like(self.target)
 
+    def protect(self, code: FaultCode, reason: str) -> None:
+        """A protective stop the driver found (e.g. the robot's measurements were lost): brake
+        to rest from the current output, refuse commands until a new stream at rest."""
+        self._protect(code, reason)
+
     def reset(self, code: FaultCode, reason: str) -> None:
         """The robot stopped the motion itself (a reflex): a new stream starts from rest, and
         the stop is reported as a protective stop (released by a new stream)."""

@@ -14,6 +14,10 @@ With ``--driver franka --robot-ip IP`` the scenario runs through a real robot's 
 (a Franka FR3, or franky-sim) instead of a sim; ``violations`` are then the driver's referee
 (its ``sim/truth``), and the EE error is n/a (no ground truth).
 
+With ``--driver ros2`` the scenario runs through ``wmm-qp driver ros2`` (started by the demo)
+against a ROS 2 robot already running on the topics of the robot file's ``[ros2]`` table (``wmm-qp
+sim --ros2``, or a ros2_control robot; docs/ros2.md); ``violations`` are the driver's referee.
+
 With ``--embedded`` the same scenario runs through one process, ``wmm-qp sim --embedded``: the
 control core in the sim's own cycle (``--rate`` is its control rate, dividing the sim's 1 kHz);
 ``exit_codes`` and ``cpu_pct`` name ``embedded``. With ``--driver franka --embedded`` the one
@@ -60,9 +64,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "temporary directory, kept and named on the verdict line)")
     parser.add_argument("--controller-config", type=Path, default=None, metavar="FILE",
                         help="the daemon's controller.toml (default: configs/controller.toml)")
-    parser.add_argument("--driver", choices=("franka",), default=None,
+    parser.add_argument("--driver", choices=("franka", "ros2"), default=None,
                         help="run the scenario through this real robot's driver instead of a sim "
-                             "(needs --robot-ip; docs/drivers.md)")
+                             "(franka needs --robot-ip, docs/drivers.md; ros2 drives the ROS 2 robot already "
+                             "running on the topics of --robot-config's [ros2] table, docs/ros2.md)")
     parser.add_argument("--embedded", action="store_true",
                         help="one process instead of two: the control core in the sim's own cycle "
                              "(wmm-qp sim --embedded; --rate must divide the sim's rate), or with --driver "
@@ -82,7 +87,12 @@ def run(args: argparse.Namespace) -> int:
     if not 10.0 <= args.rate <= 2000.0:
         print("wmm-qp demo: error: --rate must be in [10, 2000] Hz", file=sys.stderr)
         return 2
-    if (args.driver is None) != (args.robot_ip is None):
+    if args.driver == "ros2":
+        if args.robot_ip is not None or args.embedded:
+            print("wmm-qp demo: error: --driver ros2 takes no --robot-ip and no --embedded (the robot is the ROS 2 "
+                  "graph's, on the topics of --robot-config's [ros2] table)", file=sys.stderr)
+            return 2
+    elif (args.driver is None) != (args.robot_ip is None):
         print("wmm-qp demo: error: --driver and --robot-ip go together (--driver franka --robot-ip IP)",
               file=sys.stderr)
         return 2
@@ -116,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
     not_up = ""
     try:
         if args.driver is not None:
-            bar.update(f"starting the {args.driver} driver for {args.robot_ip}"
+            bar.update(f"starting the {args.driver} driver for {args.robot_ip or robot.name}"
                        f"{' with the control core in its cycle' if args.embedded else ' and the daemon'} "
                        f"(logs: {log_dir})")
             stack.start_driver(args.driver, args.robot_ip)
