@@ -204,3 +204,23 @@ def test_a_ros2_table_sets_the_topics(tmp_path: Path) -> None:
     f.write_text(src + '\n[ros2]\njoint_states = "/robot/joint_states"\ncmd_vel_type = "geometry_msgs/TwistStamped"\n')
     r = w.load_robot_config(f).ros2
     assert r.joint_states == "/robot/joint_states" and r.cmd_vel_type.endswith("TwistStamped")
+
+
+def test_the_latency_is_timed_from_the_joint_state_the_command_was_computed_from(robot: w.RobotConfig) -> None:
+    d = driver(robot)
+    d.cycle(DT, meas(robot, 10.0), 10.0)
+    st = d.state_msg({})  # state 1, from the joint state that arrived at 10.0 s
+    msg = CommandMsg(robot=d.svc.robot, seq=1, stamp=time.time(), lease="L1", instance=d.instance,
+                     arm_rates=[0.0] * robot.n_arm, wheel_speeds=[0.0] * robot.n_wheels, period=0.002, stream=1,
+                     state_seq=st.seq)
+    assert d.on_command(encode(msg), 10.003)
+    d.written(10.005)
+    assert list(d.latency) == pytest.approx([0.005])
+    d.written(10.009)  # nothing new accepted: nothing timed
+    assert len(d.latency) == 1
+    predicted = CommandMsg(robot=d.svc.robot, seq=2, stamp=time.time(), lease="L1", instance=d.instance,
+                           arm_rates=[0.0] * robot.n_arm, wheel_speeds=[0.0] * robot.n_wheels, period=0.002,
+                           stream=1, state_seq=-1)
+    assert d.on_command(encode(predicted), 10.01)
+    d.written(10.012)
+    assert len(d.latency) == 1 and d.report()["state_to_command"]["n"] == 1

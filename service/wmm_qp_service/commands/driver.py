@@ -49,6 +49,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     r.add_argument("--rate", type=float, default=None, metavar="HZ",
                    help="[Hz] the driver's cycle: joint states read, commands written (default: the robot file's "
                         "[ros2] rate_hz, 250)")
+    r.add_argument("--report", type=Path, default=None, metavar="JSON",
+                   help="write the driver's timing at exit: state → command latency (a joint state's arrival → "
+                        "the rates computed from it written), the joint states' transit, its loop's misses")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -138,10 +141,14 @@ def _run_ros2(args: argparse.Namespace) -> int:
         print("wmm-qp driver ros2: error: --rate must be in [1, 2000] Hz", file=sys.stderr)
         return 2
     driver = Ros2Driver(svc, robot, stale_timeout=stale, referee=referee, rate_hz=args.rate)
-    code = driver.run(stop_on_signals())
+    code = driver.run(stop_on_signals(), report=args.report)
     sh = driver.shaper
     violations = {k: n for k, n in driver.referee.counts.items() if n}
     last = f" (last: {sh.reason})" if sh.reason else ""
+    lat = driver.report(driver.ros_in)["state_to_command"]
+    timing = (f"; state → command p50 {lat['p50_ms']:.2f} ms, p99 {lat['p99_ms']:.2f} ms over {lat['n']} commands"
+              if lat["n"] else "")
     print(f"wmm-qp driver ros2: stopped at t = {driver.t:.3f} s (exit {code}), violations {violations}, "
-          f"protective stops {sh.protective_stops}{last}, refused {dict(driver.refused)}", file=sys.stderr, flush=True)
+          f"protective stops {sh.protective_stops}{last}, refused {dict(driver.refused)}, {driver.cycles} cycles, "
+          f"{driver.misses} deadline misses{timing}", file=sys.stderr, flush=True)
     return code

@@ -30,10 +30,13 @@ counted in the state's ``refused`` (``joint_states_foreign``, ``joint_states_par
 from __future__ import annotations
 
 import contextlib
+import json
 import math
 import sys
 import threading
 import time
+from collections import deque
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -60,6 +63,8 @@ TRUTH_EVERY = 10
 """The referee's counts go out on ``sim/truth`` every this many cycles."""
 WAIT_SAY = 2.0
 """[s] between two "waiting for joint states" lines at start."""
+RING = 4096
+"""States whose joint state's arrival is kept, to time the command computed from each."""
 
 
 def stream_limits(robot: w.RobotConfig) -> StreamLimits:
@@ -107,6 +112,13 @@ class Ros2Driver(LeaseGate):
         self.lost = True  # no fresh joint state: commands are refused (a protective stop once started)
         self._stopped = False
         self.meas: Ros2Measured | None = None  # the newest measurement used
+        self._rx_seq = np.full(RING, -1, dtype=np.int64)  # state seq → its joint state's arrival [s, monotonic]
+        self._rx_t = np.zeros(RING)
+        self._pending = -1  # the state seq of the last command accepted, until written
+        self.latency: deque[float] = deque(maxlen=500_000)  # [s] joint state in → the command from it out
+        self.misses = 0  # cycles started after their deadline (the driver's loop)
+        self.cycles = 0
+        self.ros_in: list[float] = []  # [s] the joint states' publication → arrival, at the end of run()
 
     def _q(self) -> np.ndarray:
         """The arm's measured positions with the wheels' (unbounded: zeros) appended."""
@@ -138,7 +150,34 @@ class Ros2Driver(LeaseGate):
             self.refused["ended" if sh.ended > ended else "firmware"] += 1
             return False
         self.cmd_seq = msg.seq
+        self._pending = msg.state_seq
         return True
+
+    def written(self, now: float) -> None:
+        """The rates were written at ``now`` [s, monotonic]: time the command accepted since the
+        last write from its state's joint state (the state it names in ``state_seq``)."""
+        k = self._pending
+        if k >= 0 and self._rx_seq[k % RING] == k:
+            self.latency.append(now - float(self._rx_t[k % RING]))
+        self._pending = -1
+
+    def report(self, ros_in: Any = ()) -> dict[str, Any]:
+        """The driver's timing: state → command latency [ms] (a joint state's arrival → the rates
+        computed from it written to the robot: the state out over Zenoh, the daemon's tick, the
+        command back, the wait for this driver's next cycle), its loop's misses; ``ros_in``:
+        [s] joint states' publication → arrival (their header stamp, one machine's clock)."""
+
+        def pct(xs: Any) -> dict[str, float | int | None]:
+            a = np.asarray(list(xs), dtype=float) * 1e3
+            if not a.size:
+                return {"n": 0, "p50_ms": None, "p99_ms": None, "max_ms": None}
+            return {"n": int(a.size), "p50_ms": float(np.percentile(a, 50)), "p99_ms": float(np.percentile(a, 99)),
+                    "max_ms": float(a.max())}
+
+        return {"rate_hz": self.rate_hz, "cycles": self.cycles, "deadline_misses": self.misses,
+                "state_to_command": pct(self.latency), "joint_states_in": pct(ros_in),
+                "protective_stops": self.shaper.protective_stops, "refused": dict(self.refused),
+                "violations": {k: n for k, n in self.referee.counts.items() if n}}
 
     def cycle(self, t: float, meas: Ros2Measured | None, now: float) -> np.ndarray:
         """One cycle: judge the measurement's age and positions, shape the next rates.
@@ -181,6 +220,7 @@ class Ros2Driver(LeaseGate):
         self.seq += 1
         sh, n, m = self.shaper, self.n, self.meas
         assert m is not None
+        self._rx_seq[self.seq % RING], self._rx_t[self.seq % RING] = self.seq, m.received
         return StateMsg(
             robot=self.svc.robot, seq=self.seq, stamp=time.time(), t=self.t,
             q_base=m.q_base.tolist(), q_arm=m.q_arm.tolist(), v_arm=sh.v[:n].tolist(),
@@ -196,8 +236,9 @@ class Ros2Driver(LeaseGate):
             state_seq=self.seq, base_true=NAN3, ee_true=NAN3, contact_force=[0.0, 0.0, 0.0],
             violations={k: n for k, n in self.referee.counts.items() if n})
 
-    def run(self, stop: threading.Event, max_cycles: int | None = None, say: Any = None) -> int:
-        """Drive the robot until ``stop`` (or ``max_cycles``): brake to rest, then exit.
+    def run(self, stop: threading.Event, max_cycles: int | None = None, report: Path | None = None) -> int:
+        """Drive the robot until ``stop`` (or ``max_cycles``): brake to rest, then exit; with
+        ``report``, write :meth:`report` there as JSON.
 
         Returns:
             0 after a clean stop; 2 when ROS 2 is not installed (said on stderr).
@@ -235,6 +276,9 @@ class Ros2Driver(LeaseGate):
                     f"({self.cfg.cmd_vel_type}), {self.rate_hz:g} Hz (instance {self.instance})")
                 return self._loop(hw, sub, lease_sub, pub, pub_truth, stop, max_cycles)
             finally:
+                self.ros_in = list(hw.ros_in)
+                if report is not None:
+                    report.write_text(json.dumps(self.report(self.ros_in), indent=1) + "\n")
                 for ent in (token, lease_sub, sub, pub, pub_truth):
                     if ent is not None:
                         with contextlib.suppress(Exception):
@@ -267,6 +311,7 @@ class Ros2Driver(LeaseGate):
                 finishing = True  # brake to rest, then exit
                 self.shaper.halt()
             hw.write(v[self.n:], v[:self.n])
+            self.written(time.monotonic())
             counts = dict(hw.counts)
             pub.put(encode(self.state_msg(counts)))
             done = finishing and self.shaper.at_rest
@@ -275,3 +320,4 @@ class Ros2Driver(LeaseGate):
             if done:
                 return 0
             now = loop.wait()
+            self.cycles, self.misses = loop.ticks, loop.deadline_misses

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass
 from typing import Any
 
@@ -64,6 +64,7 @@ class Ros2Hardware:
         self.joint: JointSample | None = None  # the newest accepted joint state
         self.odom: OdomSample | None = None
         self.joint_states = 0  # accepted
+        self.ros_in: deque[float] = deque(maxlen=500_000)  # [s] accepted joint states' header stamp → arrival
         self._node = node
         self._Float64MultiArray = Float64MultiArray
         self._stamped = self.cfg.cmd_vel_type.endswith("TwistStamped")
@@ -86,6 +87,9 @@ class Ros2Hardware:
             return
         self.joint = s
         self.joint_states += 1
+        st = msg.header.stamp
+        if st.sec or st.nanosec:  # (wall clock: the publisher's ROS time, on this machine)
+            self.ros_in.append(time.time() - (st.sec + 1e-9 * st.nanosec))
 
     def _on_odom(self, msg: Any) -> None:
         try:
