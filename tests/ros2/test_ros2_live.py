@@ -281,6 +281,7 @@ def test_live_the_face_follows_ros2_targets_reports_and_refuses_garbage_and_the_
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PoseStamped
     from std_msgs.msg import String
+    from visualization_msgs.msg import MarkerArray
     from wmm_qp_service.client import Client
     from wmm_qp_service.ros2.node import qos
 
@@ -302,6 +303,9 @@ def test_live_the_face_follows_ros2_targets_reports_and_refuses_garbage_and_the_
                     diag.append({kv.key: kv.value for kv in m.status[0].values})
 
                 node.create_subscription(DiagnosticArray, f"{ns}/status", on_status, qos(False, 10))
+                marker_ns: set[str] = set()
+                node.create_subscription(MarkerArray, f"{ns}/markers", lambda m: marker_ns.update(
+                    x.ns for x in m.markers if x.header.frame_id == "world"), qos(False, 10))
                 pub_t = node.create_publisher(PoseStamped, f"{ns}/ee_target", qos(True, 10))
                 pub_m = node.create_publisher(String, f"{ns}/mode", qos(True, 10))
                 until(lambda: poses and diag, 30.0, "ee_pose and status from the face")
@@ -335,6 +339,7 @@ def test_live_the_face_follows_ros2_targets_reports_and_refuses_garbage_and_the_
                     time.sleep(0.05)
                 err = float(np.linalg.norm(poses[-1] - target))
                 assert err <= 0.005, f"EE {poses[-1]} vs target {target}: {err:.4f} m; {diag[-1]}"
+                assert {"ee_target", "fence"} <= marker_ns, marker_ns
                 gaps = np.diff(stamps[-20:])
                 assert float(np.median(gaps)) <= 0.2, gaps
                 pub_t.publish(pose(np.array([math.nan, 0.0, 0.5])))
