@@ -224,3 +224,36 @@ def test_the_latency_is_timed_from_the_joint_state_the_command_was_computed_from
     assert d.on_command(encode(predicted), 10.01)
     d.written(10.012)
     assert len(d.latency) == 1 and d.report()["state_to_command"]["n"] == 1
+
+
+def test_the_cannot_stop_check_judges_where_the_joints_are_now_not_where_an_old_state_says(
+        robot: w.RobotConfig) -> None:
+    """Attack on timing: the joint states arrive late (yet within state_timeout) while a joint moves
+    towards its limit. Judged at the old state's position the motion could go on; carried on by the
+    rates written since, it must stop before the limit: a cannot_stop_before_limit stop."""
+    d = driver(robot)
+    j = 1  # panda_joint2, [-1.7628, 1.7628] rad, 7.5 rad/s² at most
+    q = np.array(robot.arm.start, dtype=float)
+    q[j] = 0.0
+    t, _ = run(d, robot, 0.0, 2)
+    go = [0.0] * robot.n_arm
+    go[j] = 1.0
+    seq = 1
+    assert d.on_command(cmd(d, seq, go), t)
+    stamp = t
+    while d.shaper.v[j] < 1.0 - 1e-9:  # up to speed, fresh states at q
+        t += DT
+        seq += 1
+        d.on_command(cmd(d, seq, go), t)
+        d.cycle(t, meas(robot, t, q), t)
+        stamp = t
+    stop = float(d.shaper.stop_distance(d.shaper.v, d.shaper.a)[j])
+    q_old = q.copy()
+    q_old[j] = robot.arm.position_upper[j] - stop - 0.06  # 60 mrad short of the last braking point
+    for _ in range(20):  # 80 ms of commands, the joint state stuck at stamp: 80 mrad travelled since
+        t += DT
+        seq += 1
+        d.on_command(cmd(d, seq, go), t)
+        d.cycle(t, meas(robot, stamp, q_old), t)
+    assert t - stamp < robot.ros2.state_timeout
+    assert d.shaper.protective_stop and d.shaper.code == "cannot_stop_before_limit", d.shaper.reason

@@ -13,7 +13,9 @@ twist. Every command passes wmm-qp's robot firmware first, the same as the FR3's
   base's wheels together: a jerk-limited stream within the velocity and acceleration limits,
   stale commands braked to rest (``stale_stop``; the stop ends the stream), a command past a
   velocity limit or one from which a joint could not brake before its position limit refused
-  (protective stop, until a new stream at rest);
+  (protective stop, until a new stream at rest) — judged from where the joints are now: the
+  newest joint state carried on by the rates written since it was measured, and a cycle more
+  (what is written now acts on the robot's next update);
 - a lost robot: no joint state for ``[ros2] state_timeout`` (none at all, the robot's broadcaster
   stopped, or every one refused) is a protective stop coded ``robot_state_lost`` naming the topic
   and the age; the driver brakes its output to rest and refuses every command until joint states
@@ -112,6 +114,7 @@ class Ros2Driver(LeaseGate):
         self.lost = True  # no fresh joint state: commands are refused (a protective stop once started)
         self._stopped = False
         self.meas: Ros2Measured | None = None  # the newest measurement used
+        self.q_now = np.zeros(self.n)  # [rad] the joints' positions now: measured, carried on by the rates written
         self._rx_seq = np.full(RING, -1, dtype=np.int64)  # state seq → its joint state's arrival [s, monotonic]
         self._rx_t = np.zeros(RING)
         self._pending = -1  # the state seq of the last command accepted, until written
@@ -121,9 +124,9 @@ class Ros2Driver(LeaseGate):
         self.ros_in: list[float] = []  # [s] the joint states' publication → arrival, at the end of run()
 
     def _q(self) -> np.ndarray:
-        """The arm's measured positions with the wheels' (unbounded: zeros) appended."""
-        q = self.meas.q_arm if self.meas is not None else np.zeros(self.n)
-        return np.concatenate([q, np.zeros(self.robot.n_wheels)])
+        """Where the arm's joints are now (:meth:`cycle`'s estimate) with the wheels' (unbounded:
+        zeros) appended: what the firmware's cannot-stop checks judge."""
+        return np.concatenate([self.q_now, np.zeros(self.robot.n_wheels)])
 
     def on_command(self, data: bytes, received: float) -> bool:
         """Validate a command, check its sender, judge it, hand it to the shaper.
@@ -197,13 +200,18 @@ class Ros2Driver(LeaseGate):
                 topic = self.cfg.joint_states
                 why = (f"no joint states on {topic!r} for {age:.3f} s (state_timeout {self.cfg.state_timeout:g} s)"
                        if meas is not None else f"no joint states on {topic!r} yet")
-                if self.shaper.stream is not None or meas is not None:  # before any stream: nothing to stop
-                    self.shaper.protect(FaultCode.ROBOT_STATE_LOST, f"robot state lost: {why}")
+                self.shaper.protect(FaultCode.ROBOT_STATE_LOST, f"robot state lost: {why}")
             self.lost = True
         else:
             self.lost = False
             self.meas = meas
             self.referee.check_positions(meas.q_arm)  # type: ignore[union-attr]
+        n, v_out = self.n, self.shaper.v  # (the rates written last cycle: the robot executes them)
+        if not self.lost and meas is not None:
+            # the joint state is `age` old and what is written now acts a cycle later: carry it on
+            self.q_now = meas.q_arm + v_out[:n] * (age + self.dt)
+        elif self.meas is not None:
+            self.q_now = self.q_now + v_out[:n] * self.dt
         v = self.shaper.step(t, self._q())
         stopped = self.shaper.stale_stop or self.shaper.protective_stop
         if stopped and not self._stopped:
