@@ -6,7 +6,8 @@ shares: hardware interface, referees, lease gate, shaper) ← ``wmm_qp_sim`` (th
 experiments, drills, the contract kit); an arrow reads "may be imported by". A module may import
 its own package and the packages below it, never one above: so no cycle can close between the
 packages either. Transport stays at the edge: ``zenoh`` is imported by the service and the tools
-only.
+only, ROS 2 (``rclpy`` and its message packages) by their ``ros2`` packages only, and of those
+only the stand-in robot (``wmm_qp_service.ros2.sim_robot``) imports the sim.
 
 Inside and across the packages, no circle may close between files: module A importing B at load
 time while B (directly or through others) imports A. Counted here: the imports a module runs when
