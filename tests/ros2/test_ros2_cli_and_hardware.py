@@ -101,3 +101,17 @@ def test_wheel_speeds_become_the_base_kinds_twist_and_joint_states_map_by_name(r
     node.subs[robot.ros2.joint_states](SimpleNamespace())  # not even a JointState
     assert hw.counts == {"joint_states_foreign": 1, "joint_states_invalid": 2}
     assert hw.read().q_arm.tolist() == list(range(robot.n_arm))  # the robot's own state kept
+
+
+def test_the_bench_section_says_why_it_cannot_run(monkeypatch: pytest.MonkeyPatch) -> None:
+    from wmm_qp_tools.bench import ros2
+
+    monkeypatch.delenv(ros2.NETNS, raising=False)
+    monkeypatch.setattr(ros2.importlib.util, "find_spec", lambda name: None)
+    assert ros2.run(1.0) == {"available": False, "why": "needs ROS 2's rclpy (pip install 'wmm-qp[ros2]')"}
+    monkeypatch.undo()
+    monkeypatch.delenv(ros2.NETNS, raising=False)
+    monkeypatch.setattr(ros2.importlib.util, "find_spec", lambda name: object())
+    monkeypatch.setattr(ros2.shutil, "which", lambda name: None)
+    out = ros2.run(1.0)
+    assert out["available"] is False and "unshare" in out["why"]

@@ -20,6 +20,7 @@ from wmm_qp_tools.bench import (
     jitter,
     oneshot,
     pink_race,
+    ros2,
     scaling,
     sim,
     tick_compare,
@@ -28,7 +29,7 @@ from wmm_qp_tools.bench.robot_files import loaded, shipped_robots
 from wmm_qp_tools.bench.stats import now_ns
 
 SECTIONS: tuple[str, ...] = ("controller", "oneshot", "pink", "scaling", "robots", "e2e", "daemon", "collisions",
-                             "collision_default", "jitter", "sim", "tick")
+                             "collision_default", "jitter", "sim", "tick", "ros2")
 
 
 def run_robots(
@@ -191,6 +192,10 @@ def run_bench(
         say(f"sim: the sim's step of every shipped robot on {', '.join(plants)}")
         out["physics"] = plants
         out["sim"] = sim.run(shipped_robots(), plants, min(ticks, 5000), max_seconds)
+        done += 1
+    if "ros2" in sections:
+        say(f"ros2: state → command through the ROS 2 driver at {', '.join(f'{r:g}' for r in ros2.RATES)} Hz")
+        out["ros2"] = ros2.run(max(5.0, min(30.0, ticks / 500.0)))
         done += 1
     if "tick" in sections and baseline_tree is not None:
         say(f"tick: the track-mode tick ({tick_solver}) of this tree and of {baseline_tree}, {rounds} rounds")
