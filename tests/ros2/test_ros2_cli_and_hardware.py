@@ -29,7 +29,7 @@ def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str]:
     (["driver", "ros2", "--robot-config", str(ROBOTS / "panda_diffdrive.toml"), "--stale-timeout", "0"],
      "--stale-timeout"),
     (["driver", "ros2", "--robot-config", str(ROBOTS / "panda_diffdrive.toml"), "--rate", "nan"], "--rate"),
-    (["sim", "--ros2", "--embedded"], "--ros2"),
+    (["sim", "--ros2", "--no-truth"], "--ros2"),
     (["sim", "--ros2", "--rate", "5000"], "--rate"),
     (["demo", "--driver", "ros2", "--robot-ip", "127.0.0.1"], "--driver ros2"),
 ])

@@ -37,7 +37,7 @@ ROOT = Path(__file__).resolve().parents[2]
 ROBOTS = default_config_dir() / "robots"
 NETNS = "WMM_QP_ROS2_NETNS"
 INSIDE = os.environ.get(NETNS) == "1"
-LIVE = 7  # the test_live_* tests (parametrised cases counted)
+LIVE = 8  # the test_live_* tests (parametrised cases counted)
 inside_only = pytest.mark.skipif(not INSIDE, reason="runs inside the network namespace that "
                                  "test_in_a_network_namespace_with_only_loopback makes")
 
@@ -272,18 +272,90 @@ def test_live_lost_joint_states_are_a_protective_stop_and_the_robot_gets_zero_ra
             rec.close()
 
 
+class FaceProbe:
+    """A plain rclpy node on the face's topics under ``ns``: it records ``ee_pose``, ``status``
+    (its values, their arrival) and ``markers``, and publishes ``ee_target`` and ``mode``."""
+
+    def __init__(self, node: Any, ns: str) -> None:
+        from diagnostic_msgs.msg import DiagnosticArray
+        from geometry_msgs.msg import PoseStamped
+        from std_msgs.msg import String
+        from visualization_msgs.msg import MarkerArray
+        from wmm_qp_service.ros2.node import qos
+
+        self.PoseStamped, self.String = PoseStamped, String
+        self.poses: list[np.ndarray] = []
+        self.stamps: list[float] = []
+        self.diag: list[dict[str, str]] = []
+        self.marker_ns: set[str] = set()
+        node.create_subscription(PoseStamped, f"{ns}/ee_pose", lambda m: self.poses.append(np.array(
+            [m.pose.position.x, m.pose.position.y, m.pose.position.z])), qos(False, 10))
+        node.create_subscription(DiagnosticArray, f"{ns}/status", self._status, qos(False, 10))
+        node.create_subscription(MarkerArray, f"{ns}/markers", lambda m: self.marker_ns.update(
+            x.ns for x in m.markers if x.header.frame_id == "world"), qos(False, 10))
+        self.pub_t = node.create_publisher(PoseStamped, f"{ns}/ee_target", qos(True, 10))
+        self.pub_m = node.create_publisher(String, f"{ns}/mode", qos(True, 10))
+        until(lambda: self.poses and self.diag, 60.0, "ee_pose and status from the face")
+        until(lambda: self.pub_t.get_subscription_count() and self.pub_m.get_subscription_count(), 30.0,
+              "the face's subscriptions matched (discovery)")
+
+    def _status(self, m: Any) -> None:
+        self.stamps.append(time.monotonic())
+        self.diag.append({kv.key: kv.value for kv in m.status[0].values})
+
+    def pose(self, x: np.ndarray, frame: str = "world") -> Any:
+        m = self.PoseStamped()
+        m.header.frame_id = frame
+        m.pose.position.x, m.pose.position.y, m.pose.position.z = (float(v) for v in x)
+        m.pose.orientation.w = 1.0
+        return m
+
+    def mode(self, mode: str) -> None:
+        self.pub_m.publish(self.String(data=mode))
+
+    def follow(self, offset: tuple[float, float, float], tol: float = 0.005) -> None:
+        """Mode track, then the target at the EE + offset until the EE is within ``tol`` of it,
+        resuming after a fault as an operator would (a loaded host's watchdogs)."""
+
+        def track() -> bool:
+            self.mode("track")
+            time.sleep(0.2)
+            return self.diag[-1].get("mode") == "track"
+
+        until(track, 20.0, "mode track through the face")
+        target = self.poses[-1] + np.array(offset)
+        end = time.monotonic() + 40.0
+        resumed = 0.0
+        while time.monotonic() < end and np.linalg.norm(self.poses[-1] - target) > tol:
+            d = self.diag[-1]
+            if (d.get("resume_needed") == "True" or d.get("mode") != "track") and time.monotonic() > resumed:
+                self.mode("track")
+                resumed = time.monotonic() + 0.3
+            self.pub_t.publish(self.pose(target))
+            time.sleep(0.05)
+        err = float(np.linalg.norm(self.poses[-1] - target))
+        assert err <= tol, f"EE {self.poses[-1]} vs target {target}: {err:.4f} m; {self.diag[-1]}"
+        assert {"ee_target", "fence"} <= self.marker_ns, self.marker_ns
+        gaps = np.diff(self.stamps[-20:])
+        assert float(np.median(gaps)) <= 0.2, gaps  # status at 5 Hz or more
+
+    def refuses_garbage(self) -> None:
+        self.pub_t.publish(self.pose(np.array([math.nan, 0.0, 0.5])))
+        self.pub_t.publish(self.pose(self.poses[-1], frame="map"))
+        self.mode("fly")
+        until(lambda: all(int(self.diag[-1].get(k, "0")) >= 1 for k in (
+            "refused.ee_target_invalid", "refused.frame", "refused.mode_invalid")),
+              10.0, "the malformed messages counted in the status")
+
+
 @inside_only
 def test_live_the_face_follows_ros2_targets_reports_and_refuses_garbage_and_the_robot_brakes_when_the_daemon_dies(
         tmp_path: Path) -> None:
     """``serve --ros2``: a plain rclpy node sends ``mode`` and ``ee_target`` poses and the EE follows;
-    ``status`` arrives every ≤ 0.2 s (median) with faults and refusals; malformed messages counted.
-    Then the daemon is killed (SIGKILL): the driver's stale stop brakes the robot to rest."""
-    from diagnostic_msgs.msg import DiagnosticArray
-    from geometry_msgs.msg import PoseStamped
-    from std_msgs.msg import String
-    from visualization_msgs.msg import MarkerArray
+    ``status`` arrives every ≤ 0.2 s (median) with faults and refusals; ``markers`` show the target
+    and the fence; malformed messages counted. Then the daemon is killed (SIGKILL): the driver's
+    stale stop brakes the robot to rest."""
     from wmm_qp_service.client import Client
-    from wmm_qp_service.ros2.node import qos
 
     robot = w.load_robot_config(ROBOTS / "gen3_mecanum.toml")
     with stack(tmp_path, ROBOTS / "gen3_mecanum.toml", daemon=True, daemon_args=("--ros2",)) as s:
@@ -291,66 +363,12 @@ def test_live_the_face_follows_ros2_targets_reports_and_refuses_garbage_and_the_
         try:
             with Client(s.svc, name="test") as cl:
                 cl.wait_ready(300.0, 60.0, exited=s.exited)
-                node, ns = rec.node, f"/{s.svc.robot}"
-                poses: list[np.ndarray] = []
-                stamps: list[float] = []
-                diag: list[dict[str, str]] = []
-                node.create_subscription(PoseStamped, f"{ns}/ee_pose", lambda m: poses.append(np.array(
-                    [m.pose.position.x, m.pose.position.y, m.pose.position.z])), qos(False, 10))
-
-                def on_status(m: Any) -> None:
-                    stamps.append(time.monotonic())
-                    diag.append({kv.key: kv.value for kv in m.status[0].values})
-
-                node.create_subscription(DiagnosticArray, f"{ns}/status", on_status, qos(False, 10))
-                marker_ns: set[str] = set()
-                node.create_subscription(MarkerArray, f"{ns}/markers", lambda m: marker_ns.update(
-                    x.ns for x in m.markers if x.header.frame_id == "world"), qos(False, 10))
-                pub_t = node.create_publisher(PoseStamped, f"{ns}/ee_target", qos(True, 10))
-                pub_m = node.create_publisher(String, f"{ns}/mode", qos(True, 10))
-                until(lambda: poses and diag, 30.0, "ee_pose and status from the face")
-                start = poses[-1].copy()
-                target = start + np.array([0.05, -0.03, -0.04])
-
-                def pose(x: np.ndarray, frame: str = "world") -> PoseStamped:
-                    m = PoseStamped()
-                    m.header.frame_id = frame
-                    m.pose.position.x, m.pose.position.y, m.pose.position.z = (float(v) for v in x)
-                    m.pose.orientation.w = 1.0
-                    return m
-
-                until(lambda: pub_t.get_subscription_count() and pub_m.get_subscription_count(), 30.0,
-                      "the face's subscriptions matched (discovery)")
-
-                def track() -> bool:
-                    pub_m.publish(String(data="track"))
-                    time.sleep(0.2)
-                    return diag[-1].get("mode") == "track"
-
-                until(track, 20.0, "mode track through the face")
-                end = time.monotonic() + 40.0
-                resumed = 0.0
-                while time.monotonic() < end and np.linalg.norm(poses[-1] - target) > 0.005:
-                    d = diag[-1]
-                    if (d.get("resume_needed") == "True" or d.get("mode") != "track") and time.monotonic() > resumed:
-                        pub_m.publish(String(data="track"))  # an operator's resume after a fault (a loaded host)
-                        resumed = time.monotonic() + 0.3
-                    pub_t.publish(pose(target))
-                    time.sleep(0.05)
-                err = float(np.linalg.norm(poses[-1] - target))
-                assert err <= 0.005, f"EE {poses[-1]} vs target {target}: {err:.4f} m; {diag[-1]}"
-                assert {"ee_target", "fence"} <= marker_ns, marker_ns
-                gaps = np.diff(stamps[-20:])
-                assert float(np.median(gaps)) <= 0.2, gaps
-                pub_t.publish(pose(np.array([math.nan, 0.0, 0.5])))
-                pub_t.publish(pose(target, frame="map"))
-                pub_m.publish(String(data="fly"))
-                until(lambda: all(int(diag[-1].get(k, "0")) >= 1 for k in ("refused.ee_target_invalid",
-                                                                            "refused.frame", "refused.mode_invalid")),
-                      10.0, "the malformed messages counted in the status")
+                face = FaceProbe(rec.node, f"/{s.svc.robot}")
+                face.follow((0.05, -0.03, -0.04))
+                face.refuses_garbage()
                 assert rec.limits_kept()[1] == ""
                 # the daemon killed mid-motion: the driver brakes the robot by itself
-                pub_t.publish(pose(start))
+                face.pub_t.publish(face.pose(face.poses[-1] - np.array([0.05, -0.03, -0.04])))
                 time.sleep(0.3)
                 s.kill("daemon")
                 st = until(lambda: (x := cl.latest_state()) is not None and x.stale_stop
@@ -361,3 +379,21 @@ def test_live_the_face_follows_ros2_targets_reports_and_refuses_garbage_and_the_
                     assert not rec.commands[-1].any()
         finally:
             rec.close()
+
+
+@inside_only
+def test_live_the_embedded_mode_has_the_face_too(tmp_path: Path) -> None:
+    """``sim --embedded --ros2``: the same face on the one embedded process."""
+    from wmm_qp_service.client import Client
+    from wmm_qp_service.processes import Stack, isolated_config
+    from wmm_qp_service.ros2.node import RosNode
+
+    robot_file = ROBOTS / "panda_diffdrive.toml"
+    robot = w.load_robot_config(robot_file)
+    with Stack(isolated_config(robot=robot), log_dir=tmp_path, robot_file=robot_file, embedded=True,
+               extra_sim_args=["--ros2"]) as s, Client(s.svc, name="test") as cl:
+        cl.wait_ready(300.0, 60.0, exited=s.exited)
+        with RosNode("test_face_probe") as ros:
+            face = FaceProbe(ros.node, f"/{s.svc.robot}")
+            face.follow((0.04, 0.0, -0.03))
+            face.refuses_garbage()
