@@ -37,7 +37,7 @@ ROOT = Path(__file__).resolve().parents[2]
 ROBOTS = default_config_dir() / "robots"
 NETNS = "WMM_QP_ROS2_NETNS"
 INSIDE = os.environ.get(NETNS) == "1"
-LIVE = 8  # the test_live_* tests (parametrised cases counted)
+LIVE = 9  # the test_live_* tests (parametrised cases counted)
 inside_only = pytest.mark.skipif(not INSIDE, reason="runs inside the network namespace that "
                                  "test_in_a_network_namespace_with_only_loopback makes")
 
@@ -397,3 +397,43 @@ def test_live_the_embedded_mode_has_the_face_too(tmp_path: Path) -> None:
             face = FaceProbe(ros.node, f"/{s.svc.robot}")
             face.follow((0.04, 0.0, -0.03))
             face.refuses_garbage()
+
+
+TALK = """
+import sys, time, rclpy
+from rclpy.node import Node
+from std_msgs.msg import String
+rclpy.init()
+n = Node("probe_" + sys.argv[1])
+got = []
+if sys.argv[1] == "pub":
+    p = n.create_publisher(String, "probe", 10)
+    t = time.time()
+    while time.time() - t < 6:
+        p.publish(String(data="hi"))
+        rclpy.spin_once(n, timeout_sec=0.05)
+else:
+    n.create_subscription(String, "probe", lambda m: got.append(m.data), 10)
+    t = time.time()
+    while time.time() - t < 6 and not got:
+        rclpy.spin_once(n, timeout_sec=0.05)
+    print("received", len(got))
+"""
+
+
+@inside_only
+def test_live_the_fast_dds_profile_loads_binds_loopback_and_two_nodes_meet(tmp_path: Path) -> None:
+    """configs/ros2/fastdds_localhost.xml with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST: Fast DDS
+    reads it without an error (a broken file, or an interface the machine lacks, is an error on
+    stderr: the profile is in use), and a talker and a listener find each other."""
+    script = tmp_path / "talk.py"
+    script.write_text(TALK)
+    env = {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "RMW_IMPLEMENTATION": "rmw_fastrtps_cpp",
+           "FASTDDS_DEFAULT_PROFILES_FILE": str(ROOT / "configs" / "ros2" / "fastdds_localhost.xml")}
+    pub = subprocess.Popen([sys.executable, str(script), "pub"], env=env, stdout=subprocess.PIPE,
+                           stderr=subprocess.PIPE, text=True)
+    sub = subprocess.run([sys.executable, str(script), "sub"], env=env, capture_output=True, text=True, timeout=60,
+                         check=False)
+    _, pub_err = pub.communicate(timeout=60)
+    assert "received 1" in sub.stdout, sub.stdout + sub.stderr
+    assert "Error" not in sub.stderr + pub_err, sub.stderr + pub_err
