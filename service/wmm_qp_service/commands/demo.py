@@ -16,7 +16,8 @@ With ``--driver franka --robot-ip IP`` the scenario runs through a real robot's 
 
 With ``--driver ros2`` the scenario runs through ``wmm-qp driver ros2`` (started by the demo)
 against a ROS 2 robot already running on the topics of the robot file's ``[ros2]`` table (``wmm-qp
-sim --ros2``, or a ros2_control robot; docs/ros2.md); ``violations`` are the driver's referee.
+sim --ros2``, or a ros2_control robot; docs/ros2.md); ``violations`` are the driver's referee,
+the EE error n/a (no ground truth), ``exit_codes`` name ``driver`` and ``daemon``.
 
 With ``--embedded`` the same scenario runs through one process, ``wmm-qp sim --embedded``: the
 control core in the sim's own cycle (``--rate`` is its control rate, dividing the sim's 1 kHz);
