@@ -68,3 +68,22 @@ def test_the_orientation_conversions_agree() -> None:
     assert np.allclose(R, R2) and abs(x * x + y * y + z * z + wq * wq - 1.0) < 1e-12
     assert np.allclose(quat_of(rpy_matrix([0.0, 0.0, np.pi])), [0, 0, 1, 0], atol=1e-12) or np.allclose(
         quat_of(rpy_matrix([0.0, 0.0, np.pi])), [0, 0, -1, 0], atol=1e-12)
+
+
+def test_the_markers_show_the_target_the_fence_and_every_obstacle_of_a_scene() -> None:
+    pytest.importorskip("visualization_msgs", reason="needs ROS 2's messages (pip install 'wmm-qp[ros2]')")
+    from visualization_msgs.msg import Marker, MarkerArray
+
+    from wmm_qp.config import default_config_dir
+
+    robot = w.load_robot_config()
+    scene = load_scene(default_config_dir() / "scenes" / "cluttered.toml")
+    face = Ros2Face(load_service_config().with_robot(robot), robot, scene)
+    face._target = [0.5, 0.0, 0.4]
+    arr = face.markers({"Marker": Marker, "MarkerArray": MarkerArray}, None)
+    ns = [m.ns for m in arr.markers]
+    solids = [o for o in scene.obstacles if o.kind != "plane"]
+    assert ns.count("ee_target") == 1 and ns.count("fence") == 1 and ns.count("obstacles") == len(solids) > 0
+    for m in arr.markers:
+        q = m.pose.orientation
+        assert abs(q.x**2 + q.y**2 + q.z**2 + q.w**2 - 1.0) < 1e-9 and m.header.frame_id == "world"
