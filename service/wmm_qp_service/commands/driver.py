@@ -20,8 +20,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                    "pip install 'wmm-qp[franka]'")
     p.add_argument("--robot-ip", required=True, metavar="IP", help="the robot's (or franky-sim's) address")
     add_service_arguments(p)
-    add_robot_argument(p)
-    p.set_defaults(robot_config=None)  # None: configs/robots/fr3.toml
+    add_robot_argument(p, default="fr3.toml")  # None: configs/robots/fr3.toml, set in run()
     p.add_argument("--stale-timeout", type=float, default=None, metavar="S",
                    help="[s] commands older than this brake the arm to rest (default: configs/sim.toml's "
                         "stale_timeout, 0.025)")
