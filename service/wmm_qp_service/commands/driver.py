@@ -72,8 +72,9 @@ def run(args: argparse.Namespace) -> int:
     sh = driver.shaper
     violations = {k: n for k, n in driver.referee.counts.items() if n}
     last = f" (last: {sh.reason})" if sh.reason else ""
-    print(f"wmm-qp driver franka: stopped at t = {driver.t:.3f} s (exit {code}), violations {violations}, "
-          f"protective stops {sh.protective_stops}{last}, refused {dict(driver.refused)}", file=sys.stderr, flush=True)
+    print(f"wmm-qp driver franka: stopped at t = {driver.t:.3f} s (exit {code}){_clock(driver.t, driver.started_at)}, "
+          f"violations {violations}, protective stops {sh.protective_stops}{last}, refused {dict(driver.refused)}",
+          file=sys.stderr, flush=True)
     return code
 
 
@@ -97,3 +98,17 @@ def _run_embedded(args: argparse.Namespace, driver: Any) -> int | None:
     print(f"wmm-qp driver franka: the embedded core ticked {t.ticks} times, {t.deadline_misses} deadline misses, "
           f"faults {dict(emb.control.core.fault_record.counts) or 'none'}", file=sys.stderr, flush=True)
     return code
+
+
+def _clock(robot_s: float, started_at: float) -> str:
+    """The robot's clock against the wall's since the motion started: a robot time well behind
+    (franky-sim steps its physics slower than real time on a busy host) is said, not hidden."""
+    import math
+    import time
+
+    wall = time.monotonic() - started_at
+    if not math.isfinite(wall) or wall <= 0.5:
+        return ""
+    ratio = robot_s / wall
+    slow = "; the robot's clock ran slower than the wall's (a simulator behind real time?)" if ratio < 0.9 else ""
+    return f" in {wall:.1f} s of wall time ({ratio:.2f}× real time{slow})"
