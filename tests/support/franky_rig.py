@@ -12,6 +12,7 @@ protocol — libfranka then raises its own ``ControlException`` in the driver.
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
 import signal
 import subprocess
 import time
@@ -130,8 +131,30 @@ def serve(shared: Any, hostname: Any, stop: Any, q_lo: list[float], q_hi: list[f
             if trip is not None:
                 reflex.append(ReflexModel(server.robot_servers[0], trip, shared))
             hostname.value = rm.hostname.encode()
-            server.run_async()
-            stop.wait()
+            if os.environ.get("WMM_QP_FRANKY_OWN_LOOP"):  # franky-sim's own loop, to compare
+                server.run_async()
+                stop.wait()
+            else:
+                pace(server, stop)
+
+
+def pace(server: Any, stop: Any, period: float = 1e-3, behind_max: float = 0.05) -> None:
+    """franky-sim's ticks on absolute deadlines, one per ``period`` [s] of wall time, until ``stop``.
+
+    franky-sim's own loop (``run_async``) sleeps ``period`` minus each tick's work, relative to
+    the tick's start: every sleep's overshoot (timer slack, wake-up latency) is lost for good, and
+    on a busy 2-core host its robot clock ran at about half real time (the driver stopped at robot
+    time 46 s after 92 s of wall time). Here a late tick is made up by the next ones; a backlog
+    over ``behind_max`` [s] is dropped, not burst through."""
+    next_t = time.perf_counter()
+    while not stop.is_set():
+        server.run_once(realtime=False)
+        next_t += period
+        delay = next_t - time.perf_counter()
+        if delay > 0:
+            time.sleep(delay)
+        elif delay < -behind_max:
+            next_t = time.perf_counter()
 
 
 @dataclass
