@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
         code = driver.run(args.robot_ip, stop_on_signals())
     sh = driver.shaper
     violations = {k: n for k, n in driver.referee.counts.items() if n}
-    last = f" (last: {sh.reason})" if sh.reason else ""
+    last = f" (last: {sh.protective_reason})" if sh.protective_reason else ""
     print(f"wmm-qp driver franka: stopped at t = {driver.t:.3f} s (exit {code}){_clock(driver.t, driver.started_at)}, "
           f"violations {violations}, protective stops {sh.protective_stops}{last}, refused {dict(driver.refused)}",
           file=sys.stderr, flush=True)

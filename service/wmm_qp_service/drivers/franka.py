@@ -177,17 +177,15 @@ class FrankaDriver(LeaseGate):
         (the fault: the refusing command's stream is then ended, and the state names it, so its
         sender sees its stream stopped and starts another)."""
         sh = self.shaper
-        if stream == sh.stream:
+        if stream == sh.stopped_stream:
             return "ended"
-        if not sh.releases(stream):
+        if not sh.would_release(stream):
             return "firmware"
         if self.t - self._recovery_refused_t < RECOVERY_RETRY:
             return "recovering"
         why = recover() if recover is not None else "no robot to recover"
         if why is not None:
-            sh.reason = f"robot: {self.robot_error}; recovery refused: {why}"
-            sh.code = FaultCode.RECOVERY_REFUSED.value
-            sh.stream = stream
+            sh.restop(stream, FaultCode.RECOVERY_REFUSED, f"robot: {self.robot_error}; recovery refused: {why}")
             self.cmd_seq = seq
             self._recovery_refused_t = self.t
             return "firmware"
@@ -219,7 +217,7 @@ class FrankaDriver(LeaseGate):
         """
         self.referee.check_positions(q)
         v = self.shaper.step(self.t, q)
-        stopped = self.shaper.stale_stop or self.shaper.protective_stop
+        stopped = self.shaper.stale or self.shaper.protective
         if stopped and not self._stopped:
             self.referee.break_stream(hard=False)  # the robot stopped following the stream
         self._stopped = stopped
@@ -257,10 +255,10 @@ class FrankaDriver(LeaseGate):
         return StateMsg(
             robot=self.svc.robot, seq=self.seq, stamp=time.time(), t=self.t,
             q_base=[0.0, 0.0, 0.0], q_arm=q.tolist(), v_arm=sh.v.tolist(), wheel_speeds=[],
-            tau=tau.tolist(), gripper_width=gripper_width, stale_stop=sh.stale_stop,
+            tau=tau.tolist(), gripper_width=gripper_width, stale_stop=sh.stale,
             cmd_seq=self.cmd_seq, instance=self.instance, lease=self.holder,
-            protective_stop=sh.protective_stop, protective_stops=sh.protective_stops,
-            protective_reason=sh.reason, protective_code=sh.code, refused=refused)
+            protective_stop=sh.protective, protective_stops=sh.protective_stops,
+            protective_reason=sh.protective_reason, protective_code=sh.protective_code, refused=refused)
 
     def truth_msg(self, force: np.ndarray) -> TruthMsg:
         """The referee's counts as ``sim/truth`` for the last state (no ground truth: NaN).
