@@ -11,6 +11,7 @@ protocol — libfranka then raises its own ``ControlException`` in the driver.
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing as mp
 import os
 import signal
@@ -34,6 +35,9 @@ FR3 = default_config_dir() / "robots" / "fr3.toml"
 # the gripper's width [m] (the fingers' joints, summed)
 N_SHARED = 20
 REFLEXES, RECOVERIES, GRIPPER = 17, 18, 19
+RT_PRIORITY = 50
+"""franky-sim's SCHED_FIFO priority in the rig: the driver's and the daemon's (configs/sim.toml
+``rt_priority``, configs/service.toml)."""
 CARTESIAN_REFLEX = 7
 """The index of ``cartesian_reflex`` in the robot state's 41 error flags (libfranka's ``Errors``)."""
 
@@ -145,7 +149,12 @@ def pace(server: Any, stop: Any, period: float = 1e-3, behind_max: float = 0.05)
     the tick's start: every sleep's overshoot (timer slack, wake-up latency) is lost for good, and
     on a busy 2-core host its robot clock ran at about half real time (the driver stopped at robot
     time 46 s after 92 s of wall time). Here a late tick is made up by the next ones; a backlog
-    over ``behind_max`` [s] is dropped, not burst through."""
+    over ``behind_max`` [s] is dropped, not burst through. The loop runs at the sim's real-time
+    priority where the host allows it: the driver and the daemon spin at SCHED_FIFO, and on a
+    2-core host a simulator at ordinary priority is the one starved (its state gaps then read as
+    the daemon's stale states and stalls)."""
+    with contextlib.suppress(AttributeError, OSError):  # as the robot side's processes: SCHED_FIFO when allowed
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(RT_PRIORITY))
     next_t = time.perf_counter()
     while not stop.is_set():
         server.run_once(realtime=False)
