@@ -102,14 +102,14 @@ def test_a_command_past_a_velocity_limit_is_refused_and_never_reaches_the_robot(
     bad[0] = 2.0 * v_max[0]
     assert not d.on_command(cmd(d, 1, bad), t)
     t, peak = run(d, robot, t, 50)
-    assert d.shaper.protective_stop and d.shaper.code == "refused_command"
+    assert d.shaper.protective and d.shaper.protective_code == "refused_command"
     assert (peak[: robot.n_arm] <= v_max + 1e-12).all() and not peak.any()
     assert d.refused["firmware"] == 1
     ok = [0.0] * robot.n_arm
     ok[0] = 0.5 * v_max[0]
     assert not d.on_command(cmd(d, 2, ok), t)  # the stopped stream stays stopped
     assert d.on_command(cmd(d, 3, ok, stream=2), t)  # a new stream, at rest: followed
-    assert not d.shaper.protective_stop
+    assert not d.shaper.protective
 
 
 def test_a_wheel_speed_past_its_limit_is_refused_too(robot: w.RobotConfig) -> None:
@@ -117,7 +117,7 @@ def test_a_wheel_speed_past_its_limit_is_refused_too(robot: w.RobotConfig) -> No
     t, _ = run(d, robot, 0.0, 3)
     w_max = float(robot.base.wheel_speed_max[0])
     assert not d.on_command(cmd(d, 1, [0.0] * robot.n_arm, [1.5 * w_max, 0.0]), t)
-    assert d.shaper.protective_stop and "joint 8" in d.shaper.reason  # the first wheel after the 7 joints
+    assert d.shaper.protective and "joint 8" in d.shaper.protective_reason  # the first wheel after the 7 joints
 
 
 def test_a_command_that_could_not_stop_before_a_position_limit_is_refused(robot: w.RobotConfig) -> None:
@@ -128,7 +128,7 @@ def test_a_command_that_could_not_stop_before_a_position_limit_is_refused(robot:
     up = [0.0] * robot.n_arm
     up[3] = 1.0
     assert not d.on_command(cmd(d, 1, up), DT)
-    assert d.shaper.code == "cannot_stop_before_limit"
+    assert d.shaper.protective_code == "cannot_stop_before_limit"
 
 
 def test_stale_commands_brake_the_robot_to_rest_within_the_stale_timeout(robot: w.RobotConfig) -> None:
@@ -139,9 +139,9 @@ def test_stale_commands_brake_the_robot_to_rest_within_the_stale_timeout(robot: 
     go[6] = 0.5
     assert d.on_command(cmd(d, 1, go, [2.0, 2.0]), t)
     t, _ = run(d, robot, t, 5)  # ramping up, within the stale timeout
-    assert not d.shaper.stale_stop and d.shaper.v[6] > 0
+    assert not d.shaper.stale and d.shaper.v[6] > 0
     t, _ = run(d, robot, t, 5)  # 40 ms without a command
-    assert d.shaper.stale_stop
+    assert d.shaper.stale
     t, _ = run(d, robot, t, 250)
     assert d.shaper.at_rest
     assert not d.on_command(cmd(d, 2, go), t) and d.refused["ended"] == 1  # the stale stop ended the stream
@@ -160,13 +160,13 @@ def test_lost_joint_states_are_a_protective_stop_naming_the_topic(robot: w.Robot
         t += DT
         d.on_command(cmd(d, k, go), t)
         d.cycle(t, meas(robot, last), t)
-    assert d.shaper.protective_stop and d.shaper.code == "robot_state_lost"
-    assert "'joint_states'" in d.shaper.reason and "state_timeout 0.1 s" in d.shaper.reason
+    assert d.shaper.protective and d.shaper.protective_code == "robot_state_lost"
+    assert "'joint_states'" in d.shaper.protective_reason and "state_timeout 0.1 s" in d.shaper.protective_reason
     assert d.refused["state_lost"] > 0
     t, _ = run(d, robot, t, 200, fresh=False)
     assert d.shaper.at_rest and d.lost
     t, _ = run(d, robot, t, 2)  # the states are back
-    assert d.on_command(cmd(d, 100, go, stream=2), t) and not d.shaper.protective_stop
+    assert d.on_command(cmd(d, 100, go, stream=2), t) and not d.shaper.protective
 
 
 def test_the_robot_refused_messages_are_counted_in_the_state(robot: w.RobotConfig) -> None:
@@ -256,4 +256,4 @@ def test_the_cannot_stop_check_judges_where_the_joints_are_now_not_where_an_old_
         d.on_command(cmd(d, seq, go), t)
         d.cycle(t, meas(robot, stamp, q_old), t)
     assert t - stamp < robot.ros2.state_timeout
-    assert d.shaper.protective_stop and d.shaper.code == "cannot_stop_before_limit", d.shaper.reason
+    assert d.shaper.protective and d.shaper.protective_code == "cannot_stop_before_limit", d.shaper.protective_reason

@@ -160,7 +160,8 @@ def run(args: argparse.Namespace) -> int:
     summary["exit_codes"] = codes
     summary["cpu_pct"], summary["cpu_how"] = cpu, CPU_HOW
     summary["logs"] = str(log_dir)
-    summary["physics"] = plant
+    # a driver's robot is its own physics (franky-sim's MuJoCo, a real arm): no plant of ours ran
+    summary["physics"] = plant if args.driver is None else f"the robot's own (driver {args.driver})"
     summary["embedded"] = args.embedded
     summary["robot"] = {"name": robot.name, "file": str(robot.path), "n_arm": robot.n_arm,
                         "n_wheels": robot.n_wheels, "base_kind": robot.base.kind, "task": ctl.task.kind}
@@ -170,7 +171,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         lp = summary["loop"]
         print(f"demo: {robot.name} ({robot.n_arm} joints, {robot.base.kind} base, {ctl.task.kind} task), "
-              f"{summary['duration_s']:.1f} s at {lp['rate_hz']:g} Hz — ticks {lp['ticks']}, "
+              f"{summary['duration_s']:.1f} s at {lp['rate_hz']:g} Hz — {summary['scenario_ticks']} ticks "
+              f"({lp['ticks']} since the daemon started, its start-up included), "
               f"deadline misses {lp['deadline_misses']}, tick p50 {lp['tick_p50_us']:.0f} µs, "
               f"p99 {lp['tick_p99_us']:.0f} µs, max {lp['tick_max_us']:.0f} µs")
         print(f"      violations {summary['violations_total']} {summary['violations']}; {summary['collision_summary']}")
@@ -275,6 +277,7 @@ def _drive(svc: Any, duration: float, bar: ProgressLine, exited: Any = lambda: N
             return np.array(i.status.x)
 
         dm_start = info.status.dm
+        ticks0 = (c.info() or info).status.loop.ticks  # the daemon ticked while the stack came up
         t_start = time.monotonic()
         faults0 = dict(info.status.faults)
         st0 = c.latest_truth() or c.wait_truth(2.0)
@@ -320,6 +323,7 @@ def _drive(svc: Any, duration: float, bar: ProgressLine, exited: Any = lambda: N
     return {
         "duration_s": elapsed,
         "loop": msgspec.to_builtins(final.status.loop),
+        "scenario_ticks": final.status.loop.ticks - ticks0,
         "violations": violations,
         "violations_total": int(sum(violations.values())),
         "ee_error_max": max(ee_err, default=None),

@@ -21,8 +21,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                    "pip install 'wmm-qp[franka]'")
     p.add_argument("--robot-ip", required=True, metavar="IP", help="the robot's (or franky-sim's) address")
     add_service_arguments(p)
-    add_robot_argument(p)
-    p.set_defaults(robot_config=None)  # None: configs/robots/fr3.toml
+    add_robot_argument(p, default="fr3.toml")  # None: configs/robots/fr3.toml, set in run()
     p.add_argument("--stale-timeout", type=float, default=None, metavar="S",
                    help="[s] commands older than this brake the arm to rest (default: configs/sim.toml's "
                         "stale_timeout, 0.025)")
@@ -94,9 +93,10 @@ def run(args: argparse.Namespace) -> int:
         code = driver.run(args.robot_ip, stop_on_signals())
     sh = driver.shaper
     violations = {k: n for k, n in driver.referee.counts.items() if n}
-    last = f" (last: {sh.reason})" if sh.reason else ""
-    print(f"wmm-qp driver franka: stopped at t = {driver.t:.3f} s (exit {code}), violations {violations}, "
-          f"protective stops {sh.protective_stops}{last}, refused {dict(driver.refused)}", file=sys.stderr, flush=True)
+    last = f" (last: {sh.protective_reason})" if sh.protective_reason else ""
+    print(f"wmm-qp driver franka: stopped at t = {driver.t:.3f} s (exit {code}){_clock(driver.t, driver.started_at)}, "
+          f"violations {violations}, protective stops {sh.protective_stops}{last}, refused {dict(driver.refused)}",
+          file=sys.stderr, flush=True)
     return code
 
 
@@ -122,6 +122,20 @@ def _run_embedded(args: argparse.Namespace, driver: Any) -> int | None:
     return code
 
 
+def _clock(robot_s: float, started_at: float) -> str:
+    """The robot's clock against the wall's since the motion started: a robot time well behind
+    (franky-sim steps its physics slower than real time on a busy host) is said, not hidden."""
+    import math
+    import time
+
+    wall = time.monotonic() - started_at
+    if not math.isfinite(wall) or wall <= 0.5:
+        return ""
+    ratio = robot_s / wall
+    slow = "; the robot's clock ran slower than the wall's (a simulator behind real time?)" if ratio < 0.9 else ""
+    return f" in {wall:.1f} s of wall time ({ratio:.2f}× real time{slow})"
+
+
 def _run_ros2(args: argparse.Namespace) -> int:
     """``driver ros2``: a ros2_control robot (docs/ros2.md)."""
     from wmm_qp_sim import load_sim_config
@@ -144,7 +158,7 @@ def _run_ros2(args: argparse.Namespace) -> int:
     code = driver.run(stop_on_signals(), report=args.report)
     sh = driver.shaper
     violations = {k: n for k, n in driver.referee.counts.items() if n}
-    last = f" (last: {sh.reason})" if sh.reason else ""
+    last = f" (last: {sh.protective_reason})" if sh.protective_reason else ""
     lat = driver.report(driver.ros_in)["state_to_command"]
     timing = (f"; state → command p50 {lat['p50_ms']:.2f} ms, p99 {lat['p99_ms']:.2f} ms over {lat['n']} commands"
               if lat["n"] else "")

@@ -196,7 +196,7 @@ class Ros2Driver(LeaseGate):
         self.t = t
         age = now - meas.received if meas is not None else math.inf
         if age > self.cfg.state_timeout:
-            if not self.lost or not self.shaper.protective_stop:
+            if not self.lost or not self.shaper.protective:
                 topic = self.cfg.joint_states
                 why = (f"no joint states on {topic!r} for {age:.3f} s (state_timeout {self.cfg.state_timeout:g} s)"
                        if meas is not None else f"no joint states on {topic!r} yet")
@@ -213,7 +213,7 @@ class Ros2Driver(LeaseGate):
         elif self.meas is not None:
             self.q_now = self.q_now + v_out[:n] * self.dt
         v = self.shaper.step(t, self._q())
-        stopped = self.shaper.stale_stop or self.shaper.protective_stop
+        stopped = self.shaper.stale or self.shaper.protective
         if stopped and not self._stopped:
             self.referee.break_stream(hard=False)  # the robot stopped following the stream
         self._stopped = stopped
@@ -233,9 +233,10 @@ class Ros2Driver(LeaseGate):
             robot=self.svc.robot, seq=self.seq, stamp=time.time(), t=self.t,
             q_base=m.q_base.tolist(), q_arm=m.q_arm.tolist(), v_arm=sh.v[:n].tolist(),
             wheel_speeds=sh.v[n:].tolist(), tau=m.tau.tolist(), gripper_width=math.nan,
-            stale_stop=sh.stale_stop, cmd_seq=self.cmd_seq, instance=self.instance, lease=self.holder,
-            protective_stop=sh.protective_stop, protective_stops=sh.protective_stops,
-            protective_reason=sh.reason, protective_code=sh.code, refused=self.refused_counts(hw_counts))
+            stale_stop=sh.stale, cmd_seq=self.cmd_seq, instance=self.instance, lease=self.holder,
+            protective_stop=sh.protective, protective_stops=sh.protective_stops,
+            protective_reason=sh.protective_reason, protective_code=sh.protective_code,
+            refused=self.refused_counts(hw_counts))
 
     def truth_msg(self) -> TruthMsg:
         """The referee's counts as ``sim/truth`` (no ground truth: NaN)."""

@@ -25,8 +25,8 @@ from wmm_qp.config import TASK_KINDS
 
 HELP = "measure per-tick controller time and the loop over Zenoh"
 
-_SECTIONS = ("controller", "oneshot", "pink", "scaling", "robots", "e2e", "daemon", "collisions", "collision_default",
-             "jitter", "sim", "tick", "ros2")
+_SECTIONS = ("default", "controller", "oneshot", "pink", "scaling", "robots", "e2e", "daemon", "collisions",
+             "collision_default", "jitter", "sim", "tick", "ros2")
 _MODES = ("hold", "track", "dm_cartesian", "dm_nullspace")
 
 
