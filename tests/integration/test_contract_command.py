@@ -105,19 +105,42 @@ def test_a_wrong_prefix_or_robot_id_is_named_with_the_keys_that_do_carry_states(
     assert f"no state on {sim.prefix}/gen3/state" in out.stderr and f"{sim.prefix}/{sim.robot}/state" in out.stderr
 
 
-def test_a_daemon_holding_the_robot_is_named_and_nothing_is_sent(sim: Any) -> None:
+def test_a_daemon_holding_the_robot_is_named_and_nothing_is_sent() -> None:
+    """A daemon's token (and its lease) on the robot's keys: the kit names them, exit 1, no check
+    runs. The test's session stands where the driver would (it listens on the sim's endpoint),
+    so the kit reaches it as it reaches a daemon connected to the driver."""
     from wmm_qp_service.keys import Keys
-    from wmm_qp_service.transport import ROLE_CLIENT, open_session
+    from wmm_qp_service.transport import ROLE_SIM, open_session
 
-    with open_session(sim, ROLE_CLIENT) as s:
-        token = s.liveliness().declare_token(Keys.of(sim.prefix, sim.robot).alive("daemon"))
+    svc = isolated_config(robot=w.load_robot_config())
+    keys = Keys.of(svc.prefix, svc.robot)
+    with open_session(svc, ROLE_SIM) as s:
+        tokens = [s.liveliness().declare_token(keys.alive("daemon")), s.liveliness().declare_token(keys.lease("d1"))]
         try:
-            out = contract(sim, "--json")
+            out = contract(svc, "--json", wait=3.0)
         finally:
-            token.undeclare()
-    assert out.returncode == 1
-    assert "alive/daemon alive: a daemon (or another controller) holds" in out.stderr
-    assert verdicts(out)["checks"] == {}
+            for t in tokens:
+                t.undeclare()
+    assert out.returncode == 1, out.stdout + out.stderr
+    assert (f"{keys.alive('daemon')}, {keys.lease('d1')} alive: a daemon (or another controller) holds {keys.root}; "
+            f"stop it first") in out.stderr
+    assert verdicts(out)["checks"] == {} and "PASS" not in out.stderr
+
+
+def test_a_daemon_on_the_daemons_endpoint_is_named() -> None:
+    """The daemon's endpoint taken (a daemon of the default endpoints runs): one line, exit 1."""
+    import socket
+
+    svc = isolated_config(robot=w.load_robot_config())
+    host, port = svc.zenoh.daemon_endpoint.split("/", 1)[1].rsplit(":", 1)
+    with socket.socket() as sock:
+        sock.bind((host, int(port)))
+        sock.listen()
+        out = contract(svc, wait=3.0)
+    assert out.returncode == 1, out.stdout + out.stderr
+    err = out.stderr.strip().splitlines()
+    assert len(err) == 1 and f"cannot open a session listening on {svc.zenoh.daemon_endpoint}" in err[0]
+    assert "is a daemon running there?" in err[0] and "Traceback" not in out.stderr
 
 
 @pytest.mark.parametrize("args, message", [

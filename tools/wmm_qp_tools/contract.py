@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import secrets
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -40,6 +41,9 @@ import wmm_qp as w
 
 SLACK = 0.3
 """[s] what a loaded host may add to any wall-clock wait of the contract."""
+COUNTED_MIN = 0.8
+"""[-] the share of a reason's refused commands its count must show (the kit's commands may be
+dropped in transit on a loaded host, as the daemon's are)."""
 ACCEL_WINDOW = 0.01
 """[s] the executed rates' acceleration is judged over windows of at least this much robot time
 (a real robot's measured rates are noisy from one cycle to the next)."""
@@ -65,11 +69,14 @@ class Controller:
     Args:
         svc: the driver's service config (prefix, robot id, endpoints).
         robot: the robot description the driver was started with.
-        lease: this controller's lease id.
+        lease: this controller's lease id (None: ``contract-`` and a random suffix).
         period: [s] the commands' period (the daemon's control period).
     """
 
-    def __init__(self, svc: ServiceConfig, robot: w.RobotConfig, lease: str = "contract", period: float = 0.002):
+    def __init__(self, svc: ServiceConfig, robot: w.RobotConfig, lease: str | None = None, period: float = 0.002):
+        # a fresh lease per run, as each daemon start has its own: the driver keeps the seq of a
+        # holder it saw, and a later run's seqs start again from 1
+        lease = lease or f"contract-{secrets.token_hex(4)}"
         self.svc, self.robot, self.lease, self.period = svc, robot, lease, period
         self.keys = Keys.of(svc.prefix, svc.robot)
         self._stack = contextlib.ExitStack()
@@ -289,14 +296,14 @@ def check_states(k: Kit, seconds: float = 1.0) -> str:
         raise ContractError(f"state seq does not increase: {seqs[i]} then {seqs[i + 1]}")
     gaps = int(np.sum(np.diff(seqs) != 1))
     missing = int(seqs[-1] - seqs[0] + 1 - len(sts))
-    if missing > 0.5 * len(sts):
+    if np.median(np.diff(seqs)) != 1:  # states lost in transit leave gaps; a driver that counts so has no 1s
         raise ContractError(f"state seq is not consecutive: {gaps} gaps ({missing} seqs skipped) in {len(sts)} "
-                            f"states")
+                            f"states, the usual step {np.median(np.diff(seqs)):g}")
     instances = {s.instance for s in sts}
     if len(instances) != 1 or "" in instances:
         raise ContractError(f"states of {len(instances)} instances {sorted(instances)} from one driver")
     return (f"{len(sts)} states in {seconds:g} s: {rate:.0f} Hz on the robot's time (>= {0.5 * k.rate_hz:g}), "
-            f"seq consecutive ({missing} lost in transit), one instance {sts[-1].instance}")
+            f"seq consecutive ({missing} lost in transit in {gaps} gaps), one instance {sts[-1].instance}")
 
 
 def check_liveliness(k: Kit) -> str:
@@ -347,10 +354,11 @@ def check_lease(k: Kit) -> str:
     c.hold_lease()
     c.until(lambda st: st.lease == c.lease, 5.0, f"state.lease naming the holder {c.lease!r}")
     _burst(k, 10, "lease", lease="intruder")
-    late = c.session.liveliness().declare_token(c.keys.lease("contract-late"))
+    later = f"{c.lease}-later"
+    late = c.session.liveliness().declare_token(c.keys.lease(later))
     try:
         time.sleep(0.2)  # the driver has seen the later token
-        _, st = _burst(k, 10, "lease", lease="contract-late")
+        _, st = _burst(k, 10, "lease", lease=later)
         if st.lease != c.lease:
             raise ContractError(f"state.lease {st.lease!r} after a later lease token appeared; the holder is "
                                 f"{c.lease!r}, the earliest alive")
@@ -412,8 +420,10 @@ def check_refusal_counts(k: Kit) -> str:
         st = c.drain()  # type: ignore[assignment]
     assert st is not None
     rows = [f"{r} +{st.refused.get(r, 0) - b} of {n}" for r, (b, n) in sorted(k.refusals.items())]
+    # a command lost in transit on a loaded host is neither refused nor counted: at least
+    # COUNTED_MIN of each reason's refusals, never more than were sent
     wrong = [f"{r}: +{st.refused.get(r, 0) - b} for {n} refused" for r, (b, n) in sorted(k.refusals.items())
-             if st.refused.get(r, 0) - b != n]
+             if not COUNTED_MIN * n <= st.refused.get(r, 0) - b <= n]
     if wrong:
         raise ContractError(f"state.refused does not count the refusals: {'; '.join(wrong)} (refused "
                             f"{dict(st.refused)})")
@@ -457,15 +467,18 @@ def check_ramp(k: Kit) -> str:
     step = 0.5 * float(c.robot.arm.velocity_max[j])
     a = float(c.robot.arm.acceleration_max[j])
     log = c.record()
-    hold = step / a + 0.1
+    hold = step / a + 0.05
     for target in (step, 0.0):
         v = c.zeros()
         v[j] = target
-        end = time.monotonic() + hold
-        while time.monotonic() < end:
-            c.drive(v)
+        reached = math.inf  # [s] monotonic time the robot executed the target
+        end = time.monotonic() + hold + 2.0 + SLACK
+        while time.monotonic() < min(end, reached + hold):
+            st = c.drive(v)
+            if st is not None and math.isinf(reached) and abs(st.v_arm[j] - target) < 0.02 * step:
+                reached = time.monotonic()
             time.sleep(c.period)
-    c.until(_near_rest(c), 1.0 + SLACK, "rest after the step down")
+    c.until(_near_rest(c), 1.0 + SLACK, "rest after the step down", lambda: c.drive(c.zeros()))
     c._recording = False
     peak = max((abs(s.v_arm[j]) for s in log), default=0.0)
     if peak < 0.9 * step:
@@ -718,8 +731,12 @@ def check_stopped_stream(k: Kit, attempts: int = 3) -> str:
         st = c.drain()
         how = "the position limit's stop"
         if attempt or st is None or not st.protective_stop or st.stale_stop:
-            _velocity_stop(c)
-            how = "a velocity limit's stop"
+            try:
+                _velocity_stop(c)
+                how = "a velocity limit's stop"
+            except ContractError:  # a driver that does not refuse that: the position limit's stop again
+                recover(k)
+                check_position_limit(k)
         log = c.record()
         c.until(lambda st: st.protective_stop and _near_rest(c)(st), 2.0 + SLACK, "rest in the protective stop",
                 lambda: c.send(c.zeros()))  # the stream goes on: its stop, not a stale one, ends it
