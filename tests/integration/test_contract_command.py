@@ -153,3 +153,22 @@ def test_bad_arguments_are_one_line_and_exit_2(args: Sequence[str], message: str
     out = subprocess.run([*TOOLS, "contract", *args], capture_output=True, text=True, timeout=120)
     assert out.returncode == 2, out.stdout + out.stderr
     assert len(out.stderr.strip().splitlines()) == 1 and message in out.stderr
+
+
+def test_the_fr3_driver_on_franky_sim_passes_every_check(tmp_path: Path) -> None:
+    """``wmm-qp contract --robot-config fr3.toml`` against ``wmm-qp driver franka`` on franky-sim
+    (each in its own process: libfranka's connect holds the GIL)."""
+    pytest.importorskip("pylibfranka", reason="needs pylibfranka (pip install 'wmm-qp[franka]')")
+    pytest.importorskip("franky_sim", reason="needs franky-sim (pip install franky-sim)")
+    from support.franky_rig import FR3, driver_stack, start_franky_sim
+
+    sim = start_franky_sim(w.load_robot_config(FR3))
+    try:
+        with driver_stack(sim, tmp_path, serve=False) as (svc, _):
+            out = contract(svc, "--robot-config", str(FR3), "--json")
+    finally:
+        sim.close()
+    assert out.returncode == 0, out.stdout + out.stderr
+    v = verdicts(out)
+    assert list(v["checks"]) == list(NAMES) and all(c["passed"] for c in v["checks"].values())
+    assert "cannot_stop_before_limit" in v["checks"]["position_limit"]["detail"]

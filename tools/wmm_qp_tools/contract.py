@@ -529,13 +529,13 @@ def check_stale(k: Kit, rate: float = 0.3) -> str:
 def _ended(k: Kit, stopped: Callable[[StateMsg], bool], which: str) -> str:
     """Legal commands of the stream the robot's stop ended, for 0.1 s: refused and counted in
     ``refused.ended`` (not ``refused.firmware``), the robot still in its stop, its ``cmd_seq``
-    naming one of them (how the daemon learns its stream stopped); then a new stream resumes."""
+    naming a command of that stream (the daemon's rule: a stop that names one of its stream's
+    commands ended that stream); then a new stream resumes."""
     c = k.c
     _resting(c, 0.1)  # what the check before sent has landed; the stream goes on (no stale stop on top)
     st0 = c.drain()
     assert st0 is not None
     fw0, end0 = st0.refused.get("firmware", 0), st0.refused.get("ended", 0)
-    first = c.seq + 1
     log = c.record()
     st = _resting(c, 0.15)  # legal commands, the stopped stream (sent on: no stale stop on top)
     c._recording = False
@@ -546,12 +546,13 @@ def _ended(k: Kit, stopped: Callable[[StateMsg], bool], which: str) -> str:
     if st.refused.get("firmware", 0) > fw0:
         raise ContractError(f"the {which} stream's commands counted as firmware faults (refused.firmware "
                             f"{fw0} -> {st.refused['firmware']}): each would hold the daemon in a safe stop")
-    if st.cmd_seq < first:
-        raise ContractError(f"cmd_seq {st.cmd_seq} names none of the {which} stream's refused commands "
-                            f"(seq >= {first}): the daemon would not learn its stream stopped")
+    if st.cmd_seq < c.stream:
+        raise ContractError(f"cmd_seq {st.cmd_seq} in the stop names no command of the {which} stream (seq >= "
+                            f"{c.stream}): the daemon would not learn its stream stopped")
     n = st.refused.get("ended", 0) - end0
     settle(c)
-    return f"refused.ended +{n}, refused.firmware +0, cmd_seq {st.cmd_seq} names one; a new stream resumed"
+    return (f"refused.ended +{n}, refused.firmware +0, cmd_seq {st.cmd_seq} names the stream (from {c.stream}); a new "
+            f"stream resumed")
 
 
 def check_stale_stream(k: Kit, rate: float = 0.3) -> str:
