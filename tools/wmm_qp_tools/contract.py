@@ -35,6 +35,7 @@ import zenoh
 from wmm_qp_service.config import ServiceConfig
 from wmm_qp_service.keys import Keys
 from wmm_qp_service.protocol import CommandMsg, StateMsg, encode
+from wmm_qp_service.rate_loop import realtime_priority
 from wmm_qp_service.transport import ROLE_DAEMON, open_session
 
 import wmm_qp as w
@@ -83,13 +84,19 @@ class Controller:
         self.session: zenoh.Session = self._stack.enter_context(open_session(svc, ROLE_DAEMON))
         self._token: Any = None
         self._sub = self.session.declare_subscriber(self.keys.state, zenoh.handlers.FifoChannel(100_000))
-        self._pub = self.session.declare_publisher(self.keys.cmd, express=True)
+        # blocking, not dropping, under congestion: the refusal counts are judged command by
+        # command, so every command the kit sends reaches the driver
+        self._pub = self.session.declare_publisher(self.keys.cmd, express=True,
+                                                   congestion_control=zenoh.CongestionControl.BLOCK)
         self._dec = msgspec.msgpack.Decoder(StateMsg)
         self.states: list[StateMsg] = []
         self.log: list[StateMsg] = []  # every state since :meth:`record` (None: not recording)
         self._recording = False
         self.seq = 0
         self.stream = 0
+        # the daemon's scheduling for the thread that sends (Zenoh's threads, started with the
+        # session, keep theirs): a loaded host then delays its commands as little as the daemon's
+        self.scheduling = realtime_priority(svc.loop.rt_priority)
 
     def close(self) -> None:
         """Undeclare everything and close the session."""
@@ -235,7 +242,7 @@ def _resting(c: Controller, seconds: float) -> StateMsg:
     return st
 
 
-def settle(c: Controller, timeout: float = 3.0) -> StateMsg:
+def settle(c: Controller, timeout: float = 10.0) -> StateMsg:
     """With the lease, a new stream of zero rates until the robot applies it, out of any stop
     and at rest (a robot in a protective stop resumes once at rest: docs/drivers.md)."""
     c.hold_lease()
@@ -287,10 +294,11 @@ def check_states(k: Kit, seconds: float = 1.0) -> str:
         raise ContractError(f"{len(sts)} states in {seconds:g} s")
     seqs = np.array([s.seq for s in sts])
     span = sts[-1].t - sts[0].t  # [s] robot time: a simulated robot may run slow
-    rate = (len(sts) - 1) / span if span > 0 else math.inf
+    # the driver's cycles by its seqs (states lost in transit are not the driver's doing)
+    rate = float(seqs[-1] - seqs[0]) / span if span > 0 else math.inf
     if len(sts) < 10 or not span > 0 or rate < 0.5 * k.rate_hz:
-        raise ContractError(f"{len(sts)} states over {span:.3f} s of robot time ({seconds:g} s of wall time); "
-                            f"the robot's rate is {k.rate_hz:g} Hz")
+        raise ContractError(f"{len(sts)} states, seq {seqs[0]} to {seqs[-1]}, over {span:.3f} s of robot time "
+                            f"({seconds:g} s of wall time): {rate:.0f} Hz; the robot's rate is {k.rate_hz:g} Hz")
     if np.any(np.diff(seqs) <= 0):
         i = int(np.flatnonzero(np.diff(seqs) <= 0)[0])
         raise ContractError(f"state seq does not increase: {seqs[i]} then {seqs[i + 1]}")
@@ -415,7 +423,7 @@ def check_refusal_counts(k: Kit) -> str:
         return all(st.refused.get(r, 0) - b >= n for r, (b, n) in k.refusals.items())
 
     try:
-        st = c.until(counted, 1.0 + SLACK, "state.refused counting every refusal")
+        st = c.until(counted, 5.0, "state.refused counting every refusal")  # a loaded driver counts late
     except ContractError:
         st = c.drain()  # type: ignore[assignment]
     assert st is not None
@@ -664,7 +672,7 @@ def check_position_limit(k: Kit, speed: float = 0.5) -> str:
     c.new_stream()
     log = c.record()
     duration = abs(lim - st0.q_arm[j]) / rate + rate / a + 1.0
-    end = time.monotonic() + duration * 3 + 2 * SLACK
+    end = time.monotonic() + duration * 3 + 10.0  # a loaded host: this process stalls, the robot waits
     verdict = ""
     v = 0.0
     try:
@@ -720,7 +728,7 @@ def _velocity_stop(c: Controller) -> StateMsg:
                    "protective stop for a command past the velocity limit", lambda: c.send(v))
 
 
-def check_stopped_stream(k: Kit, attempts: int = 3) -> str:
+def check_stopped_stream(k: Kit, attempts: int = 6) -> str:
     """After a protective stop the stopped stream's commands stay refused (``refused.ended``, not
     ``refused.firmware``) and a new stream resumes. The stop is the one the robot is in
     (:func:`check_position_limit`'s), else one provoked here with a command past the last joint's
@@ -825,7 +833,7 @@ def recover(k: Kit) -> None:
     """After a failed check: a new stream of zero rates until the robot rests (never raises)."""
     with contextlib.suppress(Exception):
         k.c._recording = False
-        settle(k.c, 3.0)
+        settle(k.c)
 
 
 def run_checks(k: Kit, skip: Sequence[str] = (), on_result: Callable[[Result], None] | None = None,

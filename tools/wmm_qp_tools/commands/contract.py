@@ -80,7 +80,8 @@ def run(args: argparse.Namespace) -> int:
     results: list[Result] = []
     with ctl:
         print(f"contract: {root} ({robot.n_arm} joints, {robot.n_wheels} wheels), rate {args.rate:g} Hz, command "
-              f"timeout {stale * 1e3:g} ms: waiting for the driver's state on {ctl.keys.state}", file=out, flush=True)
+              f"timeout {stale * 1e3:g} ms, {ctl.scheduling}: waiting for the driver's state on {ctl.keys.state}",
+              file=out, flush=True)
         try:
             check_no_daemon(ctl)
             state = wait_for_driver(ctl, args.wait)
