@@ -45,6 +45,9 @@ SLACK = 0.3
 COUNTED_MIN = 0.8
 """[-] the share of a reason's refused commands its count must show (the kit's commands may be
 dropped in transit on a loaded host, as the daemon's are)."""
+MAX_RATE = 1.0
+"""[rad/s] the fastest the kit moves a joint (its step and its run to a limit: half the joint's
+velocity limit, at most this)."""
 ACCEL_WINDOW = 0.01
 """[s] the executed rates' acceleration is judged over windows of at least this much robot time
 (a real robot's measured rates are noisy from one cycle to the next)."""
@@ -472,7 +475,7 @@ def check_ramp(k: Kit) -> str:
     c = k.c
     settle(c)
     j = c.robot.n_arm - 1
-    step = 0.5 * float(c.robot.arm.velocity_max[j])
+    step = min(0.5 * float(c.robot.arm.velocity_max[j]), MAX_RATE)
     a = float(c.robot.arm.acceleration_max[j])
     log = c.record()
     hold = step / a + 0.05
@@ -540,6 +543,7 @@ def _ended(k: Kit, stopped: Callable[[StateMsg], bool], which: str) -> str:
     naming a command of that stream (the daemon's rule: a stop that names one of its stream's
     commands ended that stream); then a new stream resumes."""
     c = k.c
+    stream = c.stream  # the stopped stream's first seq
     _resting(c, 0.1)  # what the check before sent has landed; the stream goes on (no stale stop on top)
     st0 = c.drain()
     assert st0 is not None
@@ -554,12 +558,12 @@ def _ended(k: Kit, stopped: Callable[[StateMsg], bool], which: str) -> str:
     if st.refused.get("firmware", 0) > fw0:
         raise ContractError(f"the {which} stream's commands counted as firmware faults (refused.firmware "
                             f"{fw0} -> {st.refused['firmware']}): each would hold the daemon in a safe stop")
-    if st.cmd_seq < c.stream:
+    if st.cmd_seq < stream:
         raise ContractError(f"cmd_seq {st.cmd_seq} in the stop names no command of the {which} stream (seq >= "
-                            f"{c.stream}): the daemon would not learn its stream stopped")
+                            f"{stream}): the daemon would not learn its stream stopped")
     n = st.refused.get("ended", 0) - end0
     settle(c)
-    return (f"refused.ended +{n}, refused.firmware +0, cmd_seq {st.cmd_seq} names the stream (from {c.stream}); a new "
+    return (f"refused.ended +{n}, refused.firmware +0, cmd_seq {st.cmd_seq} names the stream (from {stream}); a new "
             f"stream resumed")
 
 
@@ -627,8 +631,8 @@ def _limit_joint(c: Controller, q: np.ndarray) -> tuple[int, float] | None:
 def goto(c: Controller, q_target: Sequence[float] | np.ndarray, speed: float = 0.5, timeout: float = 20.0,
          tol: float = 0.01) -> StateMsg:
     """Drive the arm to ``q_target`` [rad] (a P law, rates at most ``speed`` x the velocity
-    limits, changed by at most the acceleration limits per period), then rest; the last state."""
-    vmax = speed * np.array(c.robot.arm.velocity_max, dtype=float)
+    limits and :data:`MAX_RATE`, changed by at most the acceleration limits per period), then rest; the last state."""
+    vmax = np.minimum(speed * np.array(c.robot.arm.velocity_max, dtype=float), MAX_RATE)
     amax = np.array(c.robot.arm.acceleration_max, dtype=float) * c.period
     target = np.array(q_target, dtype=float)
     settle(c)
@@ -666,7 +670,7 @@ def check_position_limit(k: Kit, speed: float = 0.5) -> str:
     j, d = pick
     lim = float(c.robot.arm.position_upper[j] if d > 0 else c.robot.arm.position_lower[j])
     a = float(c.robot.arm.acceleration_max[j])
-    rate = speed * float(c.robot.arm.velocity_max[j])
+    rate = min(speed * float(c.robot.arm.velocity_max[j]), MAX_RATE)
     stops0 = st0.protective_stops
     tol = 0.005 + rate * _cycles(k, 3)
     c.new_stream()
