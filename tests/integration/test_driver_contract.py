@@ -1,8 +1,9 @@
-"""The driver contract (docs/drivers.md) checked by its kit (``wmm_qp_tools.contract``) against
-both drivers: the sim (``wmm-qp sim``, the reference) and the Franka FR3 driver
-(``wmm-qp driver franka``) with franky-sim in a child process (libfranka's connect holds the GIL:
-never in the test's process). Each driver is a factory: it starts the driver on an isolated
-prefix and yields its service config, robot, rate and command timeout.
+"""The driver contract (docs/drivers.md) checked by its kit (``wmm_qp_tools.contract``, the
+checks of ``wmm-qp contract``) against both drivers: the sim (``wmm-qp sim``, the reference) and
+the Franka FR3 driver (``wmm-qp driver franka``) with franky-sim in a child process (libfranka's
+connect holds the GIL: never in the test's process). Each driver is started on an isolated prefix
+and yields its service config, robot, rate and command timeout. That the checks can fail, one
+mutant driver per check: tests/integration/test_contract_command.py.
 """
 
 from __future__ import annotations
@@ -58,61 +59,16 @@ DRIVERS: dict[str, Callable[[Path], contextlib.AbstractContextManager[Driver]]] 
 
 
 @pytest.fixture(params=sorted(DRIVERS), scope="module")
-def controller(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Any]:
+def verdicts(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """Every check of the kit against one driver, by name."""
     with contextlib.ExitStack() as stack:
         svc, robot, rate, timeout = stack.enter_context(DRIVERS[request.param](tmp_path_factory.mktemp(request.param)))
         c = stack.enter_context(contract.Controller(svc, robot))
-        c.until(lambda st: True, 90.0, "a first state from the driver")  # a first start compiles
-        yield c, rate, timeout
+        contract.wait_for_driver(c, 90.0)  # a first start compiles
+        return contract.check_all(c, rate, timeout)
 
 
-def test_it_publishes_states_at_its_rate_with_one_instance_and_its_token(controller: Any) -> None:
-    c, rate, _ = controller
-    out = contract.check_states(c, rate)
-    assert out["states"] > 0
-
-
-def test_it_obeys_only_the_lease_holder_for_its_instance(controller: Any) -> None:
-    c, _, _ = controller
-    contract.check_lease(c)
-
-
-def test_it_brakes_to_rest_on_stale_commands(controller: Any) -> None:
-    c, _, timeout = controller
-    out = contract.check_brakes_when_stale(c, timeout)
-    assert out["detect_s"] < timeout + contract.SLACK
-
-
-def test_a_stale_stop_ends_the_stream_and_a_new_stream_resumes(controller: Any) -> None:
-    c, _, timeout = controller
-    contract.check_stale_ends_the_stream(c, timeout)
-
-
-def test_it_refuses_a_command_past_the_limits_with_a_protective_stop(controller: Any) -> None:
-    c, _, _ = controller
-    contract.check_refuses_past_limits(c)
-
-
-def test_after_a_stop_only_a_new_stream_resumes(controller: Any) -> None:
-    c, _, _ = controller
-    contract.check_stops_the_stopped_stream(c)
-
-
-def test_the_kit_catches_a_robot_without_firmware(tmp_path: Path) -> None:
-    """The kit can fail: a sim whose firmware is off (``firmware = false``) applies a command past
-    the velocity limit, and :func:`~wmm_qp_tools.contract.check_refuses_past_limits` says so."""
-    from wmm_qp.config import default_config_dir as cfg_dir
-
-    sim_toml = tmp_path / "sim_no_firmware.toml"
-    sim_toml.write_text((cfg_dir() / "sim.toml").read_text().replace("firmware = true", "firmware = false"))
-    robot = w.load_robot_config()
-    stack = Stack(isolated_config(robot=robot), log_dir=tmp_path, extra_sim_args=["--sim-config", str(sim_toml)])
-    stack.start_sim()
-    try:
-        with contract.Controller(stack.svc, robot) as c:
-            c.until(lambda st: True, 90.0, "a first state from the sim")
-            contract.check_lease(c)
-            with pytest.raises(contract.ContractError, match="protective stop"):
-                contract.check_refuses_past_limits(c)
-    finally:
-        stack.stop()
+@pytest.mark.parametrize("name", contract.NAMES)
+def test_the_driver_meets_each_duty_of_the_contract(verdicts: dict[str, Any], name: str) -> None:
+    r = verdicts[name]
+    assert r.passed, r.detail

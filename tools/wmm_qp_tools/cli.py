@@ -14,6 +14,8 @@ from wmm_qp_service import cli as runtime
 _TOOLS = {
     "experiment": ("wmm_qp_tools.commands.experiment", "reproduce one of the paper's experiments (circle, dm, push)"),
     "bench": ("wmm_qp_tools.commands.bench", "measure per-tick controller time and the loop over Zenoh"),
+    "contract": ("wmm_qp_tools.commands.contract", "check a running driver against the driver contract "
+                 "(docs/drivers.md)"),
 }
 
 
