@@ -212,9 +212,11 @@ def test_live_the_contract_kit_passes_and_the_robots_topics_refuse_garbage(tmp_p
             with contract.Controller(s.svc, robot) as c:
                 try:
                     c.until(lambda st: True, 120.0, "a first state from the driver")
-                    contract.check_all(c, robot.ros2.rate_hz, 0.025)
+                    results = contract.check_all(c, robot.ros2.rate_hz, 0.025)
                 except contract.ContractError as e:
                     raise AssertionError(f"{e}\n{log_tail(tmp_path)}") from None
+                failed = {name: r.detail for name, r in results.items() if not r.passed}
+                assert len(results) == len(contract.CHECKS) and not failed, f"{failed}\n{log_tail(tmp_path)}"
                 assert rec.commands_past_limits() == 0
                 assert len(rec.commands) > 100
                 pub = rec.node.create_publisher(JointState, robot.ros2.joint_states, qos(True, 10))
