@@ -14,6 +14,11 @@ from wmm_qp_service import cli as runtime
 _TOOLS = {
     "experiment": ("wmm_qp_tools.commands.experiment", "reproduce one of the paper's experiments (circle, dm, push)"),
     "bench": ("wmm_qp_tools.commands.bench", "measure per-tick controller time and the loop over Zenoh"),
+    "record": ("wmm_qp_tools.commands.record", "record a robot's keys to MCAP (ROS 2 message types) as a client"),
+    "replay": ("wmm_qp_tools.commands.replay", "re-run the controller on a recording and report the first "
+                                               "command that differs"),
+    "plot": ("wmm_qp_tools.commands.plot", "plot a recording: joints against their limits, wheels, EE, DM, "
+                                           "tick time, modes and faults"),
 }
 
 

@@ -155,7 +155,8 @@ class McapSink:
         self.writer.add_message(self.ch[topic], log_time=ns, data=data, publish_time=ns)
         self.counts[topic] = self.counts.get(topic, 0) + 1
 
-    def _json(self, topic: str, ns: int, obj: dict[str, Any]) -> None:
+    def json(self, topic: str, ns: int, obj: dict[str, Any]) -> None:
+        """A message of a JSON channel."""
         self._put(topic, ns, msgspec.json.encode(obj))
 
     def _header(self, ns: int, frame: str) -> Any:
@@ -183,7 +184,7 @@ class McapSink:
 
     def tick(self, row: np.ndarray) -> None:
         """Every channel's messages of one tick's row."""
-        lay, T = self.layout, self.T
+        lay = self.layout
         sl = lay.slices
         sc = {k: float(row[i]) for k, i in lay.index.items()}
         ns = int(sc["t_wall"] * 1e9)
@@ -193,9 +194,9 @@ class McapSink:
         status = None if math.isnan(sc["status"]) else STATUSES[int(sc["status"])].value
         self.ticks += 1
         if mode != self.mode:
-            self._json("/wmm/mode", ns, {"tick": tick, "mode": mode, "previous": self.mode})
+            self.json("/wmm/mode", ns, {"tick": tick, "mode": mode, "previous": self.mode})
             self.mode = mode
-        self._json("/wmm/tick", ns, {
+        self.json("/wmm/tick", ns, {
             "tick": tick, "seq": int(sc["seq"]), "call": CALLS[call], "latches": int(sc["latches"]),
             "latency": sc["latency"], "mode": mode, "q_base": row[sl["ctl_q_base"]].tolist(),
             "q_arm": row[sl["ctl_q_arm"]].tolist(), "v_arm": row[sl["ctl_v_arm"]].tolist(),
@@ -204,55 +205,67 @@ class McapSink:
             "quat_d": row[sl["quat_d"]].tolist(), "omega_d": row[sl["omega_d"]].tolist(),
             "cmd_wheel_speeds": row[sl["cmd_wheels"]].tolist(), "cmd_arm_rates": row[sl["cmd_arm"]].tolist(),
             "status": status})
-        self._json("/wmm/telemetry", ns, {
+        self.json("/wmm/telemetry", ns, {
             "tick": tick, "t": sc["t"], "tick_us": sc["tick_us"], "step_us": sc["step_us"], "mode": mode,
             "status": status, "dm": sc["dm"], "sigma_min": sc["sigma_min"], "task_error": sc["task_error"],
             "alpha": sc["alpha"], "ee_error": sc["ee_error"], "x": row[sl["cmd_x"]].tolist(),
             "seq": int(sc["seq"]), "state_seq": int(sc["state_seq"])})
-        q_base, q_arm = row[sl["meas_q_base"]], row[sl["meas_q_arm"]]
+        q_base = row[sl["meas_q_base"]]
         if not math.isnan(q_base[0]):  # a state was measured
-            wheels = row[sl["meas_wheels"]]
-            self._put("/arm/joint_states", ns, self._joint_state(ns, self.joints, q_arm, row[sl["meas_v_arm"]]))
-            self._put("/base/wheel_states", ns, self._joint_state(ns, self.wheels, None, wheels))
-            yaw_q = np.array([0.0, 0.0, math.sin(0.5 * q_base[2]), math.cos(0.5 * q_base[2])])
-            base_pose = self._pose(np.array([q_base[0], q_base[1], 0.0]), yaw_q)
-            twist = self.model.base.body_twist(wheels) if self.model is not None else np.full(3, math.nan)
-            odom = T["nav_msgs/msg/Odometry"](
-                header=self._header(ns, "world"), child_frame_id="base",
-                pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=base_pose, covariance=np.zeros(36)),
-                twist=T["geometry_msgs/msg/TwistWithCovariance"](
-                    twist=T["geometry_msgs/msg/Twist"](linear=_vec3(T, (twist[0], twist[1], 0.0)),
-                                                       angular=_vec3(T, (0.0, 0.0, twist[2]))),
-                    covariance=np.zeros(36)))
-            self._put("/odom", ns, bytes(self.ts.serialize_cdr(odom, "nav_msgs/msg/Odometry")))
-            tfs = [_tf(T, self._header(ns, "world"), "base", base_pose)]
-            if self.model is not None:
-                x, R = self.model.ee_pose(q_base, q_arm)  # FK of the arm (Pinocchio's data now holds it)
-                self._put("/ee/pose", ns, self._pose_stamped(ns, x, _rot_quat(R)))
-                import pinocchio as pin
-
-                am = self.model.arm
-                pin.updateFramePlacements(am.model, am.data)
-                for i, name in self.frames:
-                    M = am.data.oMf[i]
-                    tfs.append(_tf(T, self._header(ns, "base"), name, self._pose(M.translation, _rot_quat(M.rotation))))
-            self._put("/tf", ns, bytes(self.ts.serialize_cdr(T["tf2_msgs/msg/TFMessage"](transforms=tfs),
-                                                             "tf2_msgs/msg/TFMessage")))
+            self.measured(ns, q_base, row[sl["meas_q_arm"]], row[sl["meas_v_arm"]], row[sl["meas_wheels"]])
         if sc["seq"] >= 0:  # a command went out
-            self._put("/arm/joint_commands", ns, self._joint_state(ns, self.joints, None, row[sl["cmd_arm"]]))
-            self._put("/base/wheel_commands", ns, self._joint_state(ns, self.wheels, None, row[sl["cmd_wheels"]]))
+            self.commanded(ns, row[sl["cmd_arm"]], row[sl["cmd_wheels"]])
         x_d = row[sl["x_d"]]
         if call == 1 and not math.isnan(x_d[0]):
-            q_d = row[sl["quat_d"]]
-            self._put("/ee/target", ns, self._pose_stamped(ns, x_d, q_d if not math.isnan(q_d[0])
-                                                           else np.array([0.0, 0.0, 0.0, 1.0])))
+            self.target(ns, x_d, row[sl["quat_d"]])
+
+    def measured(self, ns: int, q_base: np.ndarray, q_arm: np.ndarray, v_arm: np.ndarray,
+                 wheels: np.ndarray) -> None:
+        """A measured state: ``/arm/joint_states``, ``/base/wheel_states``, ``/odom``, ``/tf``, ``/ee/pose``."""
+        T = self.T
+        self._put("/arm/joint_states", ns, self._joint_state(ns, self.joints, q_arm, v_arm))
+        self._put("/base/wheel_states", ns, self._joint_state(ns, self.wheels, None, wheels))
+        yaw_q = np.array([0.0, 0.0, math.sin(0.5 * q_base[2]), math.cos(0.5 * q_base[2])])
+        base_pose = self._pose(np.array([q_base[0], q_base[1], 0.0]), yaw_q)
+        twist = self.model.base.body_twist(wheels) if self.model is not None else np.full(3, math.nan)
+        odom = T["nav_msgs/msg/Odometry"](
+            header=self._header(ns, "world"), child_frame_id="base",
+            pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=base_pose, covariance=np.zeros(36)),
+            twist=T["geometry_msgs/msg/TwistWithCovariance"](
+                twist=T["geometry_msgs/msg/Twist"](linear=_vec3(T, (twist[0], twist[1], 0.0)),
+                                                   angular=_vec3(T, (0.0, 0.0, twist[2]))),
+                covariance=np.zeros(36)))
+        self._put("/odom", ns, bytes(self.ts.serialize_cdr(odom, "nav_msgs/msg/Odometry")))
+        tfs = [_tf(T, self._header(ns, "world"), "base", base_pose)]
+        if self.model is not None:
+            import pinocchio as pin
+
+            x, R = self.model.ee_pose(q_base, q_arm)  # FK of the arm (Pinocchio's data now holds it)
+            self._put("/ee/pose", ns, self._pose_stamped(ns, x, _rot_quat(R)))
+            am = self.model.arm
+            pin.updateFramePlacements(am.model, am.data)
+            for i, name in self.frames:
+                M = am.data.oMf[i]
+                tfs.append(_tf(T, self._header(ns, "base"), name, self._pose(M.translation, _rot_quat(M.rotation))))
+        self._put("/tf", ns, bytes(self.ts.serialize_cdr(T["tf2_msgs/msg/TFMessage"](transforms=tfs),
+                                                         "tf2_msgs/msg/TFMessage")))
+
+    def commanded(self, ns: int, arm: np.ndarray, wheels: np.ndarray) -> None:
+        """A command sent: ``/arm/joint_commands``, ``/base/wheel_commands`` (velocity: the rates)."""
+        self._put("/arm/joint_commands", ns, self._joint_state(ns, self.joints, None, arm))
+        self._put("/base/wheel_commands", ns, self._joint_state(ns, self.wheels, None, wheels))
+
+    def target(self, ns: int, x_d: np.ndarray, quat_d: np.ndarray) -> None:
+        """The EE's target: ``/ee/target`` (orientation: the pose task's, else the identity)."""
+        q = quat_d if not math.isnan(quat_d[0]) else np.array([0.0, 0.0, 0.0, 1.0])
+        self._put("/ee/target", ns, self._pose_stamped(ns, x_d, q))
 
     def event(self, kind: int, tick: int, data: dict[str, Any]) -> None:
         ns = time.time_ns()
         if kind == 1:
-            self._json("/wmm/status", ns, {"tick": tick, "status": data})
+            self.json("/wmm/status", ns, {"tick": tick, "status": data})
         else:
-            self._json("/wmm/events", ns, {"tick": tick, "kind": EVENT_KINDS.get(kind, "note"), "data": data})
+            self.json("/wmm/events", ns, {"tick": tick, "kind": EVENT_KINDS.get(kind, "note"), "data": data})
 
 
 def _vec3(T: Any, v: Any) -> Any:
@@ -319,12 +332,13 @@ def writer_main(ticks_name: str, events_name: str, rows: int, n_arm: int, n_whee
                 with contextlib.suppress(Exception):
                     sink.event(kind, tick, msgspec.json.decode(bytes(slot[24:24 + ln])))
                 done_e += 1
+            if done_t < n_t:  # a new file starts with a tick, never empty
+                sink.maybe_rotate(done_t)
             while done_t < n_t:
                 row = ring[done_t % rows].copy()
                 sink.tick(row)
                 done_t += 1
             sink.stream.flush()
-            sink.maybe_rotate(done_t)
             if closed or orphan:
                 if orphan and not closed:
                     ended = "the host ended without closing the recording"

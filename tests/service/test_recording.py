@@ -1,0 +1,205 @@
+"""``wmm-qp serve --record``, ``wmm-qp replay``: a recording read back by an independent decoder
+(the ``mcap`` reader and ``rosbags``' CDR deserialiser, with the ROS types parsed from the schemas
+the file carries — nothing of wmm-qp's writer), replayed bit for bit with the default solver, a
+changed config's differences, and a damaged file's one-line error.
+
+One sim + daemon stack records at 1 kHz for a few seconds, rotating its file every 2 s, while a
+client drives it through track (a moving setpoint), a live obstacle, null-space DM and hold.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import subprocess
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+pytest.importorskip("mcap")
+pytest.importorskip("rosbags")
+
+from support.live import ready
+
+pytestmark = pytest.mark.integration
+
+RATE = 1000.0
+
+
+def cli(*argv: str, timeout: float = 300.0) -> subprocess.CompletedProcess[str]:
+    """The installed ``wmm-qp`` (the tools' command table) as a child process."""
+    return subprocess.run([sys.executable, "-P", "-m", "wmm_qp_tools.cli", *argv], capture_output=True, text=True,
+                          timeout=timeout, stdin=subprocess.DEVNULL)
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """A recorded run: its first file, the daemon's log and its final tick count."""
+    from wmm_qp_service.client import Client
+    from wmm_qp_service.processes import Stack, isolated_config
+
+    d = tmp_path_factory.mktemp("rec")
+    path = d / "run.mcap"
+    with Stack(isolated_config(), rate_hz=RATE, log_dir=d,
+               extra_daemon_args=["--record", str(path), "--split-time", "2"]) as st, Client(st.svc) as c:
+        info = ready(c)
+        x0 = list(info.status.x)
+        c.set_mode("track")
+        t0 = time.monotonic()
+        while (t := time.monotonic() - t0) < 2.5:
+            c.send_setpoint([x0[0] + 0.05 * math.sin(2 * t), x0[1] + 0.05 * (1 - math.cos(2 * t)), x0[2]])
+            if 1.0 < t < 1.05:
+                c.put_obstacles([{"id": "ball", "kind": "sphere", "radius": 0.05, "xyz": [x0[0] + 0.4, 0.0, 0.3]}])
+            time.sleep(0.01)
+        c.set_mode("dm_nullspace")
+        time.sleep(1.0)
+        c.set_mode("hold")
+        time.sleep(0.5)
+        codes = st.stop()
+    log = (d / "daemon.log").read_text()
+    m = re.search(r"stopped after (\d+) ticks", log)
+    assert codes["daemon"] == 0 and m is not None, log[-2000:]
+    return {"path": path, "log": log, "ticks": int(m.group(1)), "dir": d}
+
+
+def _decode(path: Path) -> tuple[dict[str, list[tuple[int, Any]]], dict[str, dict[str, str]]]:
+    """Every message of ``path`` by topic, decoded without wmm-qp: CDR by rosbags from the file's
+    own ros2msg schemas, JSON by the json module; and the metadata records."""
+    from mcap.reader import make_reader
+    from rosbags.typesys import Stores, get_typestore
+    from rosbags.typesys.msg import get_types_from_msg
+
+    ts = get_typestore(Stores.EMPTY)  # no type known up front: each comes from the file
+    out: dict[str, list[tuple[int, Any]]] = {}
+    with open(path, "rb") as f:
+        r = make_reader(f)
+        assert r.get_header().profile == "ros2"
+        for schema, ch, msg in r.iter_messages(log_time_order=False):
+            assert schema is not None
+            if ch.message_encoding == "cdr":
+                assert schema.encoding == "ros2msg"
+                if schema.name not in ts.types:
+                    ts.register(get_types_from_msg(schema.data.decode(), schema.name))
+                m = ts.deserialize_cdr(msg.data, schema.name)
+            else:
+                assert (ch.message_encoding, schema.encoding) == ("json", "jsonschema")
+                m = json.loads(msg.data)
+            out.setdefault(ch.topic, []).append((msg.log_time, m))
+        meta = {md.name: dict(md.metadata) for md in r.iter_metadata()}
+    return out, meta
+
+
+def _files(path: Path) -> list[Path]:
+    files, k = [path], 1
+    while (p := path.with_name(f"{path.stem}.{k:03d}{path.suffix}")).is_file():
+        files.append(p)
+        k += 1
+    return files
+
+
+def test_every_tick_is_recorded_and_decodes_independently(recording: dict[str, Any]) -> None:
+    files = _files(recording["path"])
+    assert len(files) >= 2, "the 2 s split made no second file"
+    ticks: list[int] = []
+    counts: Counter[str] = Counter()
+    for f in files:
+        msgs, meta = _decode(f)
+        assert meta["wmm_qp"]["format"] == "wmm-qp recording 1" and "wmm_qp_end" in meta
+        for topic, ms in msgs.items():
+            counts[topic] += len(ms)
+            stamps = [t for t, _ in ms]
+            assert stamps == sorted(stamps), f"{f.name} {topic}: log times go back"
+        rows = [m for _, m in msgs["/wmm/tick"]]
+        ticks += [r["tick"] for r in rows]
+        assert int(meta["wmm_qp"]["first_tick"]) == rows[0]["tick"]
+        js = msgs["/arm/joint_states"]
+        assert list(js[-1][1].name) == json.loads(meta["wmm_qp"]["arm_joints"])
+        assert js[-1][1].position.shape == (7,) and all(math.isfinite(x) for x in js[-1][1].position)
+        tf = msgs["/tf"][-1][1]
+        assert tf.transforms[0].child_frame_id == "base" and len(tf.transforms) > 7
+        # one measured state a tick from the first state on; one command message a command sent
+        with_state = sum(1 for r in rows if r["q_base"][0] is not None or r["call"] != "none")
+        assert len(js) <= len(rows)
+        sent = sum(1 for r in rows if r["seq"] >= 0)
+        assert len(msgs["/arm/joint_commands"]) == len(msgs["/base/wheel_commands"]) == sent
+        assert len(msgs["/odom"]) == len(msgs["/ee/pose"]) == len(js) and with_state > 0
+    n = recording["ticks"]
+    assert ticks == list(range(n)), "a tick is missing, repeated or out of order"
+    assert counts["/wmm/tick"] == counts["/wmm/telemetry"] == n
+    for topic in ("/arm/joint_states", "/base/wheel_states", "/arm/joint_commands", "/base/wheel_commands",
+                  "/ee/pose", "/ee/target", "/tf", "/odom", "/wmm/mode", "/wmm/status", "/wmm/events"):
+        assert counts[topic] > 0, topic
+    modes = [m for f in files for _, m in _decode(f)[0]["/wmm/mode"]]
+    assert {"track", "dm_nullspace", "hold"} <= {m["mode"] for m in modes}
+    assert f"recorded {n} ticks (0 lost)" in recording["log"]
+
+
+def test_replay_reproduces_every_command_with_the_default_solver(recording: dict[str, Any]) -> None:
+    r = cli("replay", str(recording["path"]), "--json", timeout=300)
+    assert r.returncode == 0, r.stderr
+    rep = json.loads(r.stdout)
+    assert rep["solver"] == "proxsuite" and rep["proxsuite_build"] == rep["proxsuite_recorded"]
+    assert rep["ticks_read"] == recording["ticks"] and len(rep["files"]) >= 2
+    assert rep["ticks"] > 0.9 * recording["ticks"]
+    assert (rep["differing"], rep["first_difference"], rep["error"]) == (0, None, None)
+    obstacles = [m for f in _files(recording["path"]) for _, m in _decode(f)[0].get("/wmm/events", [])
+                 if m["kind"] == "obstacles" and m["data"]["obstacles"]]
+    assert obstacles, "the live obstacle never reached the recording"
+
+
+def test_replay_with_another_config_shows_its_differences(recording: dict[str, Any], tmp_path: Path) -> None:
+    from wmm_qp.config import default_config_dir
+
+    text = (default_config_dir() / "controller.toml").read_text()
+    changed = tmp_path / "k_x.toml"
+    changed.write_text(re.sub(r"(?m)^K_x = 10\.0", "K_x = 5.0", text, count=1))
+    assert changed.read_text() != text
+    r = cli("replay", str(recording["path"]), "--controller-config", str(changed), "--json", timeout=300)
+    assert r.returncode == 1, r.stderr
+    rep = json.loads(r.stdout)
+    assert rep["differing"] > 0 and rep["first_difference"]["max_abs_delta"] > 0
+    assert 0 <= rep["first_difference"]["tick"] < recording["ticks"]
+
+
+def test_a_truncated_or_corrupt_file_gives_one_line_and_replays_what_it_can(recording: dict[str, Any],
+                                                                           tmp_path: Path) -> None:
+    data = recording["path"].read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) // 2])
+    bad = tmp_path / "bad.mcap"
+    mid = len(data) // 2
+    bad.write_bytes(data[:mid] + bytes(b ^ 0xFF for b in data[mid:mid + 64]) + data[mid + 64:])
+    for f in (cut, bad):
+        r = cli("replay", str(f), "--json", timeout=300)
+        assert r.returncode == 1, r.stderr
+        lines = r.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("wmm-qp replay: error:") and "Traceback" not in r.stderr
+        rep = json.loads(r.stdout)
+        assert rep["error"] and rep["ticks"] > 0 and rep["ticks_read"] < recording["ticks"]
+        assert rep["differing"] == 0  # the readable part replays as recorded
+    r = cli("replay", str(tmp_path / "none.mcap"))
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "no such file" in r.stderr
+
+
+def test_serve_record_without_the_extra_names_it(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+                                               tmp_path: Path) -> None:
+    from wmm_qp_tools import cli as tools_cli
+
+    monkeypatch.setitem(sys.modules, "mcap", None)  # import mcap → ImportError, as without the extra
+    assert tools_cli.main(["serve", "--record", str(tmp_path / "x.mcap")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "pip install 'wmm-qp[record]'" in err
+    assert not (tmp_path / "x.mcap").exists()
+    assert tools_cli.main(["serve", "--split-size", "5"]) == 2
+    assert "need --record" in capsys.readouterr().err
+
+
+def test_the_runtime_imports_without_the_extra() -> None:
+    code = ("import sys; sys.modules['mcap'] = None; sys.modules['rosbags'] = None; "
+            "import wmm_qp_service.daemon, wmm_qp_service.commands.serve, wmm_qp_service.recording.options")
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True, timeout=120).returncode == 0
