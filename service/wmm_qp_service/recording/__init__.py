@@ -22,8 +22,9 @@ EXTRA = "record"
 class RecordingUnavailable(WmmQpError):
     """The ``record`` extra (mcap, rosbags) is not installed (one line, exit 2)."""
 
-    def __init__(self, missing: str) -> None:
-        super().__init__(f"recording needs the {missing!r} package: pip install 'wmm-qp[{EXTRA}]'")
+    def __init__(self, missing: str, extra: str = EXTRA) -> None:
+        super().__init__(f"recording needs the {missing!r} package: pip install 'wmm-qp[{extra}]'")
+        self.missing = missing
 
 
 def require() -> None:
