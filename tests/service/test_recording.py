@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import signal
 import subprocess
 import sys
 import time
@@ -39,14 +40,24 @@ def cli(*argv: str, timeout: float = 300.0) -> subprocess.CompletedProcess[str]:
 
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
-    """A recorded run: its first file, the daemon's log and its final tick count."""
+    """A recorded run: its first file, the daemon's log and its final tick count; and a client's
+    recording of the same run (``wmm-qp record``)."""
     from wmm_qp_service.client import Client
     from wmm_qp_service.processes import Stack, isolated_config
 
     d = tmp_path_factory.mktemp("rec")
     path = d / "run.mcap"
-    with Stack(isolated_config(), rate_hz=RATE, log_dir=d,
-               extra_daemon_args=["--record", str(path), "--split-time", "2"]) as st, Client(st.svc) as c:
+    stack = Stack(isolated_config(), rate_hz=RATE, log_dir=d,
+                  extra_daemon_args=["--record", str(path), "--split-time", "2"])
+    svc = stack.svc
+    client = subprocess.Popen(  # a client's recording of the same run, started first (its start is slow)
+        [sys.executable, "-P", "-m", "wmm_qp_tools.cli", "record", str(d / "client.mcap"), "--duration", "600",
+         "--prefix", svc.prefix, "--robot", svc.robot, "--daemon-endpoint", svc.zenoh.daemon_endpoint,
+         "--sim-endpoint", svc.zenoh.sim_endpoint],
+        stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert client.stderr is not None
+    assert "wmm-qp record: recording" in client.stderr.readline()  # its subscribers are declared
+    with stack as st, Client(st.svc) as c:
         info = ready(c)
         x0 = list(info.status.x)
         c.set_mode("track")
@@ -60,16 +71,30 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         time.sleep(1.0)
         c.set_mode("hold")
         time.sleep(0.5)
-        codes = st.stop()
+        st.kill("daemon", signal.SIGINT)  # its recording drains before it exits: however busy the machine
+        daemon_code = st.procs["daemon"].wait(timeout=600)
+        client.send_signal(signal.SIGINT)
+        _, client_err = client.communicate(timeout=120)
     log = (d / "daemon.log").read_text()
     m = re.search(r"stopped after (\d+) ticks", log)
-    assert codes["daemon"] == 0 and m is not None, log[-2000:]
-    return {"path": path, "log": log, "ticks": int(m.group(1)), "dir": d}
+    assert daemon_code == 0 and m is not None, log[-2000:]
+    assert client.returncode == 0, client_err
+    return {"path": path, "log": log, "ticks": int(m.group(1)), "dir": d, "client": d / "client.mcap",
+            "client_err": client_err}
+
+
+_DECODED: dict[Path, tuple[dict[str, list[tuple[int, Any]]], dict[str, dict[str, str]]]] = {}
 
 
 def _decode(path: Path) -> tuple[dict[str, list[tuple[int, Any]]], dict[str, dict[str, str]]]:
     """Every message of ``path`` by topic, decoded without wmm-qp: CDR by rosbags from the file's
-    own ros2msg schemas, JSON by the json module; and the metadata records."""
+    own ros2msg schemas, JSON by the json module; and the metadata records (decoded once a file)."""
+    if path not in _DECODED:
+        _DECODED[path] = _decode_file(path)
+    return _DECODED[path]
+
+
+def _decode_file(path: Path) -> tuple[dict[str, list[tuple[int, Any]]], dict[str, dict[str, str]]]:
     from mcap.reader import make_reader
     from rosbags.typesys import Stores, get_typestore
     from rosbags.typesys.msg import get_types_from_msg
@@ -117,6 +142,7 @@ def test_every_tick_is_recorded_and_decodes_independently(recording: dict[str, A
         rows = [m for _, m in msgs["/wmm/tick"]]
         ticks += [r["tick"] for r in rows]
         assert int(meta["wmm_qp"]["first_tick"]) == rows[0]["tick"]
+        assert msgs["/wmm/mode"][0][1]["previous"] is None  # each file says its mode
         js = msgs["/arm/joint_states"]
         assert list(js[-1][1].name) == json.loads(meta["wmm_qp"]["arm_joints"])
         assert js[-1][1].position.shape == (7,) and all(math.isfinite(x) for x in js[-1][1].position)
@@ -168,14 +194,17 @@ def test_replay_with_another_config_shows_its_differences(recording: dict[str, A
 
 def test_a_truncated_or_corrupt_file_gives_one_line_and_replays_what_it_can(recording: dict[str, Any],
                                                                            tmp_path: Path) -> None:
-    data = recording["path"].read_bytes()
-    cut = tmp_path / "cut.mcap"
-    cut.write_bytes(data[: len(data) // 2])
-    bad = tmp_path / "bad.mcap"
-    mid = len(data) // 2
-    bad.write_bytes(data[:mid] + bytes(b ^ 0xFF for b in data[mid:mid + 64]) + data[mid + 64:])
-    for f in (cut, bad):
-        r = cli("replay", str(f), "--json", timeout=300)
+    files = _files(recording["path"])
+    big = max(range(len(files)), key=lambda k: files[k].stat().st_size)  # the damage falls among ticks
+    cut, bad = tmp_path / "cut", tmp_path / "bad"
+    for d, damage in ((cut, lambda b: b[: len(b) // 2]),
+                      (bad, lambda b: b[: len(b) // 2] + bytes(x ^ 0xFF for x in b[len(b) // 2:len(b) // 2 + 64])
+                       + b[len(b) // 2 + 64:])):
+        d.mkdir()
+        for k, f in enumerate(files):  # a copy of the rotated recording, one of its files damaged
+            (d / f.name).write_bytes(damage(f.read_bytes()) if k == big else f.read_bytes())
+    for d in (cut, bad):
+        r = cli("replay", str(d / files[0].name), "--json", timeout=300)
         assert r.returncode == 1, r.stderr
         lines = r.stderr.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("wmm-qp replay: error:") and "Traceback" not in r.stderr
@@ -203,3 +232,22 @@ def test_the_runtime_imports_without_the_extra() -> None:
     code = ("import sys; sys.modules['mcap'] = None; sys.modules['rosbags'] = None; "
             "import wmm_qp_service.daemon, wmm_qp_service.commands.serve, wmm_qp_service.recording.options")
     assert subprocess.run([sys.executable, "-c", code], capture_output=True, timeout=120).returncode == 0
+
+
+def test_a_client_records_the_robot_keys_and_plot_draws_both(recording: dict[str, Any], tmp_path: Path) -> None:
+    msgs, meta = _decode(recording["client"])
+    assert meta["wmm_qp"]["host"] == "record" and "wmm_qp_end" in meta
+    for topic in ("/arm/joint_states", "/base/wheel_states", "/arm/joint_commands", "/base/wheel_commands",
+                  "/odom", "/tf", "/ee/pose", "/wmm/status", "/wmm/telemetry", "/wmm/mode"):
+        assert msgs.get(topic), (topic, recording["client_err"])
+    assert {"track", "dm_nullspace", "hold"} <= {m["mode"] for _, m in msgs["/wmm/mode"]}
+    # every command the daemon recorded went over the wire: the client saw at most as many
+    assert len(msgs["/arm/joint_commands"]) <= recording["ticks"]
+    r = cli("replay", str(recording["client"]))
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "serve --record" in r.stderr
+    for src, out in ((recording["path"], tmp_path / "host"), (recording["client"], tmp_path / "client")):
+        r = cli("plot", str(src), "--out", str(out))
+        assert r.returncode == 0, r.stderr
+        names = {p.name for p in out.glob("*.png")}
+        assert {"joints.png", "wheels.png", "ee.png", "dm.png", "timing.png"} <= names, names
+        assert all(p.stat().st_size > 10_000 for p in out.glob("*.png"))

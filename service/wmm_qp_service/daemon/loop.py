@@ -189,7 +189,8 @@ class Daemon:
             from ..recording.journal import TickJournal, recording_meta
 
             self.journal = TickJournal(self.record[0], recording_meta(core, "serve", svc.loop.trigger),
-                                       core.robot.n_arm, core.robot.n_wheels, self.record[1], self.record[2])
+                                       core.robot.n_arm, core.robot.n_wheels, self.record[1], self.record[2],
+                                       svc.loop.rate_hz)
         # After the session opened: Zenoh's own threads keep normal priority, only this one is raised.
         self.scheduling = realtime_priority(svc.loop.rt_priority)
         print(f"wmm-qp serve: control thread: {self.scheduling}; trigger {svc.loop.trigger}",

@@ -42,8 +42,10 @@ if TYPE_CHECKING:
     from ..daemon.core import ControlCore
     from ..daemon.cycle import Sent
 
-TICK_ROWS = 16384
-"""Rows of the tick ring: 16 s at 1 kHz before the writer would lose a row."""
+RING_SECONDS = 30.0
+"""The tick ring holds this long of ticks (at least 4096): how far the writer may fall behind (a
+machine busy with other work) before it loses a row. At 1 kHz for the Gen3: 30000 rows of 90
+float64, 22 MB of shared memory."""
 EVENT_SLOTS = 512
 EVENT_BYTES = 16384
 """The event ring: slots of this many bytes (a status is ~1–2 kB; a longer event is cut)."""
@@ -88,7 +90,7 @@ class TickJournal:
         n_arm, n_wheels: the robot's sizes.
         split_size: [MB] start a new file past this size (None: never).
         split_time: [s] start a new file after this long (None: never).
-        rows: the tick ring's rows.
+        rate_hz: [Hz] the host's tick rate (the ring's size: :data:`RING_SECONDS`).
 
     Raises:
         RecordingUnavailable: the ``record`` extra is not installed.
@@ -97,8 +99,9 @@ class TickJournal:
 
     def __init__(self, path: str | Path, meta: dict[str, str], n_arm: int, n_wheels: int,
                  split_size: float | None = None, split_time: float | None = None,
-                 rows: int = TICK_ROWS) -> None:
+                 rate_hz: float = 1000.0, rows: int | None = None) -> None:
         require()
+        rows = rows if rows is not None else max(4096, int(RING_SECONDS * rate_hz))
         self.path = Path(path)
         self.layout = lay = Layout(n_arm, n_wheels)
         self._cap = rows
@@ -216,9 +219,10 @@ class TickJournal:
         self._header[1] = self._n_events
 
     # ------------------------------------------------------------------ the end
-    def close(self, host_ticks: int | None = None, timeout: float = 60.0) -> dict[str, Any]:
-        """Let the writer drain both rings and close its file; its summary (``files``, ``ticks``,
-        ``dropped``; ``error`` if it failed). Never raises.
+    def close(self, host_ticks: int | None = None, timeout: float = 600.0) -> dict[str, Any]:
+        """Let the writer drain both rings and close its file (a writer far behind on a busy machine
+        takes a while); its summary (``files``, ``ticks``, ``dropped``; ``error`` if it failed or is
+        not done after ``timeout`` [s]: then it finishes on its own). Never raises.
 
         Args:
             host_ticks: the host's own count of its ticks (the file's ``wmm_qp_end``), else the
@@ -239,9 +243,7 @@ class TickJournal:
                 if not self._proc.is_alive():
                     summary = {"error": f"the recording's writer died (exit code {self._proc.exitcode})"}
                     break
-        self._proc.join(timeout=5.0)
-        if self._proc.is_alive():
-            self._proc.terminate()
+        self._proc.join(timeout=5.0)  # still alive: it finishes the file on its own (its host is gone)
         self._release()
         return summary
 

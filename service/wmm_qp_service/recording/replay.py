@@ -29,7 +29,7 @@ import numpy as np
 import wmm_qp as w
 from wmm_qp.config.shapes import ShapeConfig
 
-from . import RecordingError, load_proxsuite
+from . import RecordingError, load_proxsuite, proxsuite_build
 from .layout import config_from_dict
 from .reader import RecordingReader, chain
 
@@ -110,6 +110,9 @@ def controller_for(meta: dict[str, str],
     """
     from wmm_qp.scene import load_scene
 
+    if meta.get("host") == "record":
+        raise RecordingError("a client's recording (wmm-qp record) holds no controller inputs: replay needs "
+                             "the host's own, wmm-qp serve --record")
     if not meta.get("controller_config"):
         raise RecordingError("not a wmm-qp recording (no wmm_qp metadata with a controller config)")
     robot_file = meta.get("robot_file", "")
@@ -122,6 +125,7 @@ def controller_for(meta: dict[str, str],
                                                                   state_latency=recorded.state_latency)
     else:
         cfg = recorded
+    load_proxsuite(meta.get("proxsuite_build", ""))  # the recording's build, unless proxsuite is loaded already
     model = w.WmmModel(w.load_robot_config(robot_file))
     ctl = w.make_controller(meta.get("controller", cfg.kind), model, cfg)
     scene = load_scene(meta["scene"] if meta.get("scene") else None)
@@ -171,8 +175,8 @@ def replay(path: str | Path, controller_config: str | Path | None = None,
         raise RecordingError(error or f"{path}: not a wmm-qp recording (no wmm_qp metadata)")
     if not ticks:
         raise RecordingError(error or f"{path}: no ticks recorded")
-    build = load_proxsuite(meta.get("proxsuite_build", ""))  # the recording's, unless proxsuite is loaded
     ctl, cfg, scene = controller_for(meta, controller_config)
+    build = proxsuite_build()
     ticks.sort(key=lambda d: int(d["tick"]))
     latches = 0
     n = differing = 0

@@ -7,7 +7,7 @@ Channels (docs/recording.md lists each with its fields and counts):
   (``sensor_msgs/msg/JointState``, measured), ``/arm/joint_commands`` and ``/base/wheel_commands``
   (the same type, the rates commanded), ``/ee/pose`` and ``/ee/target``
   (``geometry_msgs/msg/PoseStamped``), ``/tf`` (``tf2_msgs/msg/TFMessage``: world → base, base →
-  each arm link), ``/odom`` (``nav_msgs/msg/Odometry``);
+  each arm link; every :data:`TF_EVERY`-th state), ``/odom`` (``nav_msgs/msg/Odometry``);
 * wmm-qp's own, JSON with a JSON schema: ``/wmm/tick`` (the controller's inputs and command, what
   the replay reads), ``/wmm/telemetry`` (timings, DM, σ_min, task error), ``/wmm/mode`` (each mode
   change), ``/wmm/status`` (each status published), ``/wmm/events`` (command reasons, live
@@ -30,12 +30,16 @@ from typing import Any
 import msgspec
 import numpy as np
 
+from . import cdr
 from .layout import MODES, SCALARS, STATUSES, Layout
 from .reader import split_name
 
 CHUNK_BYTES = 256 * 1024
 """MCAP chunk size: a writer that dies loses at most the chunk it was filling (~0.2 s at 1 kHz)."""
 POLL_S = 0.01
+TF_EVERY = 10
+"""``/tf`` goes out with every 10th measured state (100 Hz at 1 kHz): the arm's links cost the writer
+about as much as every other channel together (a 1 kHz recording must not outrun its writer)."""
 
 ROS_TOPICS = {
     "/arm/joint_states": "sensor_msgs/msg/JointState",
@@ -78,28 +82,29 @@ class McapSink:
     its channels."""
 
     def __init__(self, path: Path, meta: dict[str, str], layout: Layout,
-                 split_size: float | None, split_time: float | None) -> None:
+                 split_size: float | None, split_time: float | None,
+                 extra_json: dict[str, dict[str, Any]] | None = None) -> None:
         from rosbags.typesys import Stores, get_typestore
 
         import wmm_qp as w
 
         self.path, self.meta, self.layout = path, meta, layout
+        self.json_topics = {**JSON_TOPICS, **(extra_json or {})}
         self.split_bytes = None if split_size is None else int(split_size * 1e6)
         self.split_time = split_time
         self.ts = get_typestore(Stores.ROS2_HUMBLE)
-        self.T = self.ts.types
-        self.joints = list(msgspec.json.decode(meta["arm_joints"]))
-        self.wheels = list(msgspec.json.decode(meta["wheels"]))
+        self.joint_names = [str(n).encode() for n in msgspec.json.decode(meta["arm_joints"])]
+        self.wheel_names = [str(n).encode() for n in msgspec.json.decode(meta["wheels"])]
         self.model: Any = None
         if meta.get("robot_file"):
             with contextlib.suppress(Exception):  # without the model: no /ee/pose, /tf links (said in a note)
                 self.model = w.WmmModel(w.load_robot_config(meta["robot_file"]))
-        self.frames: list[tuple[int, str]] = []
+        self.frames: list[tuple[int, bytes]] = []
         if self.model is not None:
             import pinocchio as pin
 
             am = self.model.arm.model
-            self.frames = [(i, f.name) for i, f in enumerate(am.frames) if f.type == pin.FrameType.BODY]
+            self.frames = [(i, f.name.encode()) for i, f in enumerate(am.frames) if f.type == pin.FrameType.BODY]
         self.files: list[str] = []
         self.k = 0
         self.writer: Any = None
@@ -109,6 +114,7 @@ class McapSink:
         self.ticks = 0
         self.mode: str | None = None
         self.counts: dict[str, int] = {}
+        self.states = 0
 
     # ------------------------------------------------------------------ files
     def open(self, first_tick: int) -> None:
@@ -124,12 +130,13 @@ class McapSink:
             text, _ = self.ts.generate_msgdef(typename, ros_version=2)
             sid = wr.register_schema(typename, "ros2msg", text.encode())
             self.ch[topic] = wr.register_channel(topic, "cdr", sid)
-        for topic, props in JSON_TOPICS.items():
+        for topic, props in self.json_topics.items():
             schema = {"type": "object", "title": topic, "properties": props}
             sid = wr.register_schema(f"wmm_qp{topic.replace('/', '.')}", "jsonschema", msgspec.json.encode(schema))
             self.ch[topic] = wr.register_channel(topic, "json", sid)
         self.files.append(str(p))
         self.opened_at = time.monotonic()
+        self.mode = None  # each file says its mode at its first tick: it stands alone
         self.stream.flush()
 
     def close_file(self, end: dict[str, str]) -> None:
@@ -158,29 +165,6 @@ class McapSink:
     def json(self, topic: str, ns: int, obj: dict[str, Any]) -> None:
         """A message of a JSON channel."""
         self._put(topic, ns, msgspec.json.encode(obj))
-
-    def _header(self, ns: int, frame: str) -> Any:
-        T = self.T
-        return T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=ns // 1_000_000_000,
-                                                                               nanosec=ns % 1_000_000_000),
-                                        frame_id=frame)
-
-    def _joint_state(self, ns: int, names: list[str], pos: np.ndarray | None, vel: np.ndarray) -> bytes:
-        msg = self.T["sensor_msgs/msg/JointState"](
-            header=self._header(ns, ""), name=names,
-            position=np.empty(0) if pos is None else np.ascontiguousarray(pos, dtype=np.float64),
-            velocity=np.ascontiguousarray(vel, dtype=np.float64), effort=np.empty(0))
-        return bytes(self.ts.serialize_cdr(msg, "sensor_msgs/msg/JointState"))
-
-    def _pose(self, p: np.ndarray, q: np.ndarray) -> Any:
-        T = self.T
-        return T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=float(p[0]), y=float(p[1]),
-                                                                                 z=float(p[2])),
-                                           orientation=_quat(T, q))
-
-    def _pose_stamped(self, ns: int, p: np.ndarray, q: np.ndarray) -> bytes:
-        msg = self.T["geometry_msgs/msg/PoseStamped"](header=self._header(ns, "world"), pose=self._pose(p, q))
-        return bytes(self.ts.serialize_cdr(msg, "geometry_msgs/msg/PoseStamped"))
 
     def tick(self, row: np.ndarray) -> None:
         """Every channel's messages of one tick's row."""
@@ -221,44 +205,41 @@ class McapSink:
 
     def measured(self, ns: int, q_base: np.ndarray, q_arm: np.ndarray, v_arm: np.ndarray,
                  wheels: np.ndarray) -> None:
-        """A measured state: ``/arm/joint_states``, ``/base/wheel_states``, ``/odom``, ``/tf``, ``/ee/pose``."""
-        T = self.T
-        self._put("/arm/joint_states", ns, self._joint_state(ns, self.joints, q_arm, v_arm))
-        self._put("/base/wheel_states", ns, self._joint_state(ns, self.wheels, None, wheels))
-        yaw_q = np.array([0.0, 0.0, math.sin(0.5 * q_base[2]), math.cos(0.5 * q_base[2])])
-        base_pose = self._pose(np.array([q_base[0], q_base[1], 0.0]), yaw_q)
+        """A measured state: ``/arm/joint_states``, ``/base/wheel_states``, ``/odom``, ``/ee/pose``; and
+        every :data:`TF_EVERY`-th one ``/tf`` (world → base, base → each link of the arm)."""
+        self._put("/arm/joint_states", ns, cdr.joint_state(ns, self.joint_names, q_arm, v_arm))
+        self._put("/base/wheel_states", ns, cdr.joint_state(ns, self.wheel_names, None, wheels))
+        p_base = np.array([q_base[0], q_base[1], 0.0])
+        q_yaw = np.array([0.0, 0.0, math.sin(0.5 * q_base[2]), math.cos(0.5 * q_base[2])])
         twist = self.model.base.body_twist(wheels) if self.model is not None else np.full(3, math.nan)
-        odom = T["nav_msgs/msg/Odometry"](
-            header=self._header(ns, "world"), child_frame_id="base",
-            pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=base_pose, covariance=np.zeros(36)),
-            twist=T["geometry_msgs/msg/TwistWithCovariance"](
-                twist=T["geometry_msgs/msg/Twist"](linear=_vec3(T, (twist[0], twist[1], 0.0)),
-                                                   angular=_vec3(T, (0.0, 0.0, twist[2]))),
-                covariance=np.zeros(36)))
-        self._put("/odom", ns, bytes(self.ts.serialize_cdr(odom, "nav_msgs/msg/Odometry")))
-        tfs = [_tf(T, self._header(ns, "world"), "base", base_pose)]
+        self._put("/odom", ns, cdr.odometry(ns, b"world", b"base", p_base, q_yaw, np.array([twist[0], twist[1], 0.0]),
+                                            np.array([0.0, 0.0, twist[2]])))
+        if self.model is not None:
+            x, R = self.model.ee_pose(q_base, q_arm)  # FK of the arm (Pinocchio's data now holds it)
+            self._put("/ee/pose", ns, cdr.pose_stamped(ns, b"world", x, _rot_quat(R)))
+        self.states += 1
+        if (self.states - 1) % TF_EVERY:
+            return
+        tfs = [(b"world", b"base", p_base, q_yaw)]
         if self.model is not None:
             import pinocchio as pin
 
-            x, R = self.model.ee_pose(q_base, q_arm)  # FK of the arm (Pinocchio's data now holds it)
-            self._put("/ee/pose", ns, self._pose_stamped(ns, x, _rot_quat(R)))
             am = self.model.arm
             pin.updateFramePlacements(am.model, am.data)
             for i, name in self.frames:
                 M = am.data.oMf[i]
-                tfs.append(_tf(T, self._header(ns, "base"), name, self._pose(M.translation, _rot_quat(M.rotation))))
-        self._put("/tf", ns, bytes(self.ts.serialize_cdr(T["tf2_msgs/msg/TFMessage"](transforms=tfs),
-                                                         "tf2_msgs/msg/TFMessage")))
+                tfs.append((b"base", name, M.translation, _rot_quat(M.rotation)))
+        self._put("/tf", ns, cdr.tf_message(ns, tfs))
 
     def commanded(self, ns: int, arm: np.ndarray, wheels: np.ndarray) -> None:
         """A command sent: ``/arm/joint_commands``, ``/base/wheel_commands`` (velocity: the rates)."""
-        self._put("/arm/joint_commands", ns, self._joint_state(ns, self.joints, None, arm))
-        self._put("/base/wheel_commands", ns, self._joint_state(ns, self.wheels, None, wheels))
+        self._put("/arm/joint_commands", ns, cdr.joint_state(ns, self.joint_names, None, arm))
+        self._put("/base/wheel_commands", ns, cdr.joint_state(ns, self.wheel_names, None, wheels))
 
     def target(self, ns: int, x_d: np.ndarray, quat_d: np.ndarray) -> None:
         """The EE's target: ``/ee/target`` (orientation: the pose task's, else the identity)."""
         q = quat_d if not math.isnan(quat_d[0]) else np.array([0.0, 0.0, 0.0, 1.0])
-        self._put("/ee/target", ns, self._pose_stamped(ns, x_d, q))
+        self._put("/ee/target", ns, cdr.pose_stamped(ns, b"world", x_d, q))
 
     def event(self, kind: int, tick: int, data: dict[str, Any]) -> None:
         ns = time.time_ns()
@@ -266,21 +247,6 @@ class McapSink:
             self.json("/wmm/status", ns, {"tick": tick, "status": data})
         else:
             self.json("/wmm/events", ns, {"tick": tick, "kind": EVENT_KINDS.get(kind, "note"), "data": data})
-
-
-def _vec3(T: Any, v: Any) -> Any:
-    return T["geometry_msgs/msg/Vector3"](x=float(v[0]), y=float(v[1]), z=float(v[2]))
-
-
-def _quat(T: Any, q: np.ndarray) -> Any:
-    return T["geometry_msgs/msg/Quaternion"](x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3]))
-
-
-def _tf(T: Any, header: Any, child: str, pose: Any) -> Any:
-    return T["geometry_msgs/msg/TransformStamped"](
-        header=header, child_frame_id=child,
-        transform=T["geometry_msgs/msg/Transform"](
-            translation=_vec3(T, (pose.position.x, pose.position.y, pose.position.z)), rotation=pose.orientation))
 
 
 def _rot_quat(R: np.ndarray) -> np.ndarray:
