@@ -216,8 +216,8 @@ def plot(s: Series, out: str | Path) -> list[Path]:
         _spans(s, list(axs))
         save(fig, "ee.png")
 
-    t_tel, tel = s.arrays("/wmm/telemetry", lambda m: [_f(m["dm"]), _f(m["sigma_min"]), _f(m["tick_us"]),
-                                                       _f(m["step_us"])])
+    t_tel, tel = s.arrays("/wmm/telemetry", lambda m: [_f(m.get("dm")), _f(m.get("sigma_min")), _f(m.get("tick_us")),
+                                                       _f(m.get("step_us"))])
     if len(t_tel):
         fig, axs = plt.subplots(2, 1, figsize=(11, 5), sharex=True)
         axs[0].plot(t_tel, tel[:, 0], lw=0.9)

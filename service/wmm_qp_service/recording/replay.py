@@ -110,9 +110,6 @@ def controller_for(meta: dict[str, str],
     """
     from wmm_qp.scene import load_scene
 
-    if meta.get("host") == "record":
-        raise RecordingError("a client's recording (wmm-qp record) holds no controller inputs: replay needs "
-                             "the host's own, wmm-qp serve --record")
     if not meta.get("controller_config"):
         raise RecordingError("not a wmm-qp recording (no wmm_qp metadata with a controller config)")
     robot_file = meta.get("robot_file", "")
@@ -173,6 +170,9 @@ def replay(path: str | Path, controller_config: str | Path | None = None,
             break
     if not meta:
         raise RecordingError(error or f"{path}: not a wmm-qp recording (no wmm_qp metadata)")
+    if meta.get("host") == "record":
+        raise RecordingError(f"{path}: a client's recording (wmm-qp record) holds no controller inputs: replay "
+                             f"needs the host's own, wmm-qp serve --record")
     if not ticks:
         raise RecordingError(error or f"{path}: no ticks recorded")
     ctl, cfg, scene = controller_for(meta, controller_config)

@@ -28,7 +28,7 @@ from wmm_qp_tools.bench.robot_files import loaded, shipped_robots
 from wmm_qp_tools.bench.stats import now_ns
 
 SECTIONS: tuple[str, ...] = ("controller", "oneshot", "pink", "scaling", "robots", "e2e", "daemon", "collisions",
-                             "collision_default", "jitter", "sim", "tick")
+                             "collision_default", "jitter", "sim", "tick", "record")
 
 
 def run_robots(
@@ -191,6 +191,12 @@ def run_bench(
         say(f"sim: the sim's step of every shipped robot on {', '.join(plants)}")
         out["physics"] = plants
         out["sim"] = sim.run(shipped_robots(), plants, min(ticks, 5000), max_seconds)
+        done += 1
+    if "record" in sections:
+        from . import record
+
+        say("record: the daemon's tick with and without --record, and the recording hook in process")
+        out["record"] = record.run(min(ticks, 20000), robot, cfg, controller_file)
         done += 1
     if "tick" in sections and baseline_tree is not None:
         say(f"tick: the track-mode tick ({tick_solver}) of this tree and of {baseline_tree}, {rounds} rounds")

@@ -26,7 +26,7 @@ from wmm_qp.config import TASK_KINDS
 HELP = "measure per-tick controller time and the loop over Zenoh"
 
 _SECTIONS = ("controller", "oneshot", "pink", "scaling", "robots", "e2e", "daemon", "collisions", "collision_default",
-             "jitter", "sim", "tick")
+             "jitter", "sim", "tick", "record")
 _MODES = ("hold", "track", "dm_cartesian", "dm_nullspace")
 
 
@@ -180,6 +180,16 @@ def _print_report(r: dict[str, Any]) -> None:
                   f"baseline {t['baseline_us_p50']:.1f} µs ({t['baseline_tree']}): "
                   f"ratio this/baseline {t['ratio']:.3f} over {t['rounds']} rounds "
                   f"(rounds' median {t['ratio_rounds_median']:.3f}); same numerics {t['same_run']}")  # fmt: skip
+    if (rc := r.get("record")) is not None:
+        if not rc.get("available"):
+            print(f"record     {rc.get('reason')}")
+        else:
+            j, d = rc["journal"], rc["daemon"]
+            print(f"record     hook in process: core.tick p50 {j['tick_us']['p50']} µs, TickJournal.tick p50 "
+                  f"{j['journal_us']['p50']} µs (×{j['journal_over_tick_p50']}); {j['recorded']}/{j['ticks']} ticks "
+                  f"in the file")
+            print(f"           daemon 1 kHz tick p50: without {d['without']['tick_us'].get('p50')} µs, with "
+                  f"{d['with']['tick_us'].get('p50')} µs (×{d['ratio_p50']})")
     print(f"targets    {r['targets']}")
 
 
