@@ -261,3 +261,28 @@ def test_a_client_records_the_robot_keys_and_plot_draws_both(recording: dict[str
         names = {p.name for p in out.glob("*.png")}
         assert {"joints.png", "wheels.png", "ee.png", "dm.png", "timing.png"} <= names, names
         assert all(p.stat().st_size > 10_000 for p in out.glob("*.png"))
+
+
+def test_the_embedded_core_records_every_tick_and_replays(tmp_path: Path) -> None:
+    from wmm_qp_service.client import Client
+    from wmm_qp_service.processes import Stack, isolated_config
+
+    path = tmp_path / "emb.mcap"
+    with Stack(isolated_config(), rate_hz=500.0, log_dir=tmp_path, embedded=True,
+               extra_daemon_args=["--record", str(path)]) as st, Client(st.svc) as c:
+        x0 = list(ready(c).status.x)
+        c.set_mode("track")
+        for k in range(150):
+            c.send_setpoint([x0[0] + 0.0003 * k, x0[1], x0[2]])
+            time.sleep(0.01)
+        st.kill("embedded", signal.SIGINT)
+        assert st.procs["embedded"].wait(timeout=600) == 0
+    log = (tmp_path / "embedded.log").read_text()
+    m = re.search(r", (\d+) ticks, ", log)
+    assert m is not None and f"recorded {m.group(1)} ticks (0 lost)" in log, log[-1500:]
+    msgs, meta = _decode(path)
+    assert meta["wmm_qp"]["host"] == "embedded"
+    assert [r["tick"] for _, r in msgs["/wmm/tick"]] == list(range(int(m.group(1))))
+    r = cli("replay", str(path), "--json")
+    rep = json.loads(r.stdout)
+    assert r.returncode == 0 and rep["differing"] == 0 and rep["ticks"] > 0, r.stderr
