@@ -208,13 +208,11 @@ class TickJournal:
             self._event(EV_NOTE, tick, {"note": text})
 
     def _event(self, kind: int, tick: int, payload: dict[str, Any]) -> None:
-        data = msgspec.json.encode(payload)[: EVENT_BYTES - 24]
+        data = msgspec.json.encode(payload)[: EVENT_BYTES - 32]
         slot = self._events[self._n_events % EVENT_SLOTS]
-        head = slot[:24]
-        head[:8].view(np.int64)[0] = len(data)
-        head[8:16].view(np.int64)[0] = kind
-        head[16:24].view(np.int64)[0] = tick
-        slot[24:24 + len(data)] = np.frombuffer(data, dtype=np.uint8)
+        head = slot[:32].view(np.int64)  # length, kind, tick, wall clock [ns]
+        head[:] = len(data), kind, tick, time.time_ns()
+        slot[32:32 + len(data)] = np.frombuffer(data, dtype=np.uint8)
         self._n_events += 1
         self._header[1] = self._n_events
 

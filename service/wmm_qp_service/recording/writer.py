@@ -241,8 +241,9 @@ class McapSink:
         q = quat_d if not math.isnan(quat_d[0]) else np.array([0.0, 0.0, 0.0, 1.0])
         self._put("/ee/target", ns, cdr.pose_stamped(ns, b"world", x_d, q))
 
-    def event(self, kind: int, tick: int, data: dict[str, Any]) -> None:
-        ns = time.time_ns()
+    def event(self, kind: int, tick: int, data: dict[str, Any], ns: int | None = None) -> None:
+        """An event of the host's at ``ns`` [ns, wall clock] (None: now)."""
+        ns = time.time_ns() if ns is None else ns
         if kind == 1:
             self.json("/wmm/status", ns, {"tick": tick, "status": data})
         else:
@@ -294,9 +295,9 @@ def writer_main(ticks_name: str, events_name: str, rows: int, n_arm: int, n_whee
                 done_t = n_t - rows
             while done_e < n_e:
                 slot = events[done_e % EVENT_SLOTS]
-                ln, kind, tick = (int(slot[a:a + 8].view(np.int64)[0]) for a in (0, 8, 16))
+                ln, kind, tick, ns = (int(v) for v in slot[:32].view(np.int64))
                 with contextlib.suppress(Exception):
-                    sink.event(kind, tick, msgspec.json.decode(bytes(slot[24:24 + ln])))
+                    sink.event(kind, tick, msgspec.json.decode(bytes(slot[32:32 + ln])), ns)
                 done_e += 1
             if done_t < n_t:  # a new file starts with a tick, never empty
                 sink.maybe_rotate(done_t)

@@ -20,6 +20,8 @@ HELP = "re-run the controller on a recording (serve --record) and report the fir
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.epilog = ("exit status: 0 every command the same, 1 some differ or the file is damaged (one line on stderr, "
+                     "the readable part replayed), 2 bad input or nothing replayable")
     parser.add_argument("file", metavar="FILE.mcap", help="a recording of wmm-qp serve --record (its rotated "
                                                          "files FILE.001.mcap, … follow)")
     parser.add_argument("--controller-config", metavar="TOML",
