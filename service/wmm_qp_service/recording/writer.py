@@ -303,7 +303,11 @@ def writer_main(ticks_name: str, events_name: str, rows: int, n_arm: int, n_whee
                 sink.maybe_rotate(done_t)
             while done_t < n_t:
                 row = ring[done_t % rows].copy()
-                sink.tick(row)
+                if int(header[0]) - rows > done_t:  # overwritten while it was copied: torn, lost
+                    dropped += 1
+                    sink.event(4, done_t, {"note": "1 ticks lost: overwritten while it was read", "dropped": 1})
+                else:
+                    sink.tick(row)
                 done_t += 1
             sink.stream.flush()
             if closed or orphan:

@@ -1,0 +1,114 @@
+"""The recording's hook against the attacks its claims are about: a writer that stops (the control
+thread must not wait for it, and the file must say what was lost), a host killed without closing
+(the writer must still finish the file), a tick the hook cannot read (it must not raise)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("mcap")
+pytest.importorskip("rosbags")
+
+from wmm_qp_service.recording.reader import RecordingReader
+
+import wmm_qp as w
+
+ROWS = 4096  # the smallest ring
+
+
+def _core():  # type: ignore[no-untyped-def]
+    from wmm_qp_service.config import load_service_config
+    from wmm_qp_service.daemon import ControlCore
+
+    robot = w.load_robot_config()
+    cfg = w.load_controller_config().with_(collision={"enabled": False})
+    return ControlCore(load_service_config().with_robot(robot), cfg, robot)
+
+
+def _read(path: Path) -> tuple[list[dict], list[dict], RecordingReader]:  # type: ignore[type-arg]
+    import msgspec
+
+    rd = RecordingReader(path)
+    ticks, events = [], []
+    for topic, _, data in rd.messages({"/wmm/tick", "/wmm/events"}):
+        (ticks if topic == "/wmm/tick" else events).append(msgspec.json.decode(data))
+    return ticks, events, rd
+
+
+def test_a_stopped_writer_never_holds_the_control_thread_and_the_file_counts_the_loss(tmp_path: Path) -> None:
+    from wmm_qp_service.recording.journal import TickJournal, recording_meta
+
+    core = _core()
+    path = tmp_path / "stall.mcap"
+    j = TickJournal(path, recording_meta(core, "test", "rate"), core.robot.n_arm, core.robot.n_wheels, rows=ROWS)
+    n = 3 * ROWS
+    os.kill(j._proc.pid, signal.SIGSTOP)  # the writer stalls: a disk that hangs, a machine starved
+    try:
+        for k in range(n):  # would hang here if the hook waited for the writer
+            core.tick(k * 0.001)
+            j.tick(core, None, k, k * 0.001, 0.0)
+    finally:
+        os.kill(j._proc.pid, signal.SIGCONT)
+    summary = j.close(n)
+    ticks, events, rd = _read(path)
+    assert summary["dropped"] > 0 and summary["dropped"] + len(ticks) == n
+    assert [t["tick"] for t in ticks] == list(range(n - len(ticks), n))  # the newest kept, in order
+    assert any("ticks lost" in e["data"].get("note", "") for e in events)
+    assert rd.end is not None and int(rd.end["dropped"]) == summary["dropped"]
+
+
+def test_a_host_killed_without_closing_still_gets_its_file(tmp_path: Path) -> None:
+    path = tmp_path / "killed.mcap"
+    code = textwrap.dedent(f"""
+        import os, signal, sys
+        sys.path.insert(0, {str(Path(__file__).parent)!r})
+        from test_recording_journal import _core
+        from wmm_qp_service.recording.journal import TickJournal, recording_meta
+        core = _core()
+        j = TickJournal({str(path)!r}, recording_meta(core, "test", "rate"), core.robot.n_arm, core.robot.n_wheels,
+                        rows={ROWS})
+        for k in range(300):
+            core.tick(k * 0.001)
+            j.tick(core, None, k, k * 0.001, 0.0)
+        os.kill(os.getpid(), signal.SIGKILL)  # no close(): a crash
+    """)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert r.returncode == -signal.SIGKILL, r.stderr
+    end = time.monotonic() + 120
+    while time.monotonic() < end:  # the orphaned writer drains the ring and closes the file
+        rd = RecordingReader(path)
+        list(rd.messages({"/nothing"}))
+        if rd.end is not None:
+            break
+        time.sleep(0.5)
+    ticks, _, rd = _read(path)
+    assert rd.error is None and rd.end is not None and "without closing" in rd.end["ended"]
+    assert [t["tick"] for t in ticks] == list(range(300))
+
+
+def test_a_tick_the_hook_cannot_read_is_a_note_not_an_exception(tmp_path: Path) -> None:
+    from wmm_qp_service.recording.journal import TickJournal, recording_meta
+
+    core = _core()
+    path = tmp_path / "odd.mcap"
+    j = TickJournal(path, recording_meta(core, "test", "rate"), core.robot.n_arm, core.robot.n_wheels, rows=ROWS)
+    core.tick(0.0)
+    j.tick(core, None, 0, 0.0, 0.0)
+
+    class Broken:  # a state message with the wrong number of joints
+        q_base, q_arm, v_arm, wheel_speeds = [0.0] * 3, [0.0] * 2, [0.0] * 2, [0.0] * 4
+
+    core.state_msg = Broken()  # type: ignore[assignment]
+    j.tick(core, None, 1, 0.001, 0.0)  # must not raise
+    j.close(2)
+    ticks, events, _ = _read(path)
+    assert [t["tick"] for t in ticks] == [0]
+    assert any("tick 1 not recorded" in e["data"].get("note", "") for e in events)
