@@ -112,3 +112,33 @@ def test_a_tick_the_hook_cannot_read_is_a_note_not_an_exception(tmp_path: Path) 
     ticks, events, _ = _read(path)
     assert [t["tick"] for t in ticks] == [0]
     assert any("tick 1 not recorded" in e["data"].get("note", "") for e in events)
+
+
+def test_the_bench_times_the_hook_and_every_tick_reaches_the_file() -> None:
+    from wmm_qp_tools.bench.record import journal_cost
+
+    r = journal_cost(300, w.load_robot_config(), w.load_controller_config())
+    assert (r["ticks"], r["recorded"], r["dropped"]) == (300, 300, 0)
+    assert r["journal_us"]["p50"] > 0 and r["tick_us"]["p50"] > 0
+    assert r["journal_over_tick_p50"] == round(r["journal_us"]["p50"] / r["tick_us"]["p50"], 4)
+
+
+@pytest.mark.parametrize("argv", [
+    ["serve", "--record", "/nonexistent/dir/x.mcap"],
+    ["serve", "--record", "x.mcap", "--split-size", "-1"],
+    ["serve", "--split-time", "5"],
+    ["sim", "--record", "x.mcap"],
+    ["record", "x.mcap", "--duration", "0"],
+    ["replay", "GARBAGE"],
+    ["plot", "GARBAGE"],
+    ["replay", "/nonexistent.mcap"],
+])
+def test_bad_input_is_one_line_and_exit_2(argv: list[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                          capsys: pytest.CaptureFixture[str]) -> None:
+    from wmm_qp_tools import cli as tools_cli
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "GARBAGE").write_bytes(b"not an mcap file\n")
+    assert tools_cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "error" in err and "Traceback" not in err, err

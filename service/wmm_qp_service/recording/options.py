@@ -4,7 +4,9 @@ by ``wmm-qp serve`` and ``wmm-qp sim --embedded``."""
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+from pathlib import Path
 from typing import Any
 
 from wmm_qp.exceptions import WmmQpError
@@ -38,6 +40,9 @@ def record_options(args: argparse.Namespace, command: str) -> dict[str, Any]:
     for flag, v in (("--split-size", size), ("--split-time", period)):
         if v is not None and not v > 0:
             raise WmmQpError(f"{flag} must be > 0, got {v:g}")
+    folder = Path(record).resolve().parent
+    if not folder.is_dir() or not os.access(folder, os.W_OK):
+        raise WmmQpError(f"--record {record}: {folder} is not a folder this process can write to")
     require()
     load_proxsuite(BASELINE)  # before anything loads proxsuite: a recording that replays bit for bit
     return {"record": record, "split_size": size, "split_time": period}

@@ -131,6 +131,8 @@ def run_bench(
     sections = tuple(s for s in (SECTIONS if only is None else (only,)) if s not in (skip or ()))
     if baseline_tree is None:  # "tick" compares this tree with another: nothing to time without one
         sections = tuple(s for s in sections if s != "tick")
+    if only is None:  # "record" starts two stacks of its own: asked for by name (--only record)
+        sections = tuple(s for s in sections if s != "record")
     bar = ProgressLine("bench")
     done = 0
 

@@ -8,7 +8,10 @@ shipped robot files); ``--task KIND`` overrides the controller config's task kin
 
 ``--baseline-tree DIR`` (with ``--only tick``, or with every section) times the Gen3's track-mode
 tick of this source tree and of DIR's in the same run, in ``--rounds`` alternating rounds
-(:mod:`wmm_qp_tools.bench.tick_compare`)."""
+(:mod:`wmm_qp_tools.bench.tick_compare`).
+
+``--only record`` (only by name) times the daemon's tick with and without ``--record`` in one run
+(:mod:`wmm_qp_tools.bench.record`, docs/recording.md)."""
 
 from __future__ import annotations
 

@@ -14,7 +14,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from wmm_qp_service.recording import RecordingUnavailable, require
+    from wmm_qp_service.recording import RecordingError, RecordingUnavailable, require
 
     require()
     try:
@@ -27,6 +27,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"wmm-qp plot: read {n} messages …", file=sys.stderr, flush=True)
 
     s = load(args.file, progress)
+    if s.error is not None and not s.raw:
+        raise RecordingError(s.error)  # nothing readable: one line, exit 2
     if s.error is not None:
         print(f"wmm-qp plot: error: {s.error}; plotting what was read before it", file=sys.stderr, flush=True)
     files = plot(s, args.out)
