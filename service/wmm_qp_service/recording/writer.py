@@ -319,7 +319,8 @@ def writer_main(ticks_name: str, events_name: str, rows: int, n_arm: int, n_whee
             time.sleep(POLL_S)
         sink.close_file({"ticks": str(sink.ticks), "host_ticks": str(int(header[4]) if closed else done_t),
                          "dropped": str(dropped), "ended": ended})
-        replies.put({"files": sink.files, "ticks": done_t, "dropped": dropped, "counts": sink.counts})
+        replies.put({"files": sink.files, "ticks": done_t, "dropped": dropped, "counts": sink.counts,
+                     "cpu_s": time.process_time()})
     except Exception as e:
         with contextlib.suppress(Exception):
             sink.close_file({"ticks": str(sink.ticks), "dropped": str(dropped),

@@ -190,7 +190,7 @@ def _print_report(r: dict[str, Any]) -> None:
             j, d = rc["journal"], rc["daemon"]
             print(f"record     hook in process: core.tick p50 {j['tick_us']['p50']} µs, TickJournal.tick p50 "
                   f"{j['journal_us']['p50']} µs (×{j['journal_over_tick_p50']}); {j['recorded']}/{j['ticks']} ticks "
-                  f"in the file")
+                  f"in the file; the writer process {j['writer_cpu_us_per_tick']} µs of CPU a tick")
             print(f"           daemon 1 kHz tick p50: without {d['without']['tick_us'].get('p50')} µs, with "
                   f"{d['with']['tick_us'].get('p50')} µs (×{d['ratio_p50']})")
     print(f"targets    {r['targets']}")
