@@ -1,7 +1,7 @@
 """CDR (XCDR1, little endian: the ``cdr`` encoding of ROS 2) of the few message types a recording writes.
 
-Built with ``struct`` on one buffer per message: about ten times cheaper than building ``rosbags``'
-message objects and serialising them, which would cost a 1 kHz recording's writer most of a core.
+Built on one buffer per message: several times cheaper than building ``rosbags``' message objects
+and serialising them, which cost a 1 kHz recording's writer more than its share of a core.
 The bytes are the same as ``rosbags``' ``serialize_cdr`` of the same message
 (tests/service/test_recording_cdr.py compares them type by type); readers decode them with the
 ``ros2msg`` schemas the file carries.

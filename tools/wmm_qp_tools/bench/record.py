@@ -6,7 +6,7 @@ Two measurements in one run:
   ticking at the service config's rate on states of a plant that executes its commands exactly, the
   paper's circle as setpoints, in track mode; each tick's ``core.tick`` and the recording hook's
   ``TickJournal.tick`` timed apart (the writer process serialises in parallel: its CPU time per
-  tick, start-up included); every tick must reach the file.
+  tick once started); every tick must reach the file.
 * ``daemon``: the real loop over Zenoh (:mod:`.e2e`'s stack, the fixed-rate trigger at 1 kHz, the
   circle tracked, ``--breakdown``), once without and once with ``--record``, back to back: the
   daemon's tick p50 each, and their ratio (on a shared machine the two runs differ by the load of
@@ -81,7 +81,7 @@ def journal_cost(ticks: int, robot: w.RobotConfig, cfg: w.ControllerConfig) -> d
     out["journal_over_tick_p50"] = round(out["journal_us"]["p50"] / out["tick_us"]["p50"], 4)
     out |= {"ticks": ticks, "recorded": recorded, "dropped": summary.get("dropped"), "rate_hz": svc.loop.rate_hz,
             "solver": cfg.qp.solver,
-            # the writer process's CPU time (start-up and imports included) per tick
+            # the writer process's CPU time per tick, once started (its imports left out)
             "writer_cpu_us_per_tick": round(float(summary.get("cpu_s", math.nan)) / ticks * 1e6, 1)}
     return out
 
