@@ -142,3 +142,23 @@ def test_bad_input_is_one_line_and_exit_2(argv: list[str], tmp_path: Path, monke
     assert tools_cli.main(argv) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "error" in err and "Traceback" not in err, err
+
+
+def test_a_killed_writer_leaves_a_file_readable_up_to_its_last_chunk(tmp_path: Path) -> None:
+    from wmm_qp_service.recording.journal import TickJournal, recording_meta
+
+    core = _core()
+    path = tmp_path / "writer_killed.mcap"
+    j = TickJournal(path, recording_meta(core, "test", "rate"), core.robot.n_arm, core.robot.n_wheels, rows=ROWS)
+    for k in range(2000):
+        core.tick(k * 0.001)
+        j.tick(core, None, k, k * 0.001, 0.0)
+    end = time.monotonic() + 120
+    while path.stat().st_size < 30_000 and time.monotonic() < end:  # a chunk or two written
+        time.sleep(0.05)
+    os.kill(j._proc.pid, signal.SIGKILL)
+    summary = j.close(2000)
+    assert "died" in summary["error"]
+    ticks, _, rd = _read(path)
+    assert rd.error is not None and rd.end is None  # cut short, said in one line
+    assert ticks and [t["tick"] for t in ticks] == list(range(len(ticks)))  # every tick up to the cut
