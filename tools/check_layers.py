@@ -6,7 +6,8 @@ shares: hardware interface, referees, lease gate, shaper) ← ``wmm_qp_sim`` (th
 experiments, drills, the contract kit); an arrow reads "may be imported by". A module may import
 its own package and the packages below it, never one above: so no cycle can close between the
 packages either. Transport stays at the edge: ``zenoh`` is imported by the service and the tools
-only.
+only, ROS 2 (``rclpy`` and its message packages) by their ``ros2`` packages only, and of those
+only the stand-in robot (``wmm_qp_service.ros2.sim_robot``) imports the sim.
 
 Inside and across the packages, no circle may close between files: module A importing B at load
 time while B (directly or through others) imports A. Counted here: the imports a module runs when
@@ -48,6 +49,12 @@ EDGE_ONLY = {"zenoh": ("wmm_qp_service", "wmm_qp_tools")}
 NOT_THE_SIM = ("wmm_qp_service.drivers.", "wmm_qp_service.drivers.sim_node")
 """A real robot's driver (a module under the prefix, but the sim's own node) never imports the sim:
 what it shares with the sim (referees, lease gate, shaper) is ``wmm_qp_robot``'s."""
+NOT_THE_SIM_ROS2 = ("wmm_qp_service.ros2.", "wmm_qp_service.ros2.sim_robot")
+"""The same for the ROS 2 package: only its stand-in robot (``wmm-qp sim --ros2``) drives the sim."""
+ROS2 = ("rclpy", "rosidl_runtime_py", "builtin_interfaces", "std_msgs", "sensor_msgs", "geometry_msgs",
+        "nav_msgs", "diagnostic_msgs", "visualization_msgs", "std_srvs")
+"""ROS 2's client library and messages: imported only by a ``ros2`` package of the service or the
+tools (``wmm_qp_service.ros2``), so every other module loads without a ROS 2 installation."""
 RULE = " ← ".join(name for name, _ in LAYERS)
 
 
@@ -138,8 +145,12 @@ def breaches(root: Path) -> tuple[list[str], int, int]:
                     if RANK[top] > RANK[pkg]:
                         out.append(f"{rel}:{imp.line}: {pkg} imports {top} ({imp.text!r}): a layer may import "
                                    f"only the ones below it ({RULE}; an arrow: may be imported by)")
-                if (top == "wmm_qp_sim" and here.startswith(NOT_THE_SIM[0])
-                        and not here.startswith(NOT_THE_SIM[1])):
+                if top in ROS2 and not (pkg in ("wmm_qp_service", "wmm_qp_tools")
+                                        and (here == f"{pkg}.ros2" or here.startswith(f"{pkg}.ros2."))):
+                    out.append(f"{rel}:{imp.line}: {here} imports {top} ({imp.text!r}): ROS 2 is imported only "
+                               "in wmm_qp_service.ros2 (and wmm_qp_tools.ros2)")
+                if top == "wmm_qp_sim" and any(here.startswith(a) and not here.startswith(b)
+                                               for a, b in (NOT_THE_SIM, NOT_THE_SIM_ROS2)):
                     out.append(f"{rel}:{imp.line}: the driver {here} imports the sim ({imp.text!r}): a real robot's "
                                "driver shares only wmm_qp_robot with it")
                 elif top in EDGE_ONLY and pkg not in EDGE_ONLY[top]:

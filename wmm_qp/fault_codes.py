@@ -57,3 +57,5 @@ class FaultCode(StrEnum):
     """The robot's own controller stopped the motion (a reflex, a controller error)."""
     RECOVERY_REFUSED = "recovery_refused"
     """The robot refused to recover from an error."""
+    ROBOT_STATE_LOST = "robot_state_lost"
+    """The robot's own measurements (a ROS 2 robot's joint states) stopped or went stale: it brakes."""

@@ -9,18 +9,13 @@ acceleration change and ``acceleration_max·dt`` of velocity change per cycle (a
 velocity tracker, below). Pure: no libfranka, no clock, no transport — the driver
 (``wmm_qp_service.drivers.franka``) feeds it commands and the robot's cycles.
 
-Firmware duties, as the simulated robot's (``sim/wmm_qp_sim/robot.py``) and docs/protocol.md's:
-
-- **stale commands**: no command for ``stale_timeout`` → the target becomes 0: the arm brakes,
-  jerk-limited, to rest (``stale_stop``). The stop ends the stream: its later commands (late on
-  the way, or from a sender that froze) are refused (counted in ``ended`` too: the stop is the
-  event, not each of them); a new stream resumes at once (the jump from
-  the braked rates is the shaper's to ramp), as the simulated robot's firmware does;
-- **protective stop**: a command past a velocity limit, or one from which a joint could not brake
-  before its position limit, is refused; so is going on when the next cycle's state could not
-  stop before a position limit. The arm brakes to rest, the stop is reported (``reason``), every
-  command is refused until the robot is at rest **and** a command of a new stream (a new
-  ``stream`` key: a new stream id or a new lease holder) arrives.
+Firmware duties: the stream rules every robot keeps (:class:`~.stream_rules.StreamRules`, the
+simulated robot's too): an illegal command (past a velocity limit, non-finite) is refused with a
+protective stop; a stop ends its stream; after a protective stop only a new stream, the arm at
+rest, resumes. Besides them, the shaper's own: **stale commands** (none for ``stale_timeout``: the
+target becomes 0, the arm brakes jerk-limited to rest, ``stale``); a command from which a joint
+could not brake before its position limit is refused, and so is going on when the next cycle's
+state could not stop before one (protective stops, ``cannot_stop_before_limit``).
 
 The tracker: with e = v_target − v, the acceleration that makes the most progress yet can still
 be ramped back to 0 at the jerk limit without overshooting the target solves
@@ -40,6 +35,8 @@ import numpy as np
 
 from wmm_qp.config import ArmConfig, FloatArray
 from wmm_qp.fault_codes import FaultCode
+
+from .stream_rules import StreamRules
 
 
 @dataclass(frozen=True)
@@ -69,7 +66,7 @@ class StreamLimits:
                    np.asarray(arm.velocity_max, dtype=float), a, j)
 
 
-class CommandShaper:
+class CommandShaper(StreamRules):
     """Turns the daemon's commands into a continuous jerk-limited joint velocity stream.
 
     Args:
@@ -90,14 +87,7 @@ class CommandShaper:
         self.a = np.zeros(n)  # [rad/s²] (v_k − v_{k−1})/dt of the last output
         self.target = np.zeros(n)  # [rad/s] the latest accepted command (0: none, stale, stopped)
         self.t_cmd = -np.inf  # [s] receipt time of the latest accepted command
-        self.stream: Hashable | None = None  # the stream key of the latest accepted command
-        self.stale_stop = False
-        self.protective_stop = False
-        self.protective_stops = 0
-        self.reason = ""  # why the last protective stop happened
-        self.code = ""  # its FaultCode
-        self.refused = 0  # commands refused (past a limit, or during a protective stop)
-        self.ended = 0  # of which: commands of the stream a stale or protective stop ended
+        self.reset_rules()
         self.halted = False  # halt(): braking to rest for good, every command refused
 
     @property
@@ -137,12 +127,9 @@ class CommandShaper:
             return f"joint {i + 1} commanded at {rates[i]:.4g} rad/s, beyond its limit {self.lim.v_max[i]:.4g}"
         return None
 
-    def _protect(self, code: FaultCode, reason: str) -> None:
-        if not self.protective_stop:
-            self.protective_stops += 1
-        self.protective_stop = True
-        self.reason = reason
-        self.code = code.value
+    def protect(self, code: FaultCode, why: str) -> None:
+        """A protective stop (:meth:`StreamRules.protect`): the target becomes rest."""
+        super().protect(code, why)
         self.target = np.zeros_like(self.target)
 
     def reset(self, code: FaultCode, reason: str) -> None:
@@ -150,17 +137,17 @@ class CommandShaper:
         the stop is reported as a protective stop (released by a new stream)."""
         self.v = np.zeros_like(self.v)
         self.a = np.zeros_like(self.a)
-        self._protect(code, reason)
+        self.protect(code, reason)
 
     def halt(self) -> None:
         """Brake to rest and refuse every command from now on (the driver is stopping)."""
         self.halted = True
         self.target = np.zeros_like(self.target)
 
-    def releases(self, stream: Hashable) -> bool:
-        """Whether a command of ``stream`` would end the protective stop: a new stream, the
-        output at rest (False outside a protective stop, and once halted)."""
-        return self.protective_stop and not self.halted and stream != self.stream and self.at_rest
+    def would_release(self, stream: Hashable) -> bool:
+        """Whether a legal command of ``stream`` would end the protective stop now: a new stream,
+        the output at rest (False outside a protective stop, and once halted)."""
+        return not self.halted and self.releases(stream, self.at_rest)
 
     def command(self, t: float, rates: FloatArray, stream: Hashable, q: FloatArray) -> bool:
         """A command of the daemon, received at robot time ``t`` [s].
@@ -173,40 +160,24 @@ class CommandShaper:
             q: [rad] the measured joint positions.
 
         Returns:
-            True when it became the target; False when refused (counted in ``refused``).
+            True when it became the target; False when refused or ended (counted in ``refused``
+            or ``ended``).
         """
         rates = np.asarray(rates, dtype=float)
         if self.halted:
             self.refused += 1
             return False
-        if (bad := self.illegal(rates)) is not None:  # first: an illegal command is a fault, any stream's
-            self.refused += 1
-            if not self.protective_stop or self.releases(stream):  # the stop is now its stream's
-                self.stream = stream  # (else the stream the stop ended stays the stopped one)
-            self._protect(FaultCode.REFUSED_COMMAND, bad)
-            return False
-        if self.protective_stop:
-            if not self.releases(stream):
-                self.refused += 1
-                self.ended += stream == self.stream  # the stop ended it (else: a new one, too early)
-                return False
-            self.protective_stop = False  # a new stream, the robot at rest: recover
-        elif self.stale_stop and stream == self.stream:
-            self.refused += 1  # the stale stop ended this stream: only a new one resumes
-            self.ended += 1
+        if not self.receive(stream, self.illegal(rates), self.at_rest).followed:
             return False
         i = self._cannot_stop(np.asarray(q, dtype=float), rates, np.zeros_like(rates))
         if i >= 0:
             self.refused += 1
-            self.stream = stream
-            self._protect(FaultCode.CANNOT_STOP_BEFORE_LIMIT, f"joint {i + 1} commanded at {rates[i]:.4g} rad/s "
-                          f"from {q[i]:.4g} rad could not stop before its limit "
-                          f"[{self.lim.q_lo[i]:.4g}, {self.lim.q_hi[i]:.4g}]")
+            self.protect(FaultCode.CANNOT_STOP_BEFORE_LIMIT, f"joint {i + 1} commanded at {rates[i]:.4g} rad/s "
+                         f"from {q[i]:.4g} rad could not stop before its limit "
+                         f"[{self.lim.q_lo[i]:.4g}, {self.lim.q_hi[i]:.4g}]")
             return False
         self.target = rates.copy()
         self.t_cmd = t
-        self.stream = stream
-        self.stale_stop = False
         return True
 
     def _track(self, target: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -237,14 +208,13 @@ class CommandShaper:
         """
         q = np.asarray(q, dtype=float)
         late = np.isfinite(self.t_cmd) and t - self.t_cmd > self.stale_timeout
-        if late and not (self.protective_stop or self.stale_stop):
-            self.stale_stop = True
+        if late and not self.protective and self.go_stale():
             self.target = np.zeros_like(self.target)
         v, a = self._track(self.target)
-        if not self.protective_stop and (i := self._cannot_stop(q + v * self.dt, v, a)) >= 0:
-            self._protect(FaultCode.CANNOT_STOP_BEFORE_LIMIT, f"joint {i + 1} at {q[i]:.4g} rad moving at "
-                          f"{v[i]:.4g} rad/s could no longer stop before its limit "
-                          f"[{self.lim.q_lo[i]:.4g}, {self.lim.q_hi[i]:.4g}]")
+        if not self.protective and (i := self._cannot_stop(q + v * self.dt, v, a)) >= 0:
+            self.protect(FaultCode.CANNOT_STOP_BEFORE_LIMIT, f"joint {i + 1} at {q[i]:.4g} rad moving at "
+                         f"{v[i]:.4g} rad/s could no longer stop before its limit "
+                         f"[{self.lim.q_lo[i]:.4g}, {self.lim.q_hi[i]:.4g}]")
             v, a = self._track(self.target)
         self.v, self.a = v, a
         return v.copy()

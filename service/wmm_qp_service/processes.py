@@ -125,12 +125,13 @@ class Stack:
                                         "--embedded", "--control-rate", f"{self.rate_hz:g}",
                                         *self.extra_sim_args, *self.extra_daemon_args])
 
-    def start_driver(self, kind: str, robot_ip: str) -> subprocess.Popen[bytes]:
-        """Start a real robot's driver (``wmm-qp driver KIND --robot-ip IP``) in the sim's place
-        (embedded: with the control core in its cycle, taking the extra daemon arguments)."""
+    def start_driver(self, kind: str, robot_ip: str | None = None) -> subprocess.Popen[bytes]:
+        """Start a real robot's driver (``wmm-qp driver KIND --robot-ip IP``; ``driver ros2``: no
+        address, the robot file's ``[ros2]`` topics) in the sim's place (embedded: with the control
+        core in its cycle, taking the extra daemon arguments)."""
         extra = ["--embedded", "--control-rate", f"{self.rate_hz:g}", *self.extra_daemon_args] if self.embedded else []
-        return self._spawn("driver", ["driver", kind, "--robot-ip", robot_ip,
-                                      *_service_args(self.svc, self.robot_file), *extra])
+        where = ["--robot-ip", robot_ip] if robot_ip is not None else []
+        return self._spawn("driver", ["driver", kind, *where, *_service_args(self.svc, self.robot_file), *extra])
 
     def start(self) -> Stack:
         """Start both (embedded: the one process)."""

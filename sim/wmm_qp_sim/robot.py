@@ -34,6 +34,7 @@ from collections.abc import Sequence
 import numpy as np
 from wmm_qp_robot.collision import CollisionReferee
 from wmm_qp_robot.referee import Referee
+from wmm_qp_robot.stream_rules import StreamRules, Verdict
 
 import wmm_qp
 from wmm_qp.config import FloatArray
@@ -51,7 +52,7 @@ from .state import SimState
 __all__ = ["SimCommand", "SimRobot", "SimState"]
 
 
-class SimRobot:
+class SimRobot(StreamRules):
     """The simulated WMM.
 
     Args:
@@ -182,19 +183,11 @@ class SimRobot:
         self._box_tilt = self.box.tilt if self.box is not None else 0.0
         self._update_obstacles()
         self.t_last_command = 0.0
-        self.stale = False
         self.rejected = 0
         self.n_commands = 0
         self.target_arm = np.zeros(self.n_arm)  # the command the drives follow
         self.target_wheels = np.zeros(self.n_wheels)
-        self.protective = False
-        self.protective_stops = 0
-        self.protective_reason = ""
-        self.protective_code = ""  # its FaultCode
-        self.refused = 0
-        self.ended = 0  # commands of a stream a stop ended (refused, but no new fault of the sender's)
-        self.stream: tuple[str, int] | None = None  # the (sender, stream) of the last command received
-        self.stopped_stream: tuple[str, int] | None = None  # the one a stale or protective stop ended
+        self.reset_rules()  # the firmware's stream rules (streams keyed (sender, stream))
         self.drives = {"torque_limit": [0] * self.n_arm, "tracking": [0] * self.n_arm}
         g = self.model.config.gripper
         self.gripper = Gripper(g) if g is not None else None
@@ -224,9 +217,7 @@ class SimRobot:
             command = None
         if command is not None:
             self._receive(command, dt)
-        elif self.t - self.t_last_command >= self.config.stale_timeout - 1e-12 and not self.stale:
-            self.stale = True
-            self.stopped_stream = self.stream
+        elif self.t - self.t_last_command >= self.config.stale_timeout - 1e-12 and self.go_stale():
             self.referee.break_stream(hard=False)
         if self.stale or self.protective:
             v, w = self._braked(dt)
@@ -237,8 +228,8 @@ class SimRobot:
             v, w = self.target_arm, self.target_wheels
         if self.config.firmware and not self.protective and (j := self._cannot_stop(v, dt)) >= 0:
             side = "upper" if v[j] > 0 else "lower"
-            self._protective_stop(FaultCode.CANNOT_STOP_BEFORE_LIMIT, f"joint {j + 1} at {self.q_arm[j]:.4f} rad "
-                                  f"moving {v[j]:.3f} rad/s could not stop before its {side} limit")
+            self.protect(FaultCode.CANNOT_STOP_BEFORE_LIMIT, f"joint {j + 1} at {self.q_arm[j]:.4f} rad "
+                         f"moving {v[j]:.3f} rad/s could not stop before its {side} limit")
             v, w = self._braked(dt)
         self.v_arm, self.wheels = np.array(v, dtype=float), np.array(w, dtype=float)
         self.plant.write(self.wheels, self.v_arm)
@@ -290,40 +281,29 @@ class SimRobot:
         self.n_commands += 1
         self.t_last_command = self.t
         key = command.stream_key
-        if self.config.firmware:
-            bad_v = np.flatnonzero(np.abs(arm) > self._v_tol)
-            bad_w = np.flatnonzero(np.abs(wheels) > self._w_tol)
-            if bad_v.size or bad_w.size:  # first: an illegal command is a fault, any stream's
-                self.refused += 1
-                at_rest = not (self.v_arm.any() or self.wheels.any())
-                if not self.protective or (at_rest and key != self.stopped_stream):  # the stop is now its stream's
-                    self.stale = False  # (else the stream the stop ended stays the stopped one)
-                    self.stream = self.stopped_stream = key
-                what = (f"joint {bad_v[0] + 1} rate {arm[bad_v[0]]:.3g} rad/s beyond {self.v_max[bad_v[0]]:.3g}"
-                        if bad_v.size else
-                        f"wheel {bad_w[0] + 1} speed {wheels[bad_w[0]]:.3g} rad/s beyond {self.w_max[bad_w[0]]:.3g}")
-                self._protective_stop(FaultCode.REFUSED_COMMAND, f"refused command: {what}")
+        if not self.config.firmware:  # a plain integrator: every valid command is followed
+            self.stale, self.stream = False, key
+        else:
+            verdict = self.receive(key, self._illegal(arm, wheels), at_rest=not (self.v_arm.any() or self.wheels.any()))
+            if verdict is Verdict.RESUME:
+                self.referee.break_stream(hard=False)
+            if not verdict.followed:
                 return
-            if key is not None and (self.stale or self.protective) and key == self.stopped_stream:
-                self.ended += 1  # the stop ended this stream: only a new one resumes
-                return
-        self.stale = False
-        self.stream = key
-        if self.config.firmware and self.protective:
-            if self.v_arm.any() or self.wheels.any():
-                self.refused += 1  # still braking: commands wait until the robot is at rest
-                return
-            self.protective = False  # at rest, and a legal command: resume
-            self.referee.break_stream(hard=False)
         self.target_arm, self.target_wheels = arm.copy(), wheels.copy()
 
-    def _protective_stop(self, code: FaultCode, why: str) -> None:
-        if not self.protective:
-            self.protective_stops += 1
-            self.stopped_stream = self.stream
-        self.protective = True
-        self.protective_reason = why
-        self.protective_code = code.value
+    def _illegal(self, arm: FloatArray, wheels: FloatArray) -> str | None:
+        """Why a command is illegal whatever the state (a rate past its limit), or None."""
+        bad_v = np.flatnonzero(np.abs(arm) > self._v_tol)
+        if bad_v.size:
+            return f"joint {bad_v[0] + 1} rate {arm[bad_v[0]]:.3g} rad/s beyond {self.v_max[bad_v[0]]:.3g}"
+        bad_w = np.flatnonzero(np.abs(wheels) > self._w_tol)
+        if bad_w.size:
+            return f"wheel {bad_w[0] + 1} speed {wheels[bad_w[0]]:.3g} rad/s beyond {self.w_max[bad_w[0]]:.3g}"
+        return None
+
+    def protect(self, code: FaultCode, why: str) -> None:
+        """A protective stop (:meth:`StreamRules.protect`): the referee's stream breaks too."""
+        super().protect(code, why)
         self.referee.break_stream(hard=False)
 
     def _braked(self, dt: float) -> tuple[FloatArray, FloatArray]:

@@ -65,6 +65,14 @@ def test_the_untouched_copy_passes(tree: Path) -> None:
     # transport below the service layer
     ("sim/wmm_qp_sim/_probe.py", "def _open():\n    import zenoh\n    return zenoh\n", 2,
      "wmm_qp_sim imports zenoh ('import zenoh'): transport stays at the edge"),
+    # ROS 2 outside its package: every other module must load without a ROS 2 installation
+    ("service/wmm_qp_service/daemon/_probe.py", "import rclpy\n", 1,
+     "wmm_qp_service.daemon._probe imports rclpy ('import rclpy'): ROS 2 is imported only in wmm_qp_service.ros2"),
+    ("service/wmm_qp_service/drivers/_probe.py", "from sensor_msgs.msg import JointState\n", 1,
+     "wmm_qp_service.drivers._probe imports sensor_msgs"),
+    # the ROS 2 driver imports the sim (only the stand-in robot, ros2/sim_robot.py, may)
+    ("service/wmm_qp_service/ros2/_probe.py", "from wmm_qp_sim.plants import make_plant\n", 1,
+     "the driver wmm_qp_service.ros2._probe imports the sim ('from wmm_qp_sim.plants import make_plant')"),
 ])
 def test_an_upward_import_fails_the_check_naming_it(tree: Path, file: str, code: str, at: int, named: str) -> None:
     """``code`` is a new module ``file`` of the copy; ``at``: its offending line (1-based)."""

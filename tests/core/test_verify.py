@@ -127,3 +127,41 @@ def test_verify_command_on_any_robot_and_task(robot_file: str, task: str, capsys
     out = json.loads(capsys.readouterr().out)
     assert (out["robot"], out["task"], out["samples"], out["violations"]) == (path.stem, task, 30, 0)
     assert out["steps"] == 4 * 30 and out["examples"] == []
+
+
+def test_verify_on_a_robot_file_without_collision_shapes_passes_and_says_so(
+        tmp_path: pytest.TempPathFactory, capsys: pytest.CaptureFixture[str]) -> None:
+    """A robot file with no [collision] table: no self pair to sample near, no traceback (the
+    near-self sampler took min() of no distances), and every place rows are reported says why
+    there are none."""
+    import json
+    from pathlib import Path
+
+    from wmm_qp_tools.cli import main
+
+    text = (w.default_robot_file().parent / "gen3_mecanum.toml").read_text()
+    urdf = w.default_robot_file().parent / "gen3_7dof.urdf"
+    bare = text[: text.index("[collision]")].replace('urdf = "gen3_7dof.urdf"', f'urdf = "{urdf}"')
+    bare = bare.replace("body = {", "# body = {")  # no base box either: no bodies at all
+    path = Path(str(tmp_path)) / "bare.toml"
+    path.write_text(bare)
+    assert main(["verify", "--robot-config", str(path), "--samples", "40", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["violations"] == 0 and out["collision_rows"] and out["steps"] == 4 * 40
+    assert sum(out["cut_by"].values()) == out["statuses"].get("saturated", 0)
+    rows_on = config().with_(collision={"enabled": True})
+    ctl = w.make_controller("qp", w.WmmModel(w.load_robot_config(path)), rows_on)
+    assert ctl.collision_summary().startswith(
+        "collision rows on (no self pairs — this robot file has no [collision] shapes")
+
+
+def test_the_fr3_file_has_self_pairs_and_the_table() -> None:
+    """The FR3's file takes its URDF's collision meshes: self pairs, the hand, the table below."""
+    pytest.importorskip("franky_sim")
+    robot = w.load_robot_config(w.default_robot_file().parent / "fr3.toml")
+    ctl = w.make_controller("qp", w.WmmModel(robot), config().with_(collision={"enabled": True}))
+    summary = ctl.collision_summary()
+    import re
+
+    m = re.match(r"collision rows on \((\d+) self pairs, (\d+) bodies vs the floor", summary)
+    assert m is not None and int(m[1]) >= 20 and int(m[2]) >= 8, summary

@@ -5,6 +5,7 @@ holds the GIL), with the demo's JSON keys and the driver's referee as ``violatio
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 from pathlib import Path
 
@@ -40,6 +41,9 @@ def test_the_demo_runs_through_the_franka_driver_against_franky_sim(tmp_path: Pa
         assert out["loop"]["trigger"] == ("embedded" if embedded else "rate")
         assert out["violations_total"] == 0, out["violations"]
         assert out["ee_error_max"] is None  # no ground truth from a real robot
+        assert out["physics"] == "the robot's own (driver franka)"  # no plant of ours ran
+        m = re.match(r"collision rows on \((\d+) self pairs, (\d+) bodies vs the floor", out["collision_summary"])
+        assert m is not None and int(m[1]) > 0 and int(m[2]) > 0, out["collision_summary"]  # the FR3's and the table
         assert out["dm_end"] > out["dm_start"], out
         assert sim.shared[15] == 0 and sim.shared[16] == 0, "franky-sim saw a joint past a limit"
     finally:

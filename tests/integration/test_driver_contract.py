@@ -13,9 +13,9 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from wmm_qp_tools import contract
 from wmm_qp_service.processes import Stack, isolated_config
 from wmm_qp_sim import load_sim_config
+from wmm_qp_tools import contract
 
 import wmm_qp as w
 

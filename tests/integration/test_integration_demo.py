@@ -20,6 +20,9 @@ def test_demo_json_summary() -> None:
     for k in ("rate_hz", "tick_p50_us", "tick_p99_us", "deadline_misses", "ticks"):
         assert k in d["loop"]
     assert d["loop"]["ticks"] > 1000
+    # the scenario's ticks, not the daemon's since it started (its wait for the robot included)
+    assert 0 < d["scenario_ticks"] < d["loop"]["ticks"]
+    assert d["scenario_ticks"] <= d["duration_s"] * d["loop"]["rate_hz"] * 1.05 + 10  # a fixed-rate loop
     assert d["violations_total"] == 0 and set(d["violations"]) >= {"position", "velocity"}
     # tracking and DM figures only for a run no fault interrupted: on a loaded host a stall is a
     # safe stop and a hold (the system doing its job, reported on the PASS line), not a defect

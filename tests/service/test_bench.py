@@ -76,7 +76,7 @@ def test_cli_json_has_the_required_keys(capsys: pytest.CaptureFixture[str]) -> N
     pytest.importorskip("pink")
     rc = main(
         ["bench", "--json", "--ticks", "5", "--solver", "daqp", "--mode", "track", "--no-breakdown",
-         "--skip", "e2e", "--skip", "daemon"]
+         "--skip", "e2e", "--skip", "daemon", "--skip", "default"]
     )  # fmt: skip
     assert rc == 0
     out = json.loads(capsys.readouterr().out)
@@ -346,3 +346,45 @@ def test_tick_section_a_bad_baseline_tree_is_one_line_and_exit_2(
         err = capsys.readouterr().err
         assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
         assert err.startswith("wmm-qp bench: error: ") and says in err, err
+
+
+def test_default_ratios_and_targets_are_computed_from_the_run_s_own_figures() -> None:
+    """The default section's ratios come from its figures (not constants): a fabricated run whose
+    rows cost 2.5× on one robot, whose in-loop step is 1.2× the isolated one and whose embedded
+    loop misses 3× the floor's deadlines fails exactly those targets."""
+    from wmm_qp_tools.bench.default import ratios
+    from wmm_qp_tools.bench.runner import default_targets
+
+    run = {"robot": "gen3", "in_process": {
+        "gen3": {"available": True, "ratio_p50": 1.5, "with_rows": {"p50": 100.0, "p99": 300.0}},
+        "tiago": {"available": True, "ratio_p50": 2.5, "with_rows": {"p50": 400.0, "p99": 900.0}},
+        "absent": {"available": False, "reason": "not installed"}},
+        "loops": {"rate 1000": {"step_us": {"p50": 120.0}, "misses_per_10k": 1.0},
+                  "embedded 1000": {"step_us": {"p50": 120.0}, "misses_per_10k": 6.0},
+                  "floor 1000": {"misses_per_10k": 2.0}},
+        "pink": {"gen3": {"available": True, "ratio_p50": 3.4}, "z1": {"available": False}}}
+    r = ratios(run)
+    assert r["isolated_step_p50_us"] == 100.0 and set(r["rows"]) == {"gen3", "tiago"}
+    assert r["loops"]["embedded 1000"] == {"in_loop_over_isolated_step_p50": 1.2, "misses_per_10k": 6.0,
+                                           "floor_misses_per_10k": 2.0, "misses_over_floor": 3.0}
+    t = default_targets(r)
+    assert t["default: rows_p99_under_1ms_every_robot"] is True
+    assert t["default: rows_cost_within_2x_p50_every_robot"] is False  # tiago's 2.5×
+    assert t["default rate 1000: in_loop_step_within_1_3x"] is True
+    assert t["default embedded 1000: misses_within_2x_floor"] is False
+    assert t["default: at_least_3x_pink_every_holonomic_robot"] is True
+
+
+@pytest.mark.integration
+@pytest.mark.slow
+def test_default_section_runs_what_users_run(capsys: pytest.CaptureFixture[str]) -> None:
+    """``--only default`` briefly: every shipped robot in process, both loops at both rates with
+    their floors, the ratios and the targets in the JSON (no timing asserts)."""
+    assert main(["bench", "--json", "--only", "default", "--ticks", "400"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    d = out["default"]
+    assert {"wmm", "tiago", "fr3"} <= set(d["in_process"]) and d["ratios"]["isolated_step_p50_us"] > 0
+    assert set(d["loops"]) == {"rate 500", "embedded 500", "rate 1000", "embedded 1000", "floor 500", "floor 1000"}
+    for key in ("rate 500", "embedded 1000"):
+        assert d["loops"][key]["available"] and d["ratios"]["loops"][key]["in_loop_over_isolated_step_p50"] > 0
+    assert "default: rows_p99_under_1ms_every_robot" in out["targets"]

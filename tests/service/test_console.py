@@ -4,6 +4,7 @@ one-line errors."""
 
 from __future__ import annotations
 
+import math
 import subprocess
 from typing import Any
 
@@ -242,3 +243,16 @@ def test_the_gripper_buttons_and_width_slider_send_gripper_commands() -> None:
         assert sent == [("close", 0.0), ("open", 0.0), ("move", pytest.approx(0.03))]
     finally:
         c.server.stop()
+
+
+def test_a_nearly_constant_plot_gets_a_readable_y_range() -> None:
+    """A DM held at 1.2057 ... 1.2063: uPlot's own range spans 6e-4 and labels every tick "1.206";
+    the console's spans at least the plot's minimum, about the data, and ignores nan."""
+    from wmm_qp_service.console.app import DM_MIN_SPAN, y_range
+
+    rng = y_range([1.2057, math.nan, 1.2063], DM_MIN_SPAN)
+    assert rng is not None
+    lo, hi = rng
+    assert hi - lo >= DM_MIN_SPAN and lo <= 1.2057 and hi >= 1.2063
+    assert y_range([0.0, 2.0], DM_MIN_SPAN) == (0.0, 2.0)  # a wide series keeps its own range
+    assert y_range([math.nan], DM_MIN_SPAN) is None

@@ -59,7 +59,7 @@ def test_every_output_step_is_within_velocity_acceleration_and_jerk_limits_and_b
         t += DT
         v = sh.step(t, q)
         a_prev, v_prev = _check_step(v, v_prev, a_prev), v
-    assert sh.stale_stop and sh.at_rest, (sh.v, sh.a)
+    assert sh.stale and sh.at_rest, (sh.v, sh.a)
 
 
 @settings(max_examples=25, deadline=None)
@@ -82,7 +82,7 @@ def test_a_joint_driven_towards_its_limit_stops_before_it(commands: list[tuple[i
             v = sh.step(t, q)
             a_prev, v_prev = _check_step(v, v_prev, a_prev), v
             q = q + v * DT
-            assert np.all(q >= LIM.q_lo - TOL) and np.all(q <= LIM.q_hi + TOL), (q, sh.reason)
+            assert np.all(q >= LIM.q_lo - TOL) and np.all(q <= LIM.q_hi + TOL), (q, sh.protective_reason)
 
 
 def test_a_command_that_could_not_stop_before_a_limit_is_refused_with_a_protective_stop() -> None:
@@ -92,7 +92,8 @@ def test_a_command_that_could_not_stop_before_a_limit_is_refused_with_a_protecti
     v = np.zeros(7)
     v[0] = 2.0  # 2 rad/s needs 0.2 rad to stop at 10 rad/s²: 0.01 rad is not enough
     assert not sh.command(0.0, v, stream=1, q=q)
-    assert sh.protective_stop and sh.protective_stops == 1 and "joint 1" in sh.reason and "could not stop" in sh.reason
+    why = sh.protective_reason
+    assert sh.protective and sh.protective_stops == 1 and "joint 1" in why and "could not stop" in why
     assert not sh.step(DT, q).any()  # the target is rest: nothing moves
 
 
@@ -107,15 +108,15 @@ def test_a_command_past_a_velocity_limit_is_refused_and_only_a_new_stream_at_res
     bad = ok.copy()
     bad[4] = 5.3  # joint 5's limit is 5.26 rad/s
     assert not sh.command(t, bad, stream=1, q=READY)
-    assert sh.protective_stop and "joint 5" in sh.reason and "5.26" in sh.reason
+    assert sh.protective and "joint 5" in sh.protective_reason and "5.26" in sh.protective_reason
     for _ in range(200):  # brakes to rest
         t += DT
         sh.step(t, READY)
         assert not sh.command(t, ok, stream=1, q=READY)  # the same stream: refused, even at rest
-    assert sh.at_rest and sh.protective_stop and sh.refused == 201
+    assert sh.at_rest and sh.protective and sh.refused == 1  # the illegal one; the rest ended
     assert sh.ended == 200  # the stop ended stream 1: its commands are not new faults (the first one was)
     assert sh.command(t, ok, stream=2, q=READY)  # a new stream, at rest: resumes
-    assert not sh.protective_stop and sh.protective_stops == 1
+    assert not sh.protective and sh.protective_stops == 1
 
 
 def test_a_new_stream_while_still_braking_is_refused() -> None:
@@ -133,28 +134,28 @@ def test_stale_commands_brake_to_rest_and_only_a_new_stream_resumes() -> None:
     sh.command(0.0, np.full(7, 0.2), stream=1, q=READY)
     for k in range(1, 51):
         sh.step(k * DT, READY)
-    assert not sh.stale_stop and np.all(sh.v == 0.2)  # reached the target (in 22 ms), held it
+    assert not sh.stale and np.all(sh.v == 0.2)  # reached the target (in 22 ms), held it
     sh.step(51 * DT, READY)
-    assert sh.stale_stop  # 51 ms after the last command
+    assert sh.stale  # 51 ms after the last command
     assert not sh.command(0.052, np.full(7, 0.2), stream=1, q=READY)  # the stopped stream, late: refused
     for k in range(52, 300):
         sh.step(k * DT, READY)
         assert not sh.command(k * DT, np.full(7, 0.2), stream=1, q=READY)
-    assert sh.at_rest and sh.stale_stop and sh.refused == 249 and not sh.protective_stop
+    assert sh.at_rest and sh.stale and sh.refused == 0 and not sh.protective  # ended, not refused
     assert sh.ended == 249  # each the stopped stream's: none a fault of the sender's
-    assert sh.command(0.3, np.full(7, 0.2), stream=2, q=READY) and not sh.stale_stop  # a new stream
+    assert sh.command(0.3, np.full(7, 0.2), stream=2, q=READY) and not sh.stale  # a new stream
 
 
 def test_a_new_stream_resumes_a_stale_stop_while_still_braking() -> None:
     sh = CommandShaper(LIM, DT, stale_timeout=0.02)
     sh.command(0.0, np.full(7, 0.5), stream=1, q=READY)
     k = 0
-    while not sh.stale_stop:
+    while not sh.stale:
         k += 1
         sh.step(k * DT, READY)
     sh.step((k + 1) * DT, READY)
     assert not sh.at_rest  # braking
-    assert sh.command((k + 1) * DT, np.full(7, 0.1), stream=2, q=READY) and not sh.stale_stop
+    assert sh.command((k + 1) * DT, np.full(7, 0.1), stream=2, q=READY) and not sh.stale
 
 
 @pytest.mark.parametrize("period_ms", [1, 2])
@@ -175,9 +176,9 @@ def test_the_daemons_bounds_drive_a_joint_into_its_limit_without_a_protective_st
         if k % period_ms == 0:
             lo, hi = joint_motion_bounds(q, v_cmd, LIM.q_lo, LIM.q_hi, LIM.v_max, LIM.a_max, period_ms * 1e-3, 0.025)
             v_cmd = np.clip(want, lo, hi)
-            assert sh.command(k * DT, v_cmd, stream=1, q=q), sh.reason
+            assert sh.command(k * DT, v_cmd, stream=1, q=q), sh.protective_reason
         q = q + sh.step(k * DT, q) * DT
-        assert not sh.protective_stop, sh.reason
+        assert not sh.protective, sh.protective_reason
     assert LIM.q_hi[0] - 0.01 < q[0] <= LIM.q_hi[0] and sh.at_rest
 
 
@@ -188,12 +189,12 @@ def test_an_illegal_command_of_a_stopped_stream_is_a_fault_not_an_ended_one() ->
     sh.command(0.0, np.full(7, 0.2), stream=1, q=READY)
     for k in range(1, 200):
         sh.step(k * DT, READY)
-    assert sh.stale_stop and sh.at_rest
+    assert sh.stale and sh.at_rest
     assert not sh.command(0.2, np.full(7, 0.2), stream=1, q=READY) and sh.ended == 1
     bad = np.full(7, 0.2)
     bad[4] = 5.3  # joint 5's limit is 5.26 rad/s
     assert not sh.command(0.2, bad, stream=1, q=READY)
-    assert sh.ended == 1 and sh.refused == 2 and sh.protective_stop and "joint 5" in sh.reason
+    assert sh.ended == 1 and sh.refused == 1 and sh.protective and "joint 5" in sh.protective_reason
     assert not sh.command(0.2, np.full(7, 0.2), stream=1, q=READY) and sh.ended == 2  # still ended
     assert sh.command(0.2, np.zeros(7), stream=2, q=READY)  # a new stream at rest resumes
 
@@ -205,7 +206,7 @@ def test_an_illegal_command_of_a_new_stream_in_a_stop_at_rest_ends_that_stream()
     sh = CommandShaper(LIM, DT)
     bad = np.full(7, 0.1)
     bad[4] = 5.3
-    assert not sh.command(0.0, bad, stream=1, q=READY) and sh.protective_stop and sh.at_rest
+    assert not sh.command(0.0, bad, stream=1, q=READY) and sh.protective and sh.at_rest
     assert not sh.command(0.0, bad, stream=2, q=READY)  # a new stream, illegal
-    assert not sh.command(0.0, np.zeros(7), stream=2, q=READY) and sh.ended == 1 and sh.protective_stop
-    assert sh.command(0.0, np.zeros(7), stream=3, q=READY) and not sh.protective_stop
+    assert not sh.command(0.0, np.zeros(7), stream=2, q=READY) and sh.ended == 1 and sh.protective
+    assert sh.command(0.0, np.zeros(7), stream=3, q=READY) and not sh.protective

@@ -3,7 +3,6 @@ torque-limited servos, traction-limited wheels, and the same firmware and refere
 
 from __future__ import annotations
 
-import time
 from dataclasses import replace
 from functools import cache
 from pathlib import Path
@@ -234,31 +233,6 @@ def test_without_mujoco_the_plant_says_what_to_install(monkeypatch: pytest.Monke
     monkeypatch.setattr(plants, "available_plants", lambda: ["kinematic"])
     with pytest.raises(plants.PlantNotAvailable, match=r"pip install 'wmm-qp\[physics\]'"):
         SimRobot(model("ur5_omni.toml"), PHYSICS, collisions=False)
-
-
-@pytest.mark.parametrize("name", SHIPPED)
-def test_step_time_at_1khz_is_reported(name: str) -> None:
-    """Prints the physics plant's step time (write, advance, read) and the whole SimRobot.step's
-    (collision referee off); not asserted (timing depends on the host)."""
-    m = model(name)
-    p = plant(name)
-    sim = SimRobot(m, PHYSICS, collisions=False, plant=plant(name))
-    arm = np.full(m.n_arm, 0.1)
-    wheels = m.base.wheel_speeds(np.array([0.1, 0.0, 0.1])) if m.n_wheels else np.zeros(0)
-    plant_t, step_t = [], []
-    for _ in range(1000):
-        t0 = time.perf_counter()
-        p.write(wheels, arm)
-        p.advance(DT)
-        p.read()
-        t1 = time.perf_counter()
-        sim.step(SimCommand(wheels, arm), DT)
-        t2 = time.perf_counter()
-        plant_t.append(t1 - t0)
-        step_t.append(t2 - t1)
-    us = 1e6 * np.percentile([plant_t, step_t], [50, 99], axis=1)
-    print(f"\n{name}: plant step p50 {us[0, 0]:.0f} us, p99 {us[1, 0]:.0f} us; "
-          f"SimRobot.step p50 {us[0, 1]:.0f} us, p99 {us[1, 1]:.0f} us (1 kHz budget: 1000 us)")
 
 
 def test_wmm_qp_sim_physics_flag_chooses_the_plant(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -11,7 +11,9 @@ protocol — libfranka then raises its own ``ControlException`` in the driver.
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing as mp
+import os
 import signal
 import subprocess
 import time
@@ -33,6 +35,9 @@ FR3 = default_config_dir() / "robots" / "fr3.toml"
 # the gripper's width [m] (the fingers' joints, summed)
 N_SHARED = 20
 REFLEXES, RECOVERIES, GRIPPER = 17, 18, 19
+RT_PRIORITY = 50
+"""franky-sim's SCHED_FIFO priority in the rig: the driver's and the daemon's (configs/sim.toml
+``rt_priority``, configs/service.toml)."""
 CARTESIAN_REFLEX = 7
 """The index of ``cartesian_reflex`` in the robot state's 41 error flags (libfranka's ``Errors``)."""
 
@@ -130,8 +135,35 @@ def serve(shared: Any, hostname: Any, stop: Any, q_lo: list[float], q_hi: list[f
             if trip is not None:
                 reflex.append(ReflexModel(server.robot_servers[0], trip, shared))
             hostname.value = rm.hostname.encode()
-            server.run_async()
-            stop.wait()
+            if os.environ.get("WMM_QP_FRANKY_OWN_LOOP"):  # franky-sim's own loop, to compare
+                server.run_async()
+                stop.wait()
+            else:
+                pace(server, stop)
+
+
+def pace(server: Any, stop: Any, period: float = 1e-3, behind_max: float = 0.05) -> None:
+    """franky-sim's ticks on absolute deadlines, one per ``period`` [s] of wall time, until ``stop``.
+
+    franky-sim's own loop (``run_async``) sleeps ``period`` minus each tick's work, relative to
+    the tick's start: every sleep's overshoot (timer slack, wake-up latency) is lost for good, and
+    on a busy 2-core host its robot clock ran at about half real time (the driver stopped at robot
+    time 46 s after 92 s of wall time). Here a late tick is made up by the next ones; a backlog
+    over ``behind_max`` [s] is dropped, not burst through. The loop runs at the sim's real-time
+    priority where the host allows it: the driver and the daemon spin at SCHED_FIFO, and on a
+    2-core host a simulator at ordinary priority is the one starved (its state gaps then read as
+    the daemon's stale states and stalls)."""
+    with contextlib.suppress(AttributeError, OSError):  # as the robot side's processes: SCHED_FIFO when allowed
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(RT_PRIORITY))
+    next_t = time.perf_counter()
+    while not stop.is_set():
+        server.run_once(realtime=False)
+        next_t += period
+        delay = next_t - time.perf_counter()
+        if delay > 0:
+            time.sleep(delay)
+        elif delay < -behind_max:
+            next_t = time.perf_counter()
 
 
 @dataclass

@@ -20,7 +20,7 @@ from .controller import (
     load_controller_config,
 )
 from .discovery import DEFAULT_ROBOT, default_config_dir, default_robot_file
-from .robot import BASE_KINDS, ArmConfig, BaseConfig, GripperConfig, RobotCollisionConfig, RobotConfig
+from .robot import BASE_KINDS, ArmConfig, BaseConfig, GripperConfig, RobotCollisionConfig, RobotConfig, Ros2Config
 from .robot_file import load_robot_config
 from .shapes import SHAPE_KINDS, ShapeConfig, load_shape
 from .toml import TomlTable, read_toml
@@ -41,6 +41,7 @@ __all__ = [
     "QpConfig",
     "RobotCollisionConfig",
     "RobotConfig",
+    "Ros2Config",
     "ShapeConfig",
     "TaskConfig",
     "TomlTable",

@@ -6,14 +6,16 @@
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from .._typing import FloatArray, readonly
+from ..exceptions import ConfigError
 from .shapes import ShapeConfig
-from .toml import number, toml_key
+from .toml import TomlTable, choice, number, toml_key
 
 BASE_KINDS = ("mecanum", "omni", "diff_drive", "fixed")
 
@@ -33,6 +35,50 @@ class GripperConfig:
     width_max: float = field(metadata=toml_key(number(positive=True)))
     speed_max: float = field(metadata=toml_key(number(positive=True)))
     force_max: float = field(metadata=toml_key(number(positive=True)))
+
+
+_ROS_NAME = re.compile(r"~?/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*")
+
+
+def _ros_topic(t: TomlTable, k: str, default: object) -> str:
+    """A ROS 2 topic name (relative names resolve in the driver's namespace, ros2_control's way)."""
+    s = t.string(k, default)
+    if not _ROS_NAME.fullmatch(s):
+        raise ConfigError(t.path, t.key(k), f"{s!r} is not a ROS 2 topic name (tokens of letters, digits and _ "
+                          "joined by /, none starting with a digit)")
+    return s
+
+
+CMD_VEL_TYPES = ("geometry_msgs/Twist", "geometry_msgs/TwistStamped")
+
+
+@dataclass(frozen=True)
+class Ros2Config:
+    """How a robot run by ROS 2 through ros2_control is reached (the robot file's ``[ros2]`` table,
+    docs/ros2.md); the defaults are ros2_control's names.
+
+    Attributes:
+        joint_states: ``sensor_msgs/JointState`` topic (joint_state_broadcaster's): the arm's
+            joints by name, any order; other joints are ignored.
+        odom: ``nav_msgs/Odometry`` topic of the base (its controller's odometry).
+        arm_command: ``std_msgs/Float64MultiArray`` topic of the arm's velocity controller
+            (a forward command controller): one rate per joint, in the robot file's joint order.
+        cmd_vel: the base controller's velocity topic.
+        cmd_vel_type: its message type: a holonomic base takes vx, vy, wz; a differential drive
+            vx, wz.
+        rate_hz: [Hz] the driver's cycle: it reads the newest joint states and writes the
+            commands this often (the controller manager's update rate is a good choice).
+        state_timeout: [s] joint states older than this are a lost robot: a protective stop
+            (``robot_state_lost``) until they come back and a new stream starts.
+    """
+
+    joint_states: str = field(default="joint_states", metadata=toml_key(_ros_topic))
+    odom: str = field(default="odom", metadata=toml_key(_ros_topic))
+    arm_command: str = field(default="forward_velocity_controller/commands", metadata=toml_key(_ros_topic))
+    cmd_vel: str = field(default="cmd_vel", metadata=toml_key(_ros_topic))
+    cmd_vel_type: str = field(default="geometry_msgs/Twist", metadata=toml_key(choice(CMD_VEL_TYPES)))
+    rate_hz: float = field(default=250.0, metadata=toml_key(number(positive=True, hi=2000.0)))
+    state_timeout: float = field(default=0.1, metadata=toml_key(number(positive=True, hi=5.0)))
 
 
 @dataclass(frozen=True)
@@ -183,6 +229,7 @@ class RobotConfig:
     path: Path | None = None
     collision: RobotCollisionConfig = field(default_factory=RobotCollisionConfig, metadata=_KEY)
     gripper: GripperConfig | None = field(default=None, metadata=_KEY)
+    ros2: Ros2Config = field(default_factory=Ros2Config, metadata=_KEY)
 
     @property
     def n_arm(self) -> int:

@@ -25,6 +25,7 @@ from .robot import (
     GripperConfig,
     RobotCollisionConfig,
     RobotConfig,
+    Ros2Config,
 )
 from .shapes import load_shape
 from .toml import TomlTable, load, read_toml, toml_keys
@@ -110,8 +111,9 @@ def load_robot_config(path: Path | str | None = None) -> RobotConfig:
     base = _load_base(r.table("base"))
     collision = _load_collision(r.table("collision", required=False), path, full)
     gripper = load(r.table("gripper"), GripperConfig) if r.has("gripper") else None
+    ros2 = load(r.table("ros2", required=False), Ros2Config, Ros2Config())
     return RobotConfig(arm=arm, base=base, name=r.string("name", "wmm"), path=path, collision=collision,
-                       gripper=gripper)
+                       gripper=gripper, ros2=ros2)
 
 
 def _load_collision(c: TomlTable, path: Path, full: Any) -> RobotCollisionConfig:

@@ -10,7 +10,7 @@ from .._typing import FloatArray
 from ..controllers.base import Controller
 from ..model.wmm import WmmModel
 from ..scene import Scene
-from ..types import Mode
+from ..types import Mode, Status
 from .collision import CollisionJudge
 from .referee import KINDS, check_command
 from .sampling import sample_states
@@ -27,7 +27,22 @@ class VerifyReport:
     by_mode: dict[str, dict[str, int]] = field(default_factory=dict)
     by_case: dict[str, int] = field(default_factory=dict)
     statuses: dict[str, int] = field(default_factory=dict)
+    cut_by: dict[str, int] = field(default_factory=dict)
+    """Saturated commands by what cut the task (:func:`cut_kind` of the command's reason)."""
     examples: list[dict[str, object]] = field(default_factory=list)
+
+
+SATURATION_NOTE = ("saturated is what verify aims at, not a fault: each sample is one tick from a random "
+                   "state (at or past a limit, at full speed, near a collision) towards a random target, "
+                   "and one tick's acceleration bound (13) changes a rate by a_max*dt only")
+"""Why nearly every verify command is ``saturated`` (printed under the statuses)."""
+
+
+def cut_kind(reason: str) -> str:
+    """What cut the task, from a saturated command's reason: its source's label (``collision``,
+    ``sigma_min floor``, ...) or ``bounds (13)`` when only the joint bounds did."""
+    head = reason.split(":", 1)[0].split(";", 1)[0].strip()
+    return "bounds (13)" if not head or head.startswith("the bounds cut") else head
 
 
 def verify_controller(
@@ -72,6 +87,9 @@ def verify_controller(
         cmd = controller.step(s.state, s.reference)
         rep.steps += 1
         rep.statuses[cmd.status.value] = rep.statuses.get(cmd.status.value, 0) + 1
+        if cmd.status == Status.SATURATED:
+            kind = cut_kind(cmd.reason)
+            rep.cut_by[kind] = rep.cut_by.get(kind, 0) + 1
         box = ee_box if s.reference.mode == Mode.DM_CARTESIAN else None
         res = check_command(model.config, dt, s.state, cmd, model=model, ee_box=box, collision=judge)
         total = sum(res.values())

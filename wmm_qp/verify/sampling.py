@@ -90,7 +90,8 @@ def sample_states(
         if judge is not None and case == "near_self":
             for _ in range(200):  # until a self or floor pair is within the influence distance
                 d = judge.distances(q_base, q)
-                if min(v for k, v in d.items() if not k.startswith("fence:") and "/" in k) < influence:
+                near = [v for k, v in d.items() if not k.startswith("fence:") and "/" in k]
+                if not near or min(near) < influence:  # no pairs (no [collision] shapes): any state
                     break
                 q = rng.uniform(lo, hi)
         elif judge is not None and case == "near_obstacle" and judge.scene.obstacles:

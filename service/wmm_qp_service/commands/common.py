@@ -32,12 +32,12 @@ def floats(n: int | None, name: str):
     return parse
 
 
-def add_robot_argument(parser: argparse.ArgumentParser) -> None:
-    """``--robot-config FILE``: the robot description (default: ``wmm_qp.default_robot_file()``)."""
+def add_robot_argument(parser: argparse.ArgumentParser, default: str = "gen3_mecanum.toml") -> None:
+    """``--robot-config FILE``: the robot description (default: ``wmm_qp.default_robot_file()``,
+    or ``configs/robots/<default>`` for a command whose robot is another)."""
     parser.add_argument(
         "--robot-config", type=Path, default=None, metavar="FILE",
-        help="robot description (configs/robots/*.toml, docs/robots.md; default: "
-             "configs/robots/gen3_mecanum.toml)",
+        help=f"robot description (configs/robots/*.toml, docs/robots.md; default: configs/robots/{default})",
     )
 
 

@@ -14,6 +14,11 @@ With ``--driver franka --robot-ip IP`` the scenario runs through a real robot's 
 (a Franka FR3, or franky-sim) instead of a sim; ``violations`` are then the driver's referee
 (its ``sim/truth``), and the EE error is n/a (no ground truth).
 
+With ``--driver ros2`` the scenario runs through ``wmm-qp driver ros2`` (started by the demo)
+against a ROS 2 robot already running on the topics of the robot file's ``[ros2]`` table (``wmm-qp
+sim --ros2``, or a ros2_control robot; docs/ros2.md); ``violations`` are the driver's referee,
+the EE error n/a (no ground truth), ``exit_codes`` name ``driver`` and ``daemon``.
+
 With ``--embedded`` the same scenario runs through one process, ``wmm-qp sim --embedded``: the
 control core in the sim's own cycle (``--rate`` is its control rate, dividing the sim's 1 kHz);
 ``exit_codes`` and ``cpu_pct`` name ``embedded``. With ``--driver franka --embedded`` the one
@@ -60,9 +65,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "temporary directory, kept and named on the verdict line)")
     parser.add_argument("--controller-config", type=Path, default=None, metavar="FILE",
                         help="the daemon's controller.toml (default: configs/controller.toml)")
-    parser.add_argument("--driver", choices=("franka",), default=None,
+    parser.add_argument("--driver", choices=("franka", "ros2"), default=None,
                         help="run the scenario through this real robot's driver instead of a sim "
-                             "(needs --robot-ip; docs/drivers.md)")
+                             "(franka needs --robot-ip, docs/drivers.md; ros2 drives the ROS 2 robot already "
+                             "running on the topics of --robot-config's [ros2] table, docs/ros2.md)")
     parser.add_argument("--embedded", action="store_true",
                         help="one process instead of two: the control core in the sim's own cycle "
                              "(wmm-qp sim --embedded; --rate must divide the sim's rate), or with --driver "
@@ -82,7 +88,12 @@ def run(args: argparse.Namespace) -> int:
     if not 10.0 <= args.rate <= 2000.0:
         print("wmm-qp demo: error: --rate must be in [10, 2000] Hz", file=sys.stderr)
         return 2
-    if (args.driver is None) != (args.robot_ip is None):
+    if args.driver == "ros2":
+        if args.robot_ip is not None or args.embedded:
+            print("wmm-qp demo: error: --driver ros2 takes no --robot-ip and no --embedded (the robot is the ROS 2 "
+                  "graph's, on the topics of --robot-config's [ros2] table)", file=sys.stderr)
+            return 2
+    elif (args.driver is None) != (args.robot_ip is None):
         print("wmm-qp demo: error: --driver and --robot-ip go together (--driver franka --robot-ip IP)",
               file=sys.stderr)
         return 2
@@ -116,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
     not_up = ""
     try:
         if args.driver is not None:
-            bar.update(f"starting the {args.driver} driver for {args.robot_ip}"
+            bar.update(f"starting the {args.driver} driver for {args.robot_ip or robot.name}"
                        f"{' with the control core in its cycle' if args.embedded else ' and the daemon'} "
                        f"(logs: {log_dir})")
             stack.start_driver(args.driver, args.robot_ip)
@@ -149,7 +160,8 @@ def run(args: argparse.Namespace) -> int:
     summary["exit_codes"] = codes
     summary["cpu_pct"], summary["cpu_how"] = cpu, CPU_HOW
     summary["logs"] = str(log_dir)
-    summary["physics"] = plant
+    # a driver's robot is its own physics (franky-sim's MuJoCo, a real arm): no plant of ours ran
+    summary["physics"] = plant if args.driver is None else f"the robot's own (driver {args.driver})"
     summary["embedded"] = args.embedded
     summary["robot"] = {"name": robot.name, "file": str(robot.path), "n_arm": robot.n_arm,
                         "n_wheels": robot.n_wheels, "base_kind": robot.base.kind, "task": ctl.task.kind}
@@ -159,7 +171,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         lp = summary["loop"]
         print(f"demo: {robot.name} ({robot.n_arm} joints, {robot.base.kind} base, {ctl.task.kind} task), "
-              f"{summary['duration_s']:.1f} s at {lp['rate_hz']:g} Hz — ticks {lp['ticks']}, "
+              f"{summary['duration_s']:.1f} s at {lp['rate_hz']:g} Hz — {summary['scenario_ticks']} ticks "
+              f"({lp['ticks']} since the daemon started, its start-up included), "
               f"deadline misses {lp['deadline_misses']}, tick p50 {lp['tick_p50_us']:.0f} µs, "
               f"p99 {lp['tick_p99_us']:.0f} µs, max {lp['tick_max_us']:.0f} µs")
         print(f"      violations {summary['violations_total']} {summary['violations']}; {summary['collision_summary']}")
@@ -264,6 +277,7 @@ def _drive(svc: Any, duration: float, bar: ProgressLine, exited: Any = lambda: N
             return np.array(i.status.x)
 
         dm_start = info.status.dm
+        ticks0 = (c.info() or info).status.loop.ticks  # the daemon ticked while the stack came up
         t_start = time.monotonic()
         faults0 = dict(info.status.faults)
         st0 = c.latest_truth() or c.wait_truth(2.0)
@@ -309,6 +323,7 @@ def _drive(svc: Any, duration: float, bar: ProgressLine, exited: Any = lambda: N
     return {
         "duration_s": elapsed,
         "loop": msgspec.to_builtins(final.status.loop),
+        "scenario_ticks": final.status.loop.ticks - ticks0,
         "violations": violations,
         "violations_total": int(sum(violations.values())),
         "ee_error_max": max(ee_err, default=None),

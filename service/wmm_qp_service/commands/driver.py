@@ -7,7 +7,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-HELP = "drive a real robot behind the daemon's protocol (driver franka --robot-ip IP: a Franka FR3 via libfranka)"
+HELP = ("drive a real robot behind the daemon's protocol (driver franka --robot-ip IP: a Franka FR3 via libfranka; "
+        "driver ros2 --robot-config FILE: a ros2_control robot)")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -20,8 +21,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                    "pip install 'wmm-qp[franka]'")
     p.add_argument("--robot-ip", required=True, metavar="IP", help="the robot's (or franky-sim's) address")
     add_service_arguments(p)
-    add_robot_argument(p)
-    p.set_defaults(robot_config=None)  # None: configs/robots/fr3.toml
+    add_robot_argument(p, default="fr3.toml")  # None: configs/robots/fr3.toml, set in run()
     p.add_argument("--stale-timeout", type=float, default=None, metavar="S",
                    help="[s] commands older than this brake the arm to rest (default: configs/sim.toml's "
                         "stale_timeout, 0.025)")
@@ -34,7 +34,28 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     e.add_argument("--scene", type=Path, default=None, metavar="FILE",
                    help="with --embedded: the controller's obstacles and fence (default: configs/scenes/default.toml)")
 
+    r = sub.add_parser("ros2", help="a robot run by ROS 2 (ros2_control): joint states and odometry in, the arm's "
+                                    "forward velocity commands and the base's cmd_vel out (docs/ros2.md)",
+                       description="a robot run by ROS 2 through ros2_control, on the topics of its robot file's "
+                                   "[ros2] table; every command passes wmm-qp's robot firmware first (docs/ros2.md); "
+                                   "pip install 'wmm-qp[ros2]'")
+    add_service_arguments(r)
+    r.add_argument("--robot-config", type=Path, required=True, metavar="FILE",
+                   help="the robot file (configs/robots/*.toml; its [ros2] table names the topics)")
+    r.add_argument("--stale-timeout", type=float, default=None, metavar="S",
+                   help="[s] commands older than this brake the robot to rest (default: configs/sim.toml's "
+                        "stale_timeout, 0.025)")
+    r.add_argument("--rate", type=float, default=None, metavar="HZ",
+                   help="[Hz] the driver's cycle: joint states read, commands written (default: the robot file's "
+                        "[ros2] rate_hz, 250)")
+    r.add_argument("--report", type=Path, default=None, metavar="JSON",
+                   help="write the driver's timing at exit: state → command latency (a joint state's arrival → "
+                        "the rates computed from it written), the joint states' transit, its loop's misses")
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.driver == "ros2":
+        return _run_ros2(args)
     from wmm_qp_sim import load_sim_config
 
     from ..cli_common import stop_on_signals
@@ -72,9 +93,10 @@ def run(args: argparse.Namespace) -> int:
         code = driver.run(args.robot_ip, stop_on_signals())
     sh = driver.shaper
     violations = {k: n for k, n in driver.referee.counts.items() if n}
-    last = f" (last: {sh.reason})" if sh.reason else ""
-    print(f"wmm-qp driver franka: stopped at t = {driver.t:.3f} s (exit {code}), violations {violations}, "
-          f"protective stops {sh.protective_stops}{last}, refused {dict(driver.refused)}", file=sys.stderr, flush=True)
+    last = f" (last: {sh.protective_reason})" if sh.protective_reason else ""
+    print(f"wmm-qp driver franka: stopped at t = {driver.t:.3f} s (exit {code}){_clock(driver.t, driver.started_at)}, "
+          f"violations {violations}, protective stops {sh.protective_stops}{last}, refused {dict(driver.refused)}",
+          file=sys.stderr, flush=True)
     return code
 
 
@@ -97,4 +119,50 @@ def _run_embedded(args: argparse.Namespace, driver: Any) -> int | None:
     t = emb.control.timing
     print(f"wmm-qp driver franka: the embedded core ticked {t.ticks} times, {t.deadline_misses} deadline misses, "
           f"faults {dict(emb.control.core.fault_record.counts) or 'none'}", file=sys.stderr, flush=True)
+    return code
+
+
+def _clock(robot_s: float, started_at: float) -> str:
+    """The robot's clock against the wall's since the motion started: a robot time well behind
+    (franky-sim steps its physics slower than real time on a busy host) is said, not hidden."""
+    import math
+    import time
+
+    wall = time.monotonic() - started_at
+    if not math.isfinite(wall) or wall <= 0.5:
+        return ""
+    ratio = robot_s / wall
+    slow = "; the robot's clock ran slower than the wall's (a simulator behind real time?)" if ratio < 0.9 else ""
+    return f" in {wall:.1f} s of wall time ({ratio:.2f}× real time{slow})"
+
+
+def _run_ros2(args: argparse.Namespace) -> int:
+    """``driver ros2``: a ros2_control robot (docs/ros2.md)."""
+    from wmm_qp_sim import load_sim_config
+
+    from ..cli_common import stop_on_signals
+    from ..ros2.driver import Ros2Driver
+    from .common import robot_service_config
+
+    robot, svc = robot_service_config(args)
+    sim_cfg = load_sim_config(None)  # the firmware's defaults: the same stale timeout and referee as the sim's
+    referee = sim_cfg.referee
+    stale = sim_cfg.stale_timeout if args.stale_timeout is None else args.stale_timeout
+    if not 0.0 < stale <= 1.0:
+        print("wmm-qp driver ros2: error: --stale-timeout must be in (0, 1] s", file=sys.stderr)
+        return 2
+    if args.rate is not None and not 1.0 <= args.rate <= 2000.0:
+        print("wmm-qp driver ros2: error: --rate must be in [1, 2000] Hz", file=sys.stderr)
+        return 2
+    driver = Ros2Driver(svc, robot, stale_timeout=stale, referee=referee, rate_hz=args.rate)
+    code = driver.run(stop_on_signals(), report=args.report)
+    sh = driver.shaper
+    violations = {k: n for k, n in driver.referee.counts.items() if n}
+    last = f" (last: {sh.protective_reason})" if sh.protective_reason else ""
+    lat = driver.report(driver.ros_in)["state_to_command"]
+    timing = (f"; state → command p50 {lat['p50_ms']:.2f} ms, p99 {lat['p99_ms']:.2f} ms over {lat['n']} commands"
+              if lat["n"] else "")
+    print(f"wmm-qp driver ros2: stopped at t = {driver.t:.3f} s (exit {code}), violations {violations}, "
+          f"protective stops {sh.protective_stops}{last}, refused {dict(driver.refused)}, {driver.cycles} cycles, "
+          f"{driver.misses} deadline misses{timing}", file=sys.stderr, flush=True)
     return code

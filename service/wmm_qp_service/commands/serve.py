@@ -33,6 +33,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the EE task: position (r = 3) or pose (r = 6, setpoints' orientation "
                              "followed) (default: controller.toml's task.kind)")
     parser.add_argument("--controller-config", metavar="TOML", help="default: configs/controller.toml")
+    parser.add_argument("--ros2", action="store_true",
+                        help="also a ROS 2 face under /<robot>/: ee_pose, status, markers out; ee_target, mode in "
+                             "(docs/ros2.md; pip install 'wmm-qp[ros2]')")
     parser.add_argument("--wait-lease", action="store_true",
                         help="when another daemon controls this robot, wait for its lease instead of "
                              "refusing to start")
@@ -88,6 +91,21 @@ def run(args: argparse.Namespace) -> int:
     daemon = Daemon(svc, ctl_cfg, robot, kind=args.controller, wait_lease=args.wait_lease, scene=scene,
                     breakdown=args.breakdown, **record)
     stop = stop_on_signals()
+    face = None
+    if args.ros2:
+        from ..ros2.node import Ros2Missing
+
+        try:
+            from ..ros2.face import Ros2Face
+
+            face = Ros2Face(svc.with_robot(robot), robot, scene)
+            face.start()
+        except Ros2Missing as e:
+            print(f"wmm-qp serve: error: --ros2 {e}", file=sys.stderr)
+            return 2
+        ns = face.ros.node.get_namespace() if face.ros is not None else ""
+        print(f"wmm-qp serve: ROS 2 face under {ns}/: ee_pose, status, markers; takes ee_target, mode",
+              file=sys.stderr, flush=True)
     print(f"wmm-qp serve: {svc.prefix}/{svc.robot} at {svc.loop.rate_hz:g} Hz ({svc.loop.trigger} trigger) "
           f"({daemon.core.kind}, {ctl_cfg.task.kind} task; {robot.n_arm} joints, {robot.base.kind} base "
           f"with {robot.n_wheels} wheels; scene {scene.path}: {len(scene.obstacles)} obstacles, "
@@ -98,6 +116,11 @@ def run(args: argparse.Namespace) -> int:
     except LeaseHeld as e:
         print(f"wmm-qp serve: error: {e}", file=sys.stderr, flush=True)
         return 3
+    finally:
+        if face is not None:
+            face.close()
+            print(f"wmm-qp serve: ROS 2 face: sent {dict(face.sent)}, refused {dict(face.refused) or 'none'}",
+                  file=sys.stderr, flush=True)
     lp = final.loop
     print(f"wmm-qp serve: stopped after {lp.ticks} ticks, {lp.deadline_misses} deadline misses, "
           f"tick p50 {lp.tick_p50_us:.0f} µs p99 {lp.tick_p99_us:.0f} µs", file=sys.stderr, flush=True)

@@ -43,6 +43,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                    help="with --embedded: without the cycle's cost cuts (the garbage collector in the slack "
                         "only, the spin before each deadline, the service thread one level below the cycle's "
                         "priority): to measure them (docs/benchmarks.md)")
+    parser.add_argument("--ros2", action="store_true",
+                        help="a stand-in ROS 2 robot instead of a Zenoh node: the plant behind the ros2_control-shaped "
+                             "topics of the robot file's [ros2] table (joint_states, odom out; forward velocity "
+                             "commands, cmd_vel in), for wmm-qp driver ros2 (docs/ros2.md); --rate: its cycle "
+                             "(default: [ros2] rate_hz). With --embedded: the ROS 2 face of wmm-qp serve --ros2 "
+                             "instead (ee_pose, status, markers; ee_target, mode)")
+
     from ..recording.options import add_record_arguments
 
     add_record_arguments(parser)  # with --embedded: the core's ticks
@@ -67,13 +74,16 @@ def run(args: argparse.Namespace) -> int:
         if not args.rate > 0:
             print("wmm-qp sim: error: --rate must be > 0", file=sys.stderr)
             return 2
-        sim_cfg = sim_cfg.with_(rate_hz=args.rate)
+        if not args.ros2:
+            sim_cfg = sim_cfg.with_(rate_hz=args.rate)
     if not (0.0 <= args.state_loss < 1.0 and 0.0 <= args.state_delay_ms < 10_000.0):
         print("wmm-qp sim: error: --state-loss must be in [0, 1) and --state-delay-ms in [0, 10000)",
               file=sys.stderr)
         return 2
     if args.physics is not None:
         sim_cfg = sim_cfg.with_(physics={"plant": args.physics})
+    if args.ros2 and not args.embedded:
+        return _run_ros2(args, robot, scene, sim_cfg)
     prio = sim_cfg.rt_priority if args.rt_priority is None else args.rt_priority
     if not 0 <= prio <= 99:
         print("wmm-qp sim: error: --rt-priority must be in [0, 99]", file=sys.stderr)
@@ -144,12 +154,28 @@ def _run_embedded(args: argparse.Namespace, robot: Any, svc: Any, scene: Any, si
           f"{len(scene.obstacles)} obstacles, {core.ctl.collision_summary()}; collision referee "
           f"{'on' if emb.node.sim.collision is not None else 'off'}), listening on {svc.zenoh.sim_endpoint} and "
           f"{svc.zenoh.daemon_endpoint}", file=sys.stderr, flush=True)
+    face = None
+    if args.ros2:  # the daemon's ROS 2 face, a Zenoh client of this process (docs/ros2.md)
+        from ..ros2.node import Ros2Missing
+
+        try:
+            from ..ros2.face import Ros2Face
+
+            face = Ros2Face(svc.with_robot(robot), robot, scene)
+            face.start()
+        except Ros2Missing as e:
+            print(f"wmm-qp sim: error: --ros2 {e}", file=sys.stderr)
+            return 2
     try:
         st = emb.run(stop, wait_lease=args.wait_lease, report=args.cycle_report)
     except LeaseHeld as e:
         print(f"wmm-qp sim: error: {e}", file=sys.stderr, flush=True)
         return 3
     finally:
+        if face is not None:
+            face.close()
+            print(f"wmm-qp sim: ROS 2 face: sent {dict(face.sent)}, refused {dict(face.refused) or 'none'}",
+                  file=sys.stderr, flush=True)
         recorded = emb.control.journal.close(emb.control.timing.ticks) if emb.control.journal is not None else {}
     lp = emb.control.timing
     p50, p99 = lp.percentiles_us(50.0, 99.0)
@@ -159,3 +185,26 @@ def _run_embedded(args: argparse.Namespace, robot: Any, svc: Any, scene: Any, si
     if record:
         return report_recording("sim", recorded)
     return 0
+
+
+def _run_ros2(args: argparse.Namespace, robot: Any, scene: Any, sim_cfg: Any) -> int:
+    """``wmm-qp sim --ros2``: the plant behind ros2_control-shaped topics (no Zenoh)."""
+    from ..cli_common import stop_on_signals
+    from ..ros2.node import Ros2Missing
+
+    if args.state_loss or args.state_delay_ms or args.no_truth:
+        print("wmm-qp sim: error: --ros2 is a ROS 2 robot alone: not with --state-loss, --state-delay-ms or "
+              "--no-truth (it publishes no Zenoh state)", file=sys.stderr)
+        return 2
+    if args.rate is not None and not 1.0 <= args.rate <= 2000.0:
+        print("wmm-qp sim: error: --rate must be in [1, 2000] Hz", file=sys.stderr)
+        return 2
+    try:
+        from ..ros2.sim_robot import Ros2SimRobot
+
+        sim = Ros2SimRobot(robot, sim_cfg, plant=sim_cfg.physics.plant, scene=scene, rate_hz=args.rate,
+                           seed=args.seed)
+        return sim.run(stop_on_signals())
+    except Ros2Missing as e:
+        print(f"wmm-qp sim: error: {e}", file=sys.stderr)
+        return 2

@@ -5,8 +5,12 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from typing import TYPE_CHECKING
 
 import msgspec
+
+if TYPE_CHECKING:
+    from ..protocol import InfoMsg
 
 HELP = "show the daemon's status"
 
@@ -36,9 +40,15 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(msgspec.to_builtins(info), default=str))
         return 0
+    show(info, f"{svc.prefix}/{svc.robot}")
+    return 0
+
+
+def show(info: InfoMsg, where: str) -> None:
+    """Print the status of the daemon at ``where`` (prefix/robot) as ``wmm-qp status`` does."""
     s, lp = info.status, info.status.loop
     total_viol = sum(s.robot_violations.values())
-    print(f"robot      {svc.prefix}/{svc.robot}   controller {info.config['controller']['kind']}"
+    print(f"robot      {where}   controller {info.config['controller']['kind']}"
           f"   task {info.task or '?'}")
     print(f"           {info.n_arm} joints [{', '.join(info.joints)}]   {info.base_kind or '?'} base, "
           f"{info.n_wheels} wheels [{', '.join(info.wheels)}]")
@@ -57,10 +67,13 @@ def run(args: argparse.Namespace) -> int:
     if s.faults:
         print(f"faults     {', '.join(f'{k} {v}' for k, v in sorted(s.faults.items()))}")
     lease = ("held" if s.lease_holder == s.lease else
-             f"NOT HELD (the sim applies {s.lease_holder}'s commands)" if s.lease_holder else "not yet granted")
+             f"NOT HELD (the robot applies {s.lease_holder}'s commands)" if s.lease_holder else "not yet granted")
     print(f"lease      {lease}   robot instance {s.robot_instance or 'none'}   round trip {s.round_trip_ms:.1f} ms"
           f"   operator {s.operator or 'none'} (conflicts {s.operator_conflicts})")
-    print(f"sim        violations {total_viol} {s.robot_violations if total_viol else ''}".rstrip())
+    if s.robot_violations:  # a robot's referee: counts, 0 included
+        print(f"robot      violations {total_viol} {s.robot_violations if total_viol else ''}".rstrip())
+    else:  # {}: this robot publishes no truth (docs/protocol.md), nothing refereed it here
+        print("robot      violations not refereed (the robot publishes no truth)")
     print(f"collision  {info.collision_summary or 'unknown (an older daemon)'}")
     if s.x:
         print(f"EE         x {[round(v, 4) for v in s.x]}   x_d {[round(v, 4) for v in s.x_d]}"
@@ -69,4 +82,3 @@ def run(args: argparse.Namespace) -> int:
         print(f"           orientation target (x, y, z, w) {[round(v, 4) for v in s.quat_d]}")
     if s.orientation_ignored:
         print(f"           {s.orientation_ignored} setpoint orientations ignored (position task)")
-    return 0

@@ -14,7 +14,7 @@ import wmm_qp as w
 from wmm_qp.config import TASK_KINDS
 from wmm_qp.controllers.qp import QpController
 from wmm_qp.solvers import SOLVER_NAMES
-from wmm_qp.verify import KINDS, verify_controller
+from wmm_qp.verify import KINDS, SATURATION_NOTE, verify_controller
 
 from ..progress import ProgressLine
 from ..verdict import EXIT_CODES_HELP, judge
@@ -105,6 +105,7 @@ def run(args: argparse.Namespace) -> int:
                     "by_mode": rep.by_mode,
                     "by_case": rep.by_case,
                     "statuses": rep.statuses,
+                    "cut_by": rep.cut_by,
                     "examples": rep.examples,
                     "seed": args.seed,
                     "scene": None if scene is None else str(scene.path),
@@ -124,6 +125,10 @@ def run(args: argparse.Namespace) -> int:
             print(f"{mode:<14}" + "".join(f"{counts[k]:>14}" for k in KINDS))
         print(f"{'total':<14}" + "".join(f"{rep.by_kind[k]:>14}" for k in KINDS))
         print("command statuses: " + ", ".join(f"{k} {v}" for k, v in sorted(rep.statuses.items())))
+        if rep.cut_by:
+            cuts = sorted(rep.cut_by.items(), key=lambda kv: -kv[1])
+            print("  the task cut by: " + ", ".join(f"{k} {v}" for k, v in cuts))
+            print(f"  ({SATURATION_NOTE})")
         print(f"violations: {rep.violations}")
         print(verdict.line())
     return verdict.exit_code

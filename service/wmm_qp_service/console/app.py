@@ -29,6 +29,8 @@ if TYPE_CHECKING:
 
 GRIPPER_SLIDER_MAX = 0.1
 """[m] the width slider's range (a robot clamps a width past its own ``[gripper] width_max``)."""
+DM_MIN_SPAN, ERR_MIN_SPAN = 0.05, 0.01
+"""The smallest y spans of the DM and tracking-error plots (DM: dimensionless; error: m)."""
 MODES = ("hold", "track", "dm_cartesian", "dm_nullspace")
 MODE_LABELS = {"hold": "Hold", "track": "Track", "dm_cartesian": "DM Cartesian", "dm_nullspace": "DM null space"}
 TRACKING_MODES = ("track", "dm_nullspace")
@@ -77,6 +79,23 @@ def status_markdown(st: StatusMsg | None, truth: TruthMsg | None, source: str,
     return "  \n".join(lines)
 
 
+def y_range(values: Any, min_span: float) -> tuple[float, float] | None:
+    """A plot's y range: the data's, widened about its middle to at least ``min_span`` (uPlot's
+    auto range of a nearly constant series spans a few 1e-4 and labels every tick alike, e.g. a
+    DM held at 1.2057 ... 1.2063 read "1.206" on all three); rounded outward to a 1/4 of the span
+    so that it changes seldom. None without a finite value."""
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    if not v.size:
+        return None
+    lo, hi = float(v.min()), float(v.max())
+    if hi - lo < min_span:
+        mid = 0.5 * (lo + hi)
+        lo, hi = mid - 0.5 * min_span, mid + 0.5 * min_span
+    step = 0.25 * (hi - lo)
+    return math.floor(lo / step) * step, math.ceil(hi / step) * step
+
+
 def _fmt(v: Any) -> str:
     return "(" + ", ".join(f"{float(x):.3f}" for x in v) + ")"
 
@@ -108,6 +127,7 @@ class Console:
         self._target: tuple[np.ndarray, np.ndarray] | None = None  # (x, wxyz) the operator set
         self._moved_at = -math.inf
         self.series = Series(("dm", "error"))
+        self._y_ranges: dict[int, tuple[float, float]] = {}  # each plot's y range last sent
         self._t0 = time.monotonic()
         self.mode_clicks = 0
         self._dm_key: tuple[Any, ...] | None = None
@@ -358,3 +378,8 @@ class Console:
                 t, dm_s, err_s = self.series.arrays(time.monotonic() - self._t0)
                 self.plot_dm.data = (t, dm_s)
                 self.plot_err.data = (t, err_s)
+                for plot, values, span in ((self.plot_dm, dm_s, DM_MIN_SPAN), (self.plot_err, err_s, ERR_MIN_SPAN)):
+                    rng = y_range(values, span)
+                    if rng is not None and rng != self._y_ranges.get(id(plot)):
+                        self._y_ranges[id(plot)] = rng
+                        plot.scales = {"x": {"time": False}, "y": {"auto": False, "range": list(rng)}}

@@ -1,12 +1,12 @@
 """``wmm-qp driver franka``: a Franka FR3 behind the daemon's protocol, through libfranka.
 
 One process, one loop: libfranka's joint velocity control (``readOnce`` / ``writeOnce``, the
-robot's 1 kHz cycle is the clock) and the wmm-qp protocol as the simulated robot speaks it
+robot's 1 kHz cycle is the clock: :func:`.franka_link.drive`) and the wmm-qp protocol as the simulated robot speaks it
 (``service/wmm_qp_service/drivers/sim_node.py``, docs/protocol.md): it publishes ``state`` every cycle with
 its ``instance``, a consecutive ``seq``, the ``lease`` holder and the ``cmd_seq`` it follows,
 holds the liveliness token ``alive/robot``, and obeys ``cmd`` from the lease holder only, addressed
 to its instance, with increasing seq. Between the daemon's commands (500 Hz or 1 kHz, some late
-or lost) and the robot, the :class:`~.franka_stream.CommandShaper` makes the continuous,
+or lost) and the robot, the :class:`~wmm_qp_robot.shaper.CommandShaper` makes the continuous,
 jerk-limited stream Franka's controller demands, brakes on stale commands and refuses commands
 past the limits (protective stop). The sim's referee (:mod:`wmm_qp_robot.referee`) judges every
 command as received and the measured joint positions each cycle; its counts go out on
@@ -71,7 +71,7 @@ from ..protocol import CommandMsg, GripperMsg, StateMsg, TruthMsg, encode
 from ..transport import ROLE_SIM, open_session
 from ..validation import Validator
 from .franka_hand import FrankaHand
-from .franka_link import FrankaLink
+from .franka_link import FrankaLink, drive
 
 DT = 1e-3
 """[s] Franka's control cycle."""
@@ -111,6 +111,7 @@ class FrankaDriver(LeaseGate):
         self.referee = Referee(robot, referee if referee is not None else RefereeConfig(), period_max=stale_timeout)
         self.cmd_seq = -1
         self.t = 0.0  # [s] the robot's time: the sum of its cycles
+        self.started_at = math.nan  # [s] monotonic time the motion started (robot time 0)
         self.seq = 0
         self._stopped = False  # the shaper was in a stale or protective stop at the last cycle
         self.robot_error: str | None = None  # libfranka ended the motion (its message); None: it runs
@@ -176,17 +177,15 @@ class FrankaDriver(LeaseGate):
         (the fault: the refusing command's stream is then ended, and the state names it, so its
         sender sees its stream stopped and starts another)."""
         sh = self.shaper
-        if stream == sh.stream:
+        if stream == sh.stopped_stream:
             return "ended"
-        if not sh.releases(stream):
+        if not sh.would_release(stream):
             return "firmware"
         if self.t - self._recovery_refused_t < RECOVERY_RETRY:
             return "recovering"
         why = recover() if recover is not None else "no robot to recover"
         if why is not None:
-            sh.reason = f"robot: {self.robot_error}; recovery refused: {why}"
-            sh.code = FaultCode.RECOVERY_REFUSED.value
-            sh.stream = stream
+            sh.restop(stream, FaultCode.RECOVERY_REFUSED, f"robot: {self.robot_error}; recovery refused: {why}")
             self.cmd_seq = seq
             self._recovery_refused_t = self.t
             return "firmware"
@@ -218,7 +217,7 @@ class FrankaDriver(LeaseGate):
         """
         self.referee.check_positions(q)
         v = self.shaper.step(self.t, q)
-        stopped = self.shaper.stale_stop or self.shaper.protective_stop
+        stopped = self.shaper.stale or self.shaper.protective
         if stopped and not self._stopped:
             self.referee.break_stream(hard=False)  # the robot stopped following the stream
         self._stopped = stopped
@@ -256,10 +255,10 @@ class FrankaDriver(LeaseGate):
         return StateMsg(
             robot=self.svc.robot, seq=self.seq, stamp=time.time(), t=self.t,
             q_base=[0.0, 0.0, 0.0], q_arm=q.tolist(), v_arm=sh.v.tolist(), wheel_speeds=[],
-            tau=tau.tolist(), gripper_width=gripper_width, stale_stop=sh.stale_stop,
+            tau=tau.tolist(), gripper_width=gripper_width, stale_stop=sh.stale,
             cmd_seq=self.cmd_seq, instance=self.instance, lease=self.holder,
-            protective_stop=sh.protective_stop, protective_stops=sh.protective_stops,
-            protective_reason=sh.reason, protective_code=sh.code, refused=refused)
+            protective_stop=sh.protective, protective_stops=sh.protective_stops,
+            protective_reason=sh.protective_reason, protective_code=sh.protective_code, refused=refused)
 
     def truth_msg(self, force: np.ndarray) -> TruthMsg:
         """The referee's counts as ``sim/truth`` for the last state (no ground truth: NaN).
@@ -296,6 +295,7 @@ class FrankaDriver(LeaseGate):
                 try:
                     link = FrankaLink(fr, fr.Robot(robot_ip, fr.RealtimeConfig.kIgnore))
                     link.start()
+                    self.started_at = time.monotonic()
                 except (fr.NetworkException, fr.FrankaException, RuntimeError) as e:
                     print(f"wmm-qp driver franka: error: cannot connect to the robot at {robot_ip}: {e}",
                           file=sys.stderr, flush=True)
@@ -332,45 +332,6 @@ class FrankaDriver(LeaseGate):
               if why is None else f"wmm-qp driver franka: the robot did not recover: {why}",
               file=sys.stderr, flush=True)
         return why
-
-    def drive(self, fr: Any, link: FrankaLink, stop: threading.Event, max_cycles: int | None, robot_ip: str,
-              step: Callable[[bool], tuple[np.ndarray, int]], after: Callable[[bool], None]) -> int:
-        """libfranka's cycle until ``stop`` (or ``max_cycles``), then brake to rest and finish the
-        motion; a reflex is a protective stop (:meth:`reflex`) and the cycle goes on.
-
-        Args:
-            fr: pylibfranka (its exception types).
-            link: the robot.
-            stop, max_cycles: when to brake and finish.
-            robot_ip: for the message when the connection is lost.
-            step: one cycle up to the write — read the robot, take the inputs (none once
-                finishing, its argument), shape the command — giving the velocities to write and
-                the cycles so far.
-            after: the cycle's slack after the write (its argument: the motion finished).
-
-        Returns:
-            0 after a clean stop; 1 when the connection was lost.
-        """
-        finishing = False
-        while True:
-            try:
-                v, cycles = step(finishing)
-                if not finishing and (stop.is_set() or (max_cycles is not None and cycles >= max_cycles)):
-                    finishing = True  # brake to rest, then finish the motion
-                    self.shaper.halt()
-                done = finishing and self.shaper.at_rest
-                link.write(v, finished=done)
-                after(done)
-                if done:
-                    return 0
-            except fr.NetworkException as e:
-                print(f"wmm-qp driver franka: error: lost the connection to the robot at {robot_ip}: {e}",
-                      file=sys.stderr, flush=True)
-                return 1
-            except fr.ControlException as e:
-                self.reflex(e, link)
-                if finishing:
-                    return 0
 
     def _loop(self, fr: Any, link: FrankaLink, subs: tuple[Any, Any], lease_sub: Any, pubs: tuple[Any, Any],
               stop: threading.Event, max_cycles: int | None, robot_ip: str) -> int:
@@ -412,4 +373,4 @@ class FrankaDriver(LeaseGate):
             if n % TRUTH_EVERY == 1 or done:
                 pub_truth.put(encode(self.truth_msg(np.array(st.O_F_ext_hat_K, dtype=float)[:3])))
 
-        return self.drive(fr, link, stop, max_cycles, robot_ip, step, after)
+        return drive(fr, link, self, stop, max_cycles, robot_ip, step, after)

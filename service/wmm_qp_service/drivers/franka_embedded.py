@@ -42,7 +42,7 @@ from ..embedded import EmbeddedControl
 from ..embedded.service import embedded_session
 from ..protocol import CommandMsg, StateMsg
 from .franka import DT, TRUTH_EVERY, FrankaDriver
-from .franka_link import FrankaLink
+from .franka_link import FrankaLink, drive
 
 LATE = 1.5
 """A cycle whose duration exceeds this many robot cycles was late for the robot (a miss)."""
@@ -153,7 +153,7 @@ class FrankaEmbedded:
                            np.array(st.O_F_ext_hat_K, dtype=float)[:3], self.mono(), tick=not finishing)
             return v, self.cycles
 
-        return d.drive(fr, link, stop, max_cycles, robot_ip, step, lambda done: self.after())
+        return drive(fr, link, d, stop, max_cycles, robot_ip, step, lambda done: self.after())
 
     def run(self, robot_ip: str, stop: threading.Event, max_cycles: int | None = None,
             wait_lease: bool = False) -> int:

@@ -16,6 +16,7 @@ import contextlib
 import math
 import multiprocessing as mp
 import queue
+import signal
 import sys
 from typing import Any
 
@@ -24,7 +25,12 @@ READ_PERIOD = 0.01
 
 
 def _serve(robot_ip: str, commands: Any, width: Any, stop: Any) -> None:
-    """The child: connect, then execute commands and read the width until ``stop``."""
+    """The child: connect, then execute commands and read the width until ``stop``.
+
+    Ctrl-C in a terminal reaches the whole foreground process group: the child ignores it (no
+    ``KeyboardInterrupt`` traceback of its own) and ends when the driver, which stops on it, sets
+    ``stop``."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         import pylibfranka as fr
 

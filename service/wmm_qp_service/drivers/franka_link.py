@@ -17,9 +17,13 @@ Only this module and :mod:`.franka_hand` call ``pylibfranka``.
 
 from __future__ import annotations
 
-from typing import Any
+import sys
+import threading
+from collections.abc import Callable
+from typing import Any, Protocol
 
 import numpy as np
+from wmm_qp_robot.shaper import CommandShaper
 
 
 class FrankaLink:
@@ -90,3 +94,52 @@ class FrankaLink:
         except (fr.FrankaException, RuntimeError) as e:
             return f"{type(e).__name__}: {str(e).strip() or 'no reason given'}"
         return None
+
+
+class Driven(Protocol):
+    """What :func:`drive` needs of the driver: its shaper and its reflex handler."""
+
+    shaper: CommandShaper
+
+    def reflex(self, e: Exception, link: FrankaLink) -> None: ...
+
+
+def drive(fr: Any, link: FrankaLink, driver: Driven, stop: threading.Event, max_cycles: int | None, robot_ip: str,
+          step: Callable[[bool], tuple[np.ndarray, int]], after: Callable[[bool], None]) -> int:
+    """libfranka's cycle until ``stop`` (or ``max_cycles``), then brake to rest and finish the
+    motion; a reflex is a protective stop (:meth:`FrankaDriver.reflex`) and the cycle goes on.
+
+    Args:
+        fr: pylibfranka (its exception types).
+        link: the robot.
+        driver: whose shaper halts when finishing, and who takes a reflex.
+        stop, max_cycles: when to brake and finish.
+        robot_ip: for the message when the connection is lost.
+        step: one cycle up to the write — read the robot, take the inputs (none once
+            finishing, its argument), shape the command — giving the velocities to write and
+            the cycles so far.
+        after: the cycle's slack after the write (its argument: the motion finished).
+
+    Returns:
+        0 after a clean stop; 1 when the connection was lost.
+    """
+    finishing = False
+    while True:
+        try:
+            v, cycles = step(finishing)
+            if not finishing and (stop.is_set() or (max_cycles is not None and cycles >= max_cycles)):
+                finishing = True  # brake to rest, then finish the motion
+                driver.shaper.halt()
+            done = finishing and driver.shaper.at_rest
+            link.write(v, finished=done)
+            after(done)
+            if done:
+                return 0
+        except fr.NetworkException as e:
+            print(f"wmm-qp driver franka: error: lost the connection to the robot at {robot_ip}: {e}",
+                  file=sys.stderr, flush=True)
+            return 1
+        except fr.ControlException as e:
+            driver.reflex(e, link)
+            if finishing:
+                return 0

@@ -202,6 +202,7 @@ def run_case(
             c.set_mode("hold")
             rec.close()
             states_raw, tel, truths = rec.states, rec.telemetry, rec.truth_by_seq()
+            out["not_truths"] = rec.not_truths  # messages on the truth key that were no truth
     finally:
         out["exit_codes"] = stack.stop()
     for key, wanted, path in (("breakdown", breakdown and not embedded, breakdown_file),

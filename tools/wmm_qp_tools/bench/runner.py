@@ -16,10 +16,12 @@ from wmm_qp_tools.bench import (
     collision,
     controller,
     daemon,
+    default,
     e2e,
     jitter,
     oneshot,
     pink_race,
+    ros2,
     scaling,
     sim,
     tick_compare,
@@ -27,8 +29,9 @@ from wmm_qp_tools.bench import (
 from wmm_qp_tools.bench.robot_files import loaded, shipped_robots
 from wmm_qp_tools.bench.stats import now_ns
 
-SECTIONS: tuple[str, ...] = ("controller", "oneshot", "pink", "scaling", "robots", "e2e", "daemon", "collisions",
-                             "collision_default", "jitter", "sim", "tick", "record")
+SECTIONS: tuple[str, ...] = ("default", "controller", "oneshot", "pink", "scaling", "robots", "e2e", "daemon",
+                             "collisions", "collision_default", "jitter", "sim", "tick", "ros2",
+                             "record")
 
 
 def run_robots(
@@ -115,7 +118,7 @@ def run_bench(
         {"machine", "robot", "task", "ticks", "tick_us" {solver: {p50, p99, max}} (track mode),
         "controller", "oneshot", "pink", "pink_tick_us" {p50, p99}, "scaling", "robots", "e2e",
         "sim" {robot: {plant: {"step_us", "realtime_factor", ...}}}, "physics" (the sim's plants),
-        "tick_compare" (:func:`.tick_compare.run`), "targets"}.
+        "tick_compare" (:func:`.tick_compare.run`), "default" (:func:`.default.run`), "targets"}.
     """
     robot = w.load_robot_config() if robot is None else robot
     cfg = w.load_controller_config() if cfg is None else cfg
@@ -139,6 +142,10 @@ def run_bench(
     def say(what: str) -> None:  # each section takes seconds: its start is always shown
         bar.done(f"section {done + 1}/{len(sections)}: {what}")
 
+    if "default" in sections:
+        say("default: what users run (rows on): every shipped robot in process, the daemon's and the embedded loops")
+        out["default"] = default.run(rows_cfg, robot, ticks, max_seconds, controller_file)
+        done += 1
     if "controller" in sections:
         say(f"controller: the step of every solver in every mode, {ticks} ticks each")
         res = controller.run(robot, cfg, solvers, modes, ticks, breakdown, max_seconds)
@@ -194,6 +201,9 @@ def run_bench(
         out["physics"] = plants
         out["sim"] = sim.run(shipped_robots(), plants, min(ticks, 5000), max_seconds)
         done += 1
+    if "ros2" in sections:
+        say(f"ros2: state → command through the ROS 2 driver at {', '.join(f'{r:g}' for r in ros2.RATES)} Hz")
+        out["ros2"] = ros2.run(max(5.0, min(30.0, ticks / 500.0)))
     if "record" in sections:
         from . import record
 
@@ -234,6 +244,8 @@ def targets(r: dict[str, Any]) -> dict[str, Any]:
         if ratios:
             t["nullspace_over_track_p50"] = ratios
             t["nullspace_within_1_3x"] = all(v <= 1.3 for v in ratios.values())
+    if "default" in r:
+        t.update(default_targets(r["default"]["ratios"]))
     race = r.get("pink")
     if race and race.get("available"):
         t["pink_over_ours_p50"] = race["ratio_p50"]
@@ -294,4 +306,28 @@ def loop_targets(e: dict[str, Any]) -> dict[str, Any]:
         for proc in ("daemon", "sim"):
             if cpu.get(proc) is not None:
                 t[f"state 1000: {proc}_cpu_le_35pct"] = cpu[proc] <= 35.0
+    return t
+
+
+def default_targets(ratios: dict[str, Any]) -> dict[str, Any]:
+    """The default section's targets (docs/benchmarks.md, "Targets"): every shipped robot's track
+    step with the default rows p99 < 1 ms and at most 2× the step without them (p50); the in-loop
+    step within 1.3× the isolated one; the embedded loop at 1 kHz missing at most 2× the empty
+    loop's deadlines; at least 3× pink's solve_ik on every holonomic robot. A figure that is
+    missing (a section that could not run) is no target met."""
+    t: dict[str, Any] = {}
+    rows = ratios.get("rows", {})
+    if rows:
+        t["default: rows_p99_under_1ms_every_robot"] = all((v["with_rows_p99_us"] or 1e9) < 1000.0
+                                                             for v in rows.values())
+        t["default: rows_cost_within_2x_p50_every_robot"] = all((v["with_over_without_p50"] or 1e9) <= 2.0
+                                                                for v in rows.values())
+    for key, v in ratios.get("loops", {}).items():
+        if v["in_loop_over_isolated_step_p50"] is not None:
+            t[f"default {key}: in_loop_step_within_1_3x"] = v["in_loop_over_isolated_step_p50"] <= 1.3
+        if key == "embedded 1000" and v["misses_over_floor"] is not None:
+            t["default embedded 1000: misses_within_2x_floor"] = v["misses_over_floor"] <= 2.0
+    pink = ratios.get("pink_over_ours_p50", {})
+    if pink:
+        t["default: at_least_3x_pink_every_holonomic_robot"] = all((v or 0.0) >= 3.0 for v in pink.values())
     return t

@@ -28,8 +28,8 @@ from wmm_qp.config import TASK_KINDS
 
 HELP = "measure per-tick controller time and the loop over Zenoh"
 
-_SECTIONS = ("controller", "oneshot", "pink", "scaling", "robots", "e2e", "daemon", "collisions", "collision_default",
-             "jitter", "sim", "tick", "record")
+_SECTIONS = ("default", "controller", "oneshot", "pink", "scaling", "robots", "e2e", "daemon", "collisions",
+             "collision_default", "jitter", "sim", "tick", "ros2", "record")
 _MODES = ("hold", "track", "dm_cartesian", "dm_nullspace")
 
 
@@ -183,6 +183,14 @@ def _print_report(r: dict[str, Any]) -> None:
                   f"baseline {t['baseline_us_p50']:.1f} µs ({t['baseline_tree']}): "
                   f"ratio this/baseline {t['ratio']:.3f} over {t['rounds']} rounds "
                   f"(rounds' median {t['ratio_rounds_median']:.3f}); same numerics {t['same_run']}")  # fmt: skip
+    if (ros := r.get("ros2")) is not None:
+        if not ros.get("available"):
+            print(f"ros2       not run: {ros.get('why')}")
+        for rate, x in ros.get("rates", {}).items():
+            s2c = x["state_to_command"]
+            print(f"ros2 {rate:>4} Hz state → command p50 {s2c['p50_ms']} ms, p99 {s2c['p99_ms']} ms; driver misses "
+                  f"{x['deadline_misses']}/{x['cycles']}, daemon misses {x['daemon_deadline_misses']}/"
+                  f"{x['daemon_ticks']}, violations {x['violations'] or 0}")
     if (rc := r.get("record")) is not None:
         if not rc.get("available"):
             print(f"record     {rc.get('reason')}")

@@ -28,6 +28,7 @@ class Recorder:
     states: list[bytes] = field(default_factory=list)
     truths: list[bytes] = field(default_factory=list)
     telemetry: list[TelemetryMsg] = field(default_factory=list)
+    not_truths: int = 0  # messages on the truth key that were no truth (skipped, counted)
     _sub: Any = None
     _sub_truth: Any = None
 
@@ -50,7 +51,15 @@ class Recorder:
     def truth_by_seq(self) -> dict[int, TruthMsg]:
         """The recorded truths, decoded, by the seq of their state."""
         dec = msgspec.msgpack.Decoder(TruthMsg)
-        return {t.state_seq: t for t in (dec.decode(b) for b in self.truths)}
+        out: dict[int, TruthMsg] = {}
+        for b in self.truths:
+            try:
+                t = dec.decode(b)
+            except msgspec.ValidationError:  # not a truth (a bench once read a status here): skipped
+                self.not_truths += 1
+                continue
+            out[t.state_seq] = t
+        return out
 
     def last_x(self) -> np.ndarray | None:
         """[m] the model EE position of the newest telemetry (None: none yet)."""

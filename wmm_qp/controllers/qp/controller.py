@@ -136,7 +136,9 @@ class QpController(QpStages, SolveCascade):
         if self.collision is None or self.fence is None:
             return "no collision rows"
         geo = self.collision.geo
-        return (f"collision rows on ({len(geo.self_pairs)} self pairs, {len(geo.floor_bodies)} bodies vs the floor, "
+        pairs = (f"{len(geo.self_pairs)} self pairs" if geo.bodies
+                 else "no self pairs — this robot file has no [collision] shapes")
+        return (f"collision rows on ({pairs}, {len(geo.floor_bodies)} bodies vs the floor, "
                 f"{len(self.collision.obstacles)} obstacles, {'fence' if self.fence.fenced else 'no fence'})")
 
     def last_collision_rows(self) -> Rows | None:
