@@ -16,6 +16,11 @@ _TOOLS = {
     "bench": ("wmm_qp_tools.commands.bench", "measure per-tick controller time and the loop over Zenoh"),
     "contract": ("wmm_qp_tools.commands.contract", "check a running driver against the driver contract "
                  "(docs/drivers.md)"),
+    "record": ("wmm_qp_tools.commands.record", "record a robot's keys to MCAP (ROS 2 message types) as a client"),
+    "replay": ("wmm_qp_tools.commands.replay", "re-run the controller on a recording and report the first "
+                                               "command that differs"),
+    "plot": ("wmm_qp_tools.commands.plot", "plot a recording: joints against their limits, wheels, EE, DM, "
+                                           "tick time, modes and faults"),
 }
 
 

@@ -39,6 +39,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--wait-lease", action="store_true",
                         help="when another daemon controls this robot, wait for its lease instead of "
                              "refusing to start")
+    from ..recording.options import add_record_arguments
+
+    add_record_arguments(parser)
 
 
 def controller_config(args: argparse.Namespace) -> w.ControllerConfig:
@@ -63,8 +66,10 @@ def run(args: argparse.Namespace) -> int:
 
     from ..cli_common import stop_on_signals
     from ..daemon import Daemon, LeaseHeld
+    from ..recording.options import record_options, report_recording
     from .common import load_scene_arg, robot_service_config
 
+    record = record_options(args, "serve")  # a missing extra or a bad split: one line, before anything starts
     robot, svc = robot_service_config(args)
     scene = load_scene_arg(args)  # the default scene's fence clamps setpoints in any case
     if args.rate is not None:
@@ -84,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
             return 2
         ctl_cfg = ctl_cfg.with_(qp={"solver": args.solver})
     daemon = Daemon(svc, ctl_cfg, robot, kind=args.controller, wait_lease=args.wait_lease, scene=scene,
-                    breakdown=args.breakdown)
+                    breakdown=args.breakdown, **record)
     stop = stop_on_signals()
     face = None
     if args.ros2:
@@ -119,4 +124,6 @@ def run(args: argparse.Namespace) -> int:
     lp = final.loop
     print(f"wmm-qp serve: stopped after {lp.ticks} ticks, {lp.deadline_misses} deadline misses, "
           f"tick p50 {lp.tick_p50_us:.0f} µs p99 {lp.tick_p99_us:.0f} µs", file=sys.stderr, flush=True)
+    if args.record:
+        return report_recording("serve", daemon.recorded)
     return 0

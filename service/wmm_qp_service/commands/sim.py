@@ -49,6 +49,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "commands, cmd_vel in), for wmm-qp driver ros2 (docs/ros2.md); --rate: its cycle "
                              "(default: [ros2] rate_hz). With --embedded: the ROS 2 face of wmm-qp serve --ros2 "
                              "instead (ee_pose, status, markers; ee_target, mode)")
+
+    from ..recording.options import add_record_arguments
+
+    add_record_arguments(parser)  # with --embedded: the core's ticks
     f = parser.add_argument_group("fault injection (reliability tests)")
     f.add_argument("--state-loss", type=float, default=0.0, metavar="P",
                    help="drop each state publication with probability P in [0, 1)")
@@ -86,6 +90,10 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if args.embedded:
         return _run_embedded(args, robot, svc, scene, sim_cfg, prio)
+    if args.record is not None:
+        print("wmm-qp sim: error: --record needs --embedded (it records the control core's ticks; the daemon "
+              "records with wmm-qp serve --record)", file=sys.stderr)
+        return 2
     if (flag := embedded_only_given(args, shared=("--scene",))) is not None:
         print(f"wmm-qp sim: error: {flag} needs --embedded (without it the sim hosts no controller: "
               f"give it to wmm-qp serve)", file=sys.stderr)
@@ -125,11 +133,20 @@ def _run_embedded(args: argparse.Namespace, robot: Any, svc: Any, scene: Any, si
         print(f"wmm-qp sim: error: --control-rate must be in (0, {sim_cfg.rate_hz:g}] Hz (the sim's rate)",
               file=sys.stderr)
         return 2
+    from ..recording.options import record_options, report_recording
+
+    record = record_options(args, "sim")  # a missing extra or a bad split: one line, before anything starts
     ctl_cfg = controller_config(args)  # a bad file: one line, exit 2
     emb = EmbeddedSim(svc, sim_cfg, robot, ctl_cfg, control_rate=args.control_rate, kind=args.controller,
                       scene=scene, seed=args.seed, ramp=not args.no_ramp, truth=not args.no_truth,
                       rt_priority=prio, spin_s=svc.loop.spin_us * 1e-6, cuts=not args.plain_cycle)
     core = emb.control.core
+    if record:  # the writer process starts before the cycle's priority is raised
+        from ..recording.journal import TickJournal, recording_meta
+
+        emb.control.journal = TickJournal(record["record"], recording_meta(core, "embedded", "embedded"),
+                                          robot.n_arm, robot.n_wheels, record["split_size"], record["split_time"],
+                                          emb.control.timing.rate_hz)
     stop = stop_on_signals()
     print(f"wmm-qp sim: {svc.prefix}/{svc.robot} at {sim_cfg.rate_hz:g} Hz, embedded control at "
           f"{emb.control.timing.rate_hz:g} Hz ({core.kind}, {ctl_cfg.task.kind} task; {robot.n_arm} joints, "
@@ -159,11 +176,14 @@ def _run_embedded(args: argparse.Namespace, robot: Any, svc: Any, scene: Any, si
             face.close()
             print(f"wmm-qp sim: ROS 2 face: sent {dict(face.sent)}, refused {dict(face.refused) or 'none'}",
                   file=sys.stderr, flush=True)
+        recorded = emb.control.journal.close(emb.control.timing.ticks) if emb.control.journal is not None else {}
     lp = emb.control.timing
     p50, p99 = lp.percentiles_us(50.0, 99.0)
     print(f"wmm-qp sim: stopped at t = {st.t:.3f} s, violations {st.violations}, {lp.ticks} ticks, "
           f"{lp.deadline_misses} deadline misses, tick p50 {p50:.0f} µs p99 {p99:.0f} µs, faults "
           f"{dict(core.fault_record.counts) or 'none'}", file=sys.stderr, flush=True)
+    if record:
+        return report_recording("sim", recorded)
     return 0
 
 

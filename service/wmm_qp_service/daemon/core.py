@@ -34,6 +34,10 @@ from .setpoints import Setpoints
 from .state_gate import Latch, StateGate
 from .watchdog import Fault, FaultRecord, hazard, say, second_source
 
+CALL_NONE, CALL_STEP, CALL_SAFE_STOP, CALL_REPEAT = 0, 1, 2, 3
+"""What a tick asked of the controller (``ControlCore.ctl_call``): nothing, ``step``, ``safe_stop``,
+or nothing but its last command again."""
+
 UNCONFIRMED = 1.0
 """[s] a stream whose first command no state has named applied for this long, while states come,
 is said as a fault once (a driver that does not report ``cmd_seq``; the robot does not move)."""
@@ -122,6 +126,11 @@ class ControlCore(CoreInputs):
         self.truth: TruthMsg | None = None  # the latched instance's last evaluation data (optional)
         self.stages: TickStages | None = None  # the breakdown's stopwatch (None: off)
         self.step_ns = 0  # [ns] the last ctl.step
+        # what this tick asked of the controller, for a recording's replay (wmm_qp_service.recording)
+        self.ctl_call = CALL_NONE
+        self.ctl_state: w.RobotState | None = None  # the state handed to it
+        self.ctl_latency = math.nan  # [s] bounds (13)'s latency margin it held
+        self.latches = 0  # re-latches so far (each resets the controller's warm starts)
         self._sent: tuple[w.Command | None, bool] = (None, False)  # the last command sent, and anchored
 
     # ------------------------------------------------------------------ the state
@@ -239,6 +248,7 @@ class ControlCore(CoreInputs):
     def tick(self, now: float) -> w.Command | None:
         """One control tick at ``now`` [s]; returns the command to send (None: nothing)."""
         self.now = now
+        self.ctl_call = CALL_NONE
         stream = self.stream
         self._sent = (self.cmd, stream.anchor_on_command)  # the last command sent (withdraw)
         if self.state is None or not self._may_send(now):
@@ -263,6 +273,7 @@ class ControlCore(CoreInputs):
                             f"began at seq {stream.start}): the daemon repeats its first command; a driver "
                             f"reports the last command it applied")
             stream.computed_from(-1)
+            self.ctl_call = CALL_REPEAT
             self.state_fresh = False
             self.ee_error = math.nan
             if self.stages is not None:
@@ -295,6 +306,7 @@ class ControlCore(CoreInputs):
         state = stream.anchored(self.state, self.cmd, self.state_msg)
         if stages is not None:
             stages.lap(RUCKIG)
+        self.ctl_call, self.ctl_state, self.ctl_latency = CALL_STEP, state, self.stream.latency
         t = time.perf_counter_ns()
         cmd = self.ctl.step(state, self.ref)
         self.step_ns = time.perf_counter_ns() - t
@@ -370,6 +382,7 @@ class ControlCore(CoreInputs):
             self._latch_orientation()
         self.estimator.reset()
         self.ctl.reset()
+        self.latches += 1
         self.need_latch = False
         self.ref_valid = False
 
@@ -392,6 +405,7 @@ class ControlCore(CoreInputs):
             q_base=self.state.q_base, q_arm=self.state.q_arm,
             v_arm=last.arm_rates if last is not None else self.state.v_arm,
             wheel_speeds=last.wheel_speeds if last is not None else self.state.wheel_speeds)
+        self.ctl_call, self.ctl_state, self.ctl_latency = CALL_SAFE_STOP, base, self.stream.latency
         cmd = self.ctl.safe_stop(base, fault.message)
         self.cmd = cmd
         self.stream.follow()

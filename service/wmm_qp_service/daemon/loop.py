@@ -15,7 +15,7 @@ import threading
 import time
 from collections import Counter
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import msgspec
 import zenoh
@@ -38,6 +38,9 @@ from .robot_link import ZenohRobotLink
 from .watchdog import FaultLog, say
 from .zenoh_service import ZenohService, answer_queries
 
+if TYPE_CHECKING:
+    from ..recording.journal import TickJournal
+
 
 class ControlLoop:
     """One tick of a run: the state, the service's inputs, the cycle, then the service's outputs.
@@ -56,6 +59,7 @@ class ControlLoop:
         self.daemon, self.core, self.cycle, self.service = daemon, daemon.core, cycle, service
         self.timing, self.state_loop, self.race = timing, state_loop, race
         self.stages = daemon.stages
+        self.journal = daemon.journal
 
     def tick(self, now: float) -> bool:
         """Run the tick that is due at ``now`` [s]; False: the lease race was lost (leave)."""
@@ -75,6 +79,8 @@ class ControlLoop:
         core.check_obstacles(now)
         # ---- control (stages: watchdogs, ruckig, step, publish)
         sent = cycle.command(now)
+        if self.journal is not None:  # copies into shared memory; a writer process serialises
+            self.journal.tick(core, sent, timing.ticks, now - core.t0, timing.last_work * 1e6)
         if sent is not None:
             # ---- after the command: telemetry (when someone listens), status, queries
             service.telemetry(core, sent, timing.ticks, now - core.t0, timing.last_work * 1e6, cycle.state_rx)
@@ -95,7 +101,10 @@ class ControlLoop:
 
     def _status(self) -> StatusMsg:
         d = self.daemon
-        return reports.status(self.core, self.timing, d.rejected(), d.accepted())
+        st = reports.status(self.core, self.timing, d.rejected(), d.accepted())
+        if self.journal is not None:
+            self.journal.status(self.timing.ticks, st)
+        return st
 
 
 class Daemon:
@@ -112,6 +121,9 @@ class Daemon:
         breakdown: time each stage of every tick that publishes a command
             (:class:`~wmm_qp_service.tick_stages.TickStages`) and write the summary to this JSON
             file at exit (``wmm-qp serve --breakdown``; ``wmm-qp bench --only daemon``). None: off.
+        record: record every tick to this MCAP file (``wmm-qp serve --record``,
+            :mod:`wmm_qp_service.recording`); None: off.
+        split_size, split_time: [MB], [s] start a new recording file past this size or time.
     """
 
     LEASE_GRACE = 1.0
@@ -120,7 +132,8 @@ class Daemon:
 
     def __init__(self, svc: ServiceConfig, ctl_cfg: w.ControllerConfig, robot: w.RobotConfig,
                  kind: str | None = None, wait_lease: bool = False, scene: Scene | None = None,
-                 breakdown: str | Path | None = None) -> None:
+                 breakdown: str | Path | None = None, record: str | Path | None = None,
+                 split_size: float | None = None, split_time: float | None = None) -> None:
         self.wait_lease = wait_lease
         self.breakdown = breakdown
         self.stages = TickStages() if breakdown is not None else None
@@ -131,6 +144,9 @@ class Daemon:
         self.inputs = HostInputs(svc, robot.n_arm, robot.n_wheels)
         self.loop: LoopTiming = RateLoop(svc.loop.rate_hz, svc.loop.spin_us * 1e-6)  # run() sets the trigger's
         self.scheduling = "not started"  # set by run(): the control thread's scheduling policy
+        self.record = (record, split_size, split_time)
+        self.journal: TickJournal | None = None  # the recording's hook (run() starts it)
+        self.recorded: dict[str, Any] = {}  # the recording's summary (files, ticks, dropped) after run()
 
     def rejected(self) -> Counter[str]:
         """Rejected and refused messages by reason, all keys together."""
@@ -169,6 +185,12 @@ class Daemon:
 
     def _run(self, session: zenoh.Session, stop: threading.Event, max_ticks: int | None) -> StatusMsg:
         core, svc, stages = self.core, self.svc, self.stages
+        if self.record[0] is not None:  # its writer process starts before this thread's priority is raised
+            from ..recording.journal import TickJournal, recording_meta
+
+            self.journal = TickJournal(self.record[0], recording_meta(core, "serve", svc.loop.trigger),
+                                       core.robot.n_arm, core.robot.n_wheels, self.record[1], self.record[2],
+                                       svc.loop.rate_hz)
         # After the session opened: Zenoh's own threads keep normal priority, only this one is raised.
         self.scheduling = realtime_priority(svc.loop.rt_priority)
         print(f"wmm-qp serve: control thread: {self.scheduling}; trigger {svc.loop.trigger}",
@@ -200,6 +222,8 @@ class Daemon:
             final = reports.status(core, timing, self.rejected(), self.accepted())
             service.close()
             link.close()
+            if self.journal is not None:
+                self.recorded = self.journal.close(timing.ticks)
             if stages is not None and self.breakdown is not None:
                 with contextlib.suppress(Exception):
                     stages.write(self.breakdown, {"trigger": svc.loop.trigger, "rate_hz": svc.loop.rate_hz,

@@ -27,7 +27,7 @@ import sys
 import time
 from collections import Counter, deque
 from collections.abc import Callable
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -43,6 +43,9 @@ from ..protocol import StateMsg, TelemetryMsg, TruthMsg
 from .collector import SlackCollector
 from .link import InProcessLink
 from .timing import CycleTiming, decimation
+
+if TYPE_CHECKING:
+    from ..recording.journal import TickJournal
 
 OUTBOX = 4096
 """Messages waiting for the service thread at most (the oldest dropped beyond: a stalled
@@ -163,6 +166,7 @@ class EmbeddedControl:
         self._t_update = 0.0
         self._cycles = 0
         self._fault_log: FaultLog | None = None
+        self.journal: TickJournal | None = None  # the recording's hook (``sim --embedded --record``)
 
     # ------------------------------------------------------------------ life
     def start(self) -> float:
@@ -204,6 +208,8 @@ class EmbeddedControl:
         self.inputs.apply(self.core, now)  # validated in the last slack: applied where the daemon applies them
         self.core.check_obstacles(now)
         self.sent = sent = self.cycle.command(now)
+        if self.journal is not None:  # copies into shared memory; a writer process serialises
+            self.journal.tick(self.core, sent, self.timing.ticks, now - self.core.t0, self.timing.last_work * 1e6)
         return sent
 
     def after(self, now: float, state: StateMsg | None, truth: TruthMsg | None, ticked: bool) -> None:
@@ -245,7 +251,10 @@ class EmbeddedControl:
                 self.cycle.state_rx if fresh else math.nan)))
         self._apply_inputs(now)
         if timing.ticks % self.status_every == 0:
-            out.append(("status", reports.status(core, timing, self.rejected(), self.accepted())))
+            status = reports.status(core, timing, self.rejected(), self.accepted())
+            out.append(("status", status))
+            if self.journal is not None:
+                self.journal.status(timing.ticks, status)
         for _ in range(self.queries_per_tick):
             try:
                 q = self.queries.popleft()

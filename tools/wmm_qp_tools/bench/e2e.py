@@ -103,6 +103,7 @@ def run_case(
     controller_file: Path | None = None,
     breakdown: bool = False,
     plain: bool = False,
+    extra_daemon_args: list[str] | None = None,
 ) -> dict[str, Any]:
     """One case: start the stack, track the circle for ``ticks`` ticks, measure, stop.
 
@@ -119,6 +120,7 @@ def run_case(
             ``breakdown`` (:meth:`~..tick_stages.TickStages.summary`, over the ticks that
             published a command, start-up included).
         plain: the embedded stack without its cycle's cost cuts (``--plain-cycle``).
+        extra_daemon_args: more arguments of the daemon (``--record FILE``: :mod:`.record`).
 
     Returns:
         The figures of the module docstring, plus the load average, exit codes and faults.
@@ -149,6 +151,7 @@ def run_case(
         args += ["--breakdown", str(breakdown_file)]
     if embedded:
         args += ["--cycle-report", str(cycle_file)] + (["--plain-cycle"] if plain else [])
+    args += extra_daemon_args or []
     stack = Stack(svc, rate_hz=rate_hz, log_dir=log_dir, extra_daemon_args=args, embedded=embedded,
                   robot_file=None if robot is None else robot.path)  # fmt: skip
     svc = stack.svc

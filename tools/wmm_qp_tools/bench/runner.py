@@ -30,7 +30,8 @@ from wmm_qp_tools.bench.robot_files import loaded, shipped_robots
 from wmm_qp_tools.bench.stats import now_ns
 
 SECTIONS: tuple[str, ...] = ("default", "controller", "oneshot", "pink", "scaling", "robots", "e2e", "daemon",
-                             "collisions", "collision_default", "jitter", "sim", "tick", "ros2")
+                             "collisions", "collision_default", "jitter", "sim", "tick", "ros2",
+                             "record")
 
 
 def run_robots(
@@ -133,6 +134,8 @@ def run_bench(
     sections = tuple(s for s in (SECTIONS if only is None else (only,)) if s not in (skip or ()))
     if baseline_tree is None:  # "tick" compares this tree with another: nothing to time without one
         sections = tuple(s for s in sections if s != "tick")
+    if only is None:  # "record" starts two stacks of its own: asked for by name (--only record)
+        sections = tuple(s for s in sections if s != "record")
     bar = ProgressLine("bench")
     done = 0
 
@@ -201,6 +204,11 @@ def run_bench(
     if "ros2" in sections:
         say(f"ros2: state → command through the ROS 2 driver at {', '.join(f'{r:g}' for r in ros2.RATES)} Hz")
         out["ros2"] = ros2.run(max(5.0, min(30.0, ticks / 500.0)))
+    if "record" in sections:
+        from . import record
+
+        say("record: the daemon's tick with and without --record, and the recording hook in process")
+        out["record"] = record.run(min(ticks, 20000), robot, cfg, controller_file)
         done += 1
     if "tick" in sections and baseline_tree is not None:
         say(f"tick: the track-mode tick ({tick_solver}) of this tree and of {baseline_tree}, {rounds} rounds")

@@ -8,7 +8,10 @@ shipped robot files); ``--task KIND`` overrides the controller config's task kin
 
 ``--baseline-tree DIR`` (with ``--only tick``, or with every section) times the Gen3's track-mode
 tick of this source tree and of DIR's in the same run, in ``--rounds`` alternating rounds
-(:mod:`wmm_qp_tools.bench.tick_compare`)."""
+(:mod:`wmm_qp_tools.bench.tick_compare`).
+
+``--only record`` (only by name) times the daemon's tick with and without ``--record`` in one run
+(:mod:`wmm_qp_tools.bench.record`, docs/recording.md)."""
 
 from __future__ import annotations
 
@@ -26,7 +29,7 @@ from wmm_qp.config import TASK_KINDS
 HELP = "measure per-tick controller time and the loop over Zenoh"
 
 _SECTIONS = ("default", "controller", "oneshot", "pink", "scaling", "robots", "e2e", "daemon", "collisions",
-             "collision_default", "jitter", "sim", "tick", "ros2")
+             "collision_default", "jitter", "sim", "tick", "ros2", "record")
 _MODES = ("hold", "track", "dm_cartesian", "dm_nullspace")
 
 
@@ -188,6 +191,16 @@ def _print_report(r: dict[str, Any]) -> None:
             print(f"ros2 {rate:>4} Hz state → command p50 {s2c['p50_ms']} ms, p99 {s2c['p99_ms']} ms; driver misses "
                   f"{x['deadline_misses']}/{x['cycles']}, daemon misses {x['daemon_deadline_misses']}/"
                   f"{x['daemon_ticks']}, violations {x['violations'] or 0}")
+    if (rc := r.get("record")) is not None:
+        if not rc.get("available"):
+            print(f"record     {rc.get('reason')}")
+        else:
+            j, d = rc["journal"], rc["daemon"]
+            print(f"record     hook in process: core.tick p50 {j['tick_us']['p50']} µs, TickJournal.tick p50 "
+                  f"{j['journal_us']['p50']} µs (×{j['journal_over_tick_p50']}); {j['recorded']}/{j['ticks']} ticks "
+                  f"in the file; the writer process {j['writer_cpu_us_per_tick']} µs of CPU a tick")
+            print(f"           daemon 1 kHz tick p50: without {d['without']['tick_us'].get('p50')} µs, with "
+                  f"{d['with']['tick_us'].get('p50')} µs (×{d['ratio_p50']})")
     print(f"targets    {r['targets']}")
 
 
