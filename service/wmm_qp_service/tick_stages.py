@@ -16,6 +16,10 @@ from typing import Any
 
 import numpy as np
 
+CALL_NONE, CALL_STEP, CALL_SAFE_STOP, CALL_REPEAT = 0, 1, 2, 3
+"""What a control tick asked of the controller (``ControlCore.ctl_call``): nothing, ``step``,
+``safe_stop``, or nothing but its last command again."""
+
 STAGES: tuple[str, ...] = (
     "poll", "validation", "watchdogs", "ruckig", "step", "publish", "telemetry", "status", "queries",
 )

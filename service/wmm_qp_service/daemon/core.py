@@ -1,8 +1,8 @@
 """The control core: the daemon's logic without transport — one robot's cycle.
 
 :meth:`ControlCore.on_state` takes a validated state in, :meth:`ControlCore.tick` computes the
-command to send; between them the service side hands it the operator's inputs (:mod:`.inputs`:
-modes, setpoints, obstacles, the sim's truth and liveliness). Its concerns live beside it:
+command to send; between them the host (:mod:`.host`) hands it the operator's inputs (:mod:`.inputs`:
+modes, setpoints, obstacles, the robot's truth and liveliness). Its concerns live beside it:
 the instance latch and seq (:mod:`.state_gate`), the command stream (:mod:`.command_stream`),
 the setpoint stream (:mod:`.setpoints`), live obstacles (:mod:`.obstacles`), the watchdogs and
 faults (:mod:`.watchdog`), the reports (:mod:`.reports`). Nothing here raises in the loop:
@@ -26,17 +26,13 @@ from wmm_qp.tasks import rotation_to_quat
 from ..config import ServiceConfig
 from ..protocol import StateMsg, TruthMsg
 from ..smoother import OrientationTarget, SetpointSmoother, VelocityEstimator
-from ..tick_stages import RUCKIG, STEP, WATCHDOGS, TickStages
+from ..tick_stages import CALL_NONE, CALL_REPEAT, CALL_SAFE_STOP, CALL_STEP, RUCKIG, STEP, WATCHDOGS, TickStages
 from .command_stream import CommandStream, predicted
 from .inputs import CoreInputs
 from .obstacles import LiveObstacles
 from .setpoints import Setpoints
 from .state_gate import Latch, StateGate
 from .watchdog import Fault, FaultRecord, hazard, say, second_source
-
-CALL_NONE, CALL_STEP, CALL_SAFE_STOP, CALL_REPEAT = 0, 1, 2, 3
-"""What a tick asked of the controller (``ControlCore.ctl_call``): nothing, ``step``, ``safe_stop``,
-or nothing but its last command again."""
 
 UNCONFIRMED = 1.0
 """[s] a stream whose first command no state has named applied for this long, while states come,
@@ -45,9 +41,6 @@ is said as a fault once (a driver that does not report ``cmd_seq``; the robot do
 
 class ControlCore(CoreInputs):
     """The daemon's logic without transport: modes, watchdogs, smoothing, the controller.
-
-    The :class:`~.loop.Daemon` feeds it validated messages and sends what it returns; tests
-    can drive it directly with a fake clock.
 
     With the pose task (``ctl_cfg.task.kind = "pose"``) the reference carries an orientation
     target too (:class:`~wmm_qp_service.smoother.OrientationTarget`): latched from the EE's
@@ -84,10 +77,9 @@ class ControlCore(CoreInputs):
         self.ctl.warm_up()  # the compiled kernels are loaded before the loop, not in its first tick
         self.dt = self.cfg.dt
         if 2.0 * self.dt > wd.state_age_max:
-            raise w.ConfigError("<service config>", "loop.rate_hz",
-                                f"{svc.loop.rate_hz:g} Hz is too slow for watchdog.state_age_max "
-                                f"({wd.state_age_max * 1e3:g} ms): a state is up to two periods "
-                                f"old when it is used; raise the rate or state_age_max (and command_hold)")
+            raise w.ConfigError("<service config>", "loop.rate_hz", f"{svc.loop.rate_hz:g} Hz is too slow for "
+                                f"watchdog.state_age_max ({wd.state_age_max * 1e3:g} ms): a state is up to two "
+                                f"periods old when it is used; raise the rate or state_age_max (and command_hold)")
         sm = svc.smoothing
         self.smoother = SetpointSmoother(self.dt, sm.v_max, sm.a_max, sm.j_max)
         self.estimator = VelocityEstimator(v_max=sm.v_max)
@@ -99,10 +91,8 @@ class ControlCore(CoreInputs):
         self.state_msg: StateMsg | None = None
         self.state_time = -math.inf
         self.state_fresh = False
-        self.need_latch = True
-        self.safe = False
-        self.resume_needed = False
-        self.robot_alive = False
+        self.need_latch, self.safe = True, False
+        self.resume_needed = self.robot_alive = False
         self.cmd: w.Command | None = None
         self.ref = w.Reference(mode=w.Mode.HOLD)
         self._ref = w.Reference(mode=w.Mode.HOLD)  # the one tick() refills
@@ -118,18 +108,18 @@ class ControlCore(CoreInputs):
         self.setpoints = Setpoints(wd, self.scene, robot.base.floor_z + self.cfg.collision.floor_margin,
                                    self.pose, self.refused, self._fault)
         self.lease = "core"  # this daemon's control lease id (the Daemon sets its Zenoh id)
-        self.lease_lost = False  # the sim applies another holder's commands
-        self.lease_holder = ""  # the holder the sim reports
-        # the robot's own firmware and the sim's referee
+        self.lease_lost = False  # the robot applies another holder's commands
+        self.lease_holder = ""  # the holder the robot reports
+        # the robot's own firmware and its referee
         self.firmware_seen = -1  # protective stops + firmware refusals of the latched instance (-1: no state yet)
         self.protective = ""
         self.truth: TruthMsg | None = None  # the latched instance's last evaluation data (optional)
         self.stages: TickStages | None = None  # the breakdown's stopwatch (None: off)
         self.step_ns = 0  # [ns] the last ctl.step
-        # what this tick asked of the controller, for a recording's replay (wmm_qp_service.recording)
-        self.ctl_call = CALL_NONE
-        self.ctl_state: w.RobotState | None = None  # the state handed to it
-        self.ctl_latency = math.nan  # [s] bounds (13)'s latency margin it held
+        # what this tick asked of the controller (CALL_*), the state handed to it and bounds (13)'s
+        # latency margin [s]: for a recording's replay (wmm_qp_service.recording)
+        self.ctl_call, self.ctl_latency = CALL_NONE, math.nan
+        self.ctl_state: w.RobotState | None = None
         self.latches = 0  # re-latches so far (each resets the controller's warm starts)
         self._sent: tuple[w.Command | None, bool] = (None, False)  # the last command sent, and anchored
 
@@ -267,11 +257,10 @@ class ControlCore(CoreInputs):
             # the robot applied none of this stream's commands yet: the last one again (its first,
             # or the last of a safe stop since, braked from it)
             if stream.unconfirmed_too_long(now, UNCONFIRMED, self.state_fresh):
-                self._fault(FaultCode.COMMANDS_NOT_APPLIED, f"the robot's states name none of this stream's "
-                            f"commands as applied (cmd_seq "
-                            f"{self.state_msg.cmd_seq if self.state_msg is not None else -1}, the stream "
-                            f"began at seq {stream.start}): the daemon repeats its first command; a driver "
-                            f"reports the last command it applied")
+                seq = self.state_msg.cmd_seq if self.state_msg is not None else -1
+                self._fault(FaultCode.COMMANDS_NOT_APPLIED, f"the robot's states name none of this stream's commands "
+                            f"as applied (cmd_seq {seq}, the stream began at seq {stream.start}): the daemon "
+                            f"repeats its first command; a driver reports the last command it applied")
             stream.computed_from(-1)
             self.ctl_call = CALL_REPEAT
             self.state_fresh = False
@@ -349,9 +338,9 @@ class ControlCore(CoreInputs):
         return True
 
     def _after_fault(self) -> None:
-        """The fault cleared: re-latch from the measured state, and hold where the robot is until
-        a mode message resumes a task; a daemon that was holding has no task to resume (an idle
-        robot's faults need no operator)."""
+        """The fault cleared: re-latch from the measured state, and hold where the robot is until a
+        mode message resumes a task (a daemon that was holding has none: an idle robot's faults
+        need no operator)."""
         if self.safe:
             self.safe = False
             self.need_latch = True
@@ -363,9 +352,7 @@ class ControlCore(CoreInputs):
         """Bring the targets to rest in hold, and when the setpoints stopped for ``setpoint_timeout``."""
         following = self.mode in (w.Mode.TRACK, w.Mode.DM_NULLSPACE)
         quiet = now - self.setpoints.time > self.svc.watchdog.setpoint_timeout
-        if not self.smoother.resting and following and quiet:
-            self.smoother.bring_to_rest()
-        if self.mode == w.Mode.HOLD and not self.smoother.resting:
+        if not self.smoother.resting and ((following and quiet) or self.mode == w.Mode.HOLD):
             self.smoother.bring_to_rest()
         if self.pose and not self.orient.resting and (not following or quiet):
             self.orient.bring_to_rest()
