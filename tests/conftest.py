@@ -28,3 +28,20 @@ def service_stack(tmp_path: Path) -> Iterator[Callable[..., object]]:
     yield make
     for s in stacks:
         s.stop()
+
+
+@pytest.fixture(autouse=True)
+def _scheduling_left_as_found() -> Iterator[None]:
+    """The test process's scheduling as each test found it: a kit held open across a module's
+    tests raises its thread to SCHED_FIFO, and every process started later inherits it (CPU hogs
+    at FIFO once starved a demo at the same priority for good). Put back after each test."""
+    import os
+
+    try:
+        before = os.sched_getscheduler(0), os.sched_getparam(0)
+    except (AttributeError, OSError):
+        yield
+        return
+    yield
+    if (os.sched_getscheduler(0), os.sched_getparam(0)) != before:
+        os.sched_setscheduler(0, *before)

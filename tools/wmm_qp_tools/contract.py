@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
 import secrets
 import time
 from collections.abc import Callable, Sequence
@@ -53,6 +54,14 @@ ACCEL_WINDOW = 0.01
 (a real robot's measured rates are noisy from one cycle to the next)."""
 ACCEL_RTOL = 0.05
 """[-] the acceleration a driver may exceed its limits by (measurement, discretisation)."""
+
+
+def _scheduling() -> tuple[int, os.sched_param] | None:
+    """This thread's scheduling policy and parameter (None: not Linux)."""
+    try:
+        return os.sched_getscheduler(0), os.sched_getparam(0)
+    except (AttributeError, OSError):
+        return None
 
 
 class ContractError(AssertionError):
@@ -99,10 +108,16 @@ class Controller:
         self.stream = 0
         # the daemon's scheduling for the thread that sends (Zenoh's threads, started with the
         # session, keep theirs): a loaded host then delays its commands as little as the daemon's
+        # (restored by close(): left at SCHED_FIFO, the caller's later children inherit it, and a
+        # test process's CPU hogs at FIFO starved a demo at the same priority for good)
+        self._sched_before = _scheduling()
         self.scheduling = realtime_priority(svc.loop.rt_priority)
 
     def close(self) -> None:
-        """Undeclare everything and close the session."""
+        """Undeclare everything, close the session, give the thread its scheduling back."""
+        if (before := getattr(self, "_sched_before", None)) is not None:
+            with contextlib.suppress(AttributeError, OSError):
+                os.sched_setscheduler(0, *before)
         for ent in (self._token, self._sub, self._pub):
             if ent is not None:
                 with contextlib.suppress(Exception):
