@@ -81,6 +81,11 @@ def test_json_gives_each_checks_verdict_and_skip_leaves_a_check_out(sim: Any) ->
     assert all(c["passed"] is True and c["detail"] for c in v["checks"].values())
 
 
+def test_every_mutant_still_patches_code_that_exists() -> None:
+    out = subprocess.run([sys.executable, str(MUTANTS), "--check"], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+
+
 @pytest.mark.parametrize("mutant", NAMES)
 def test_a_mutant_driver_fails_exactly_the_check_of_its_broken_duty(mutant: str, tmp_path: Path) -> None:
     with driver(tmp_path, mutant) as svc:

@@ -74,6 +74,7 @@ def lease() -> None:
     """Obeys any sender's lease."""
     from wmm_qp_robot.lease_gate import LeaseGate
 
+    assert hasattr(LeaseGate, "obey")
     LeaseGate.obey = _obey_without("lease")  # type: ignore[method-assign]
 
 
@@ -81,6 +82,7 @@ def instance() -> None:
     """Obeys commands for any instance."""
     from wmm_qp_robot.lease_gate import LeaseGate
 
+    assert hasattr(LeaseGate, "obey")
     LeaseGate.obey = _obey_without("instance")  # type: ignore[method-assign]
 
 
@@ -88,6 +90,7 @@ def seq() -> None:
     """Obeys a holder's old and replayed seqs."""
     from wmm_qp_robot.lease_gate import LeaseGate
 
+    assert hasattr(LeaseGate, "obey")
     LeaseGate.obey = _obey_without("seq")  # type: ignore[method-assign]
 
 
@@ -176,6 +179,7 @@ def position_limit() -> None:
     """No check that a joint can still brake before its position limit."""
     from wmm_qp_sim.robot import SimRobot
 
+    assert hasattr(SimRobot, "_cannot_stop")
     SimRobot._cannot_stop = lambda self, v, dt: -1  # type: ignore[method-assign]
 
 
@@ -183,13 +187,13 @@ def stopped_stream() -> None:
     """A protective stop forgets the stream it stopped: its commands resume it once at rest."""
     from wmm_qp_sim.robot import SimRobot
 
-    orig = SimRobot._protective_stop
+    orig = SimRobot.protect
 
     def stop(self: Any, code: Any, why: str) -> None:
         orig(self, code, why)
         self.stopped_stream = None
 
-    SimRobot._protective_stop = stop  # type: ignore[method-assign]
+    SimRobot.protect = stop  # type: ignore[method-assign]
 
 
 MUTANTS: dict[str, Callable[[], None]] = {f.__name__: f for f in (
@@ -200,6 +204,10 @@ MUTANTS: dict[str, Callable[[], None]] = {f.__name__: f for f in (
 def main(argv: list[str]) -> int:
     from wmm_qp_service import cli
 
+    if argv == ["--check"]:  # every mutant still finds the code it patches (a refactor renamed nothing)
+        for mutant in MUTANTS.values():
+            mutant()
+        return 0
     MUTANTS[argv[0]]()
     return cli.main(argv[1:])
 
