@@ -144,7 +144,7 @@ def keyboard_screen(t: DeviceTeleop, robot: str, task: str) -> list[str]:
         lines += [f"mode    {st.mode}" + ("   SAFE STOP" if st.safe_stop else "")
                   + ("   resume needed (t)" if st.resume_needed else ""),
                   f"daemon  {lp.measured_hz:.0f}/{lp.rate_hz:.0f} Hz  misses {lp.deadline_misses}  "
-                  f"rejected {sum(st.rejected.values())}  sim violations {sum(st.robot_violations.values())}",
+                  f"rejected {sum(st.rejected.values())}  robot violations {sum(st.robot_violations.values())}",
                   f"fault   {st.last_fault or 'none'}",
                   f"EE      {' '.join(f'{v:+.3f}' for v in st.x)}   operator {st.operator or 'none'}"]
     rot = "  u/o yaw  i/k pitch  j/l roll" if t.integ.R is not None else ""

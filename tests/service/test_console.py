@@ -94,7 +94,7 @@ def test_status_text_shows_every_counter_and_clamped_when_present() -> None:
                    dm=1.5, operator="console-ab")
     text = status_markdown(st, None, "console-ab")
     for part in ("`track`", "SAFE STOP", "499 / 500 Hz", "deadline misses** 7", "state stale (x)",
-                 "rejected** 2", "sim violations** 1", "this console"):
+                 "rejected** 2", "robot violations** 1", "this console"):
         assert part in text, part
     if "clamped" not in StatusMsg.__struct_fields__:  # before the daemon reports it
         assert "clamped" not in text

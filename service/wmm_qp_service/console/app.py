@@ -67,7 +67,7 @@ def status_markdown(st: StatusMsg | None, truth: TruthMsg | None, source: str,
         f"**rejected** {rej}" + (f" {dict(st.rejected)}" if rej else "")
         + (f" · **clamped** {clamped}" if clamped is not None else "")
         + (f" (last: {last})" if (last := getattr(st, "last_clamp", "")) else ""),
-        f"**sim violations** {viol}" + (f" {dict(st.robot_violations)}" if viol else "")
+        f"**robot violations** {viol}" + (f" {dict(st.robot_violations)}" if viol else "")
         + (" · **protective stop**" if st.protective_stop else ""),
         f"**DM** {st.dm:.3f} · **stream** {stream}",
     ]
