@@ -1,4 +1,5 @@
-"""``wmm-qp console``: the operator's web console (viser), a Zenoh client of the daemon."""
+"""``wmm-qp console``: the operator's web console (viser), a Zenoh client of the daemon; with
+``--play FILE.mcap`` it plays a recording back instead (no Zenoh, no daemon)."""
 
 from __future__ import annotations
 
@@ -6,6 +7,7 @@ import argparse
 import socket
 import sys
 from pathlib import Path
+from typing import Any
 
 HELP = "a web console: the robot live in 3D, drag its EE target, modes, status, plots (viser)"
 
@@ -33,6 +35,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="[s] how long to wait for a daemon (default 10)")
     parser.add_argument("--duration", type=float, default=0.0, metavar="S",
                         help="[s] stop after this long (default 0: until Ctrl-C)")
+    parser.add_argument("--play", type=Path, default=None, metavar="FILE.mcap",
+                        help="play a recording back (serve --record, record) instead of a live robot: no Zenoh")
+    parser.add_argument("--speed", type=float, default=1.0, metavar="X",
+                        help="with --play: playback speed (default 1; the page can change it)")
     add_service_arguments(parser)
     add_robot_argument(parser)
 
@@ -69,6 +75,11 @@ def run(args: argparse.Namespace) -> int:
     if not args.wait > 0 or args.duration < 0:
         print("wmm-qp console: error: --wait must be > 0 and --duration >= 0", file=sys.stderr)
         return 2
+    if args.play is None and args.speed != 1.0:
+        print("wmm-qp console: error: --speed needs --play FILE", file=sys.stderr)
+        return 2
+    if args.play is not None:
+        return _play(args, stop_on_signals)
     problem = _check_bind(args.host, args.port)
     if problem:
         print(f"wmm-qp console: error: {problem}", file=sys.stderr)
@@ -88,6 +99,52 @@ def run(args: argparse.Namespace) -> int:
         assert a is not None
         print(f"console: {console.url}  (robot {a.robot_id}; robots seen: "
               f"{', '.join(link.robots()) or a.robot_id}; Ctrl-C stops)", flush=True)
+        end = time.monotonic() + args.duration if args.duration > 0 else float("inf")
+        while not stop.wait(0.2) and time.monotonic() < end:
+            pass
+    finally:
+        console.close()
+    return 0
+
+
+def _play(args: argparse.Namespace, stop_on_signals: Any) -> int:
+    """``--play FILE``: the console on a recording (its robot from the recording's metadata)."""
+    import time
+
+    from wmm_qp import WmmQpError, load_scene
+
+    from ..console import Console, ConsoleError
+    from ..console.playback import RecordingLink, warn_truncated
+    from ..console.timeline import load_timeline
+    from ..recording import require
+
+    if not args.speed > 0:
+        print(f"wmm-qp console: error: --speed must be > 0, got {args.speed:g}", file=sys.stderr)
+        return 2
+    try:
+        require()
+        timeline = load_timeline(args.play)
+        link = RecordingLink(timeline, args.play, fallback=args.robot_config, speed=args.speed)
+        link.attach()
+        recorded_scene = Path(timeline.meta.get("scene", ""))
+        scene = load_scene(args.scene if args.scene is not None or not recorded_scene.is_file() else recorded_scene)
+    except (WmmQpError, ConsoleError) as e:  # RecordingUnavailable, RecordingError, ConfigError
+        print(f"wmm-qp console: error: {e}", file=sys.stderr)
+        return 2
+    except Exception as e:  # a file no reader expects: still one line
+        print(f"wmm-qp console: error: cannot play {args.play}: {type(e).__name__}: {e}".splitlines()[0],
+              file=sys.stderr)
+        return 2
+    problem = _check_bind(args.host, args.port)
+    if problem:
+        print(f"wmm-qp console: error: {problem}", file=sys.stderr)
+        return 2
+    warn_truncated(timeline)
+    stop = stop_on_signals()
+    console = Console(link, host=args.host, port=args.port, scene=scene)
+    try:
+        console.start(robot_id=link.robot_id)
+        print(f"console: {console.url}  (playing {link.summary()}; Ctrl-C stops)", flush=True)
         end = time.monotonic() + args.duration if args.duration > 0 else float("inf")
         while not stop.wait(0.2) and time.monotonic() < end:
             pass

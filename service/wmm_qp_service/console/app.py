@@ -22,6 +22,7 @@ from wmm_qp import Scene
 from ..protocol import StatusMsg, TruthMsg
 from .geometry import Series, wxyz_to_xyzw, xyzw_to_wxyz
 from .link import Attached, ConsoleError, RobotLink
+from .playback import PlaybackPanel, RecordingLink
 from .view import RobotView
 
 if TYPE_CHECKING:
@@ -104,7 +105,8 @@ class Console:
     """The console: a viser server, the robot link, the panel and the scene of the attached robot.
 
     Args:
-        link: the open Zenoh link.
+        link: the open Zenoh link, or a recording's (:class:`~.playback.RecordingLink`: the page
+            plays it back, with playback controls and without the controls that command).
         host, port: where the web server listens.
         scene: obstacles and fence to draw (None: none).
         rate_hz: [Hz] page updates.
@@ -112,9 +114,12 @@ class Console:
         stream_s: [s] how long after the last move the target is still streamed.
     """
 
-    def __init__(self, link: RobotLink, host: str = "127.0.0.1", port: int = 8080, scene: Scene | None = None,
-                 rate_hz: float = 20.0, stream_hz: float = 50.0, stream_s: float = 1.0) -> None:
+    def __init__(self, link: RobotLink | RecordingLink, host: str = "127.0.0.1", port: int = 8080,
+                 scene: Scene | None = None, rate_hz: float = 20.0, stream_hz: float = 50.0,
+                 stream_s: float = 1.0) -> None:
         self.link = link
+        self.recording = link if isinstance(link, RecordingLink) else None
+        self.player: PlaybackPanel | None = None
         self.host, self.port = host, port
         self.scene = scene
         self.rate_hz, self.stream_hz, self.stream_s = rate_hz, stream_hz, stream_s
@@ -189,6 +194,8 @@ class Console:
         assert self.server is not None
         gui = self.server.gui
         gui.configure_theme(control_width="large")
+        if self.recording is not None:
+            self.player = PlaybackPanel(gui, self.recording)
         with gui.add_folder("Robot"):
             self.robot_dropdown = gui.add_dropdown("Robot", [self.link.svc.robot],
                                                    initial_value=self.link.svc.robot,
@@ -215,6 +222,10 @@ class Console:
                                                 initial_value=GRIPPER_SLIDER_MAX,
                                                 hint="move the fingers to this width (the robot clamps it)")
             self.gripper_width.on_update(self._gripper_width_moved)
+        if self.recording is not None:  # a recording is watched, not driven
+            for h in (self.robot_dropdown, *self.mode_buttons.values(), self.direction, self.stop_button,
+                      *self.gripper_buttons.values(), self.gripper_width):
+                h.disabled = True
         with gui.add_folder("Status"):
             self.status_md = gui.add_markdown("**daemon**: no status yet")
         with gui.add_folder("Last 30 s"):
@@ -251,7 +262,11 @@ class Console:
             self._moved_at = -math.inf
             self.series = Series(("dm", "error"))
             self.view = RobotView(self.server, attached.robot, attached.W, self.scene, attached.pose_task)
-            self.view.gizmo.on_update(self._on_gizmo)
+            if self.recording is None:
+                self.view.gizmo.on_update(self._on_gizmo)
+            else:  # the recorded target, not one to drag
+                g = self.view.gizmo
+                g.disable_axes = g.disable_sliders = g.disable_rotations = True
             d = attached.direction
             self.direction.value = (float(d[0]), float(d[1]), float(d[2]))  # type: ignore[misc]
             st = attached.info.status
@@ -263,7 +278,8 @@ class Console:
         info = attached.info
         self.robot_md.content = (f"attached to **{attached.robot_id}** · {info.base_kind} base, {info.n_arm} "
                                  f"joints, {info.task} task  \ndrawn: {self.view.drawn}  \n"
-                                 f"file `{attached.robot.path}`")
+                                 f"file `{attached.robot.path}`"
+                                 + (f"  \nplaying {self.recording.summary()}" if self.recording else ""))
         if self.robot_dropdown.value != attached.robot_id:
             self.robot_dropdown.options = sorted({*self.robot_dropdown.options, attached.robot_id})
             self.robot_dropdown.value = attached.robot_id  # type: ignore[misc]
@@ -374,12 +390,19 @@ class Console:
             text = status_markdown(st, truth, self.link.source, width)
             if text != self.status_md.content:
                 self.status_md.content = text
-            if len(self.series) >= 2:
-                t, dm_s, err_s = self.series.arrays(time.monotonic() - self._t0)
-                self.plot_dm.data = (t, dm_s)
-                self.plot_err.data = (t, err_s)
-                for plot, values, span in ((self.plot_dm, dm_s, DM_MIN_SPAN), (self.plot_err, err_s, ERR_MIN_SPAN)):
-                    rng = y_range(values, span)
-                    if rng is not None and rng != self._y_ranges.get(id(plot)):
-                        self._y_ranges[id(plot)] = rng
-                        plot.scales = {"x": {"time": False}, "y": {"auto": False, "range": list(rng)}}
+            if self.recording is not None:  # the recording's last 30 s up to the playback time
+                (t_dm, dm_s), (t_err, err_s) = self.recording.history()
+                if self.player is not None:
+                    self.player.update()
+            elif len(self.series) >= 2:
+                t_dm, dm_s, err_s = self.series.arrays(time.monotonic() - self._t0)
+                t_err = t_dm
+            else:
+                return
+            self.plot_dm.data = (t_dm, dm_s)
+            self.plot_err.data = (t_err, err_s)
+            for plot, values, span in ((self.plot_dm, dm_s, DM_MIN_SPAN), (self.plot_err, err_s, ERR_MIN_SPAN)):
+                rng = y_range(values, span)
+                if rng is not None and rng != self._y_ranges.get(id(plot)):
+                    self._y_ranges[id(plot)] = rng
+                    plot.scales = {"x": {"time": False}, "y": {"auto": False, "range": list(rng)}}
