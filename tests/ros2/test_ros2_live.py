@@ -168,7 +168,7 @@ def log_tail(tmp: Path) -> str:
 # ---------------------------------------------------------------------------------------- the live tests
 @inside_only
 # both plants and both base kinds (holonomic vx, vy, wz; differential vx, wz), two runs: the other two
-# pairings add nothing the firmware and kinematics tests (test_ros2_firmware.py) do not cover
+# pairings add nothing the firmware and kinematics tests (tests/ros2/test_ros2_firmware.py) do not cover
 @pytest.mark.parametrize(("robot_file", "physics"), [("gen3_mecanum.toml", "kinematic"),
                                                      ("panda_diffdrive.toml", "mujoco")])
 def test_live_the_demo_completes_every_mode_through_ros2_with_no_joint_past_its_limits(
