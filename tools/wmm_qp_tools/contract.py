@@ -46,6 +46,9 @@ SLACK = 0.3
 COUNTED_MIN = 0.8
 """[-] the share of a reason's refused commands its count must show (the kit's commands may be
 dropped in transit on a loaded host, as the daemon's are)."""
+COUNT_WAIT = 2.0
+"""[s] how long the kit waits for a driver to count the refusals it provoked (a loaded driver counts
+late; one that does not count at all costs each refusing check this long)."""
 MAX_RATE = 1.0
 """[rad/s] the fastest the kit moves a joint (its step and its run to a limit: half the joint's
 velocity limit, at most this)."""
@@ -347,8 +350,8 @@ def _burst(k: Kit, n: int, reason: str, arm: Sequence[float] | None = None,
     """After :func:`settle`, ``n`` commands (zero rates, or ``arm``) with the keyword arguments
     of :meth:`Controller.send` (a forged lease, another instance, an old seq, …), one per period
     and nothing else; verdict: none of them applied (no state's ``cmd_seq`` names one), judged
-    once the driver counted them all under ``reason`` or applied one, or after 5 s (a loaded
-    driver answers late). The refusals are booked under ``reason`` for
+    once the driver counted them all under ``reason`` or applied one, or after ``COUNT_WAIT`` (a
+    loaded driver answers late). The refusals are booked under ``reason`` for
     :func:`check_refusal_counts`."""
     c = k.c
     st0 = settle(c)
@@ -360,7 +363,7 @@ def _burst(k: Kit, n: int, reason: str, arm: Sequence[float] | None = None,
         if "seq" in kw:
             kw["seq"] += 1
         time.sleep(c.period)
-    end = time.monotonic() + 5.0
+    end = time.monotonic() + COUNT_WAIT
     while time.monotonic() < end:
         st = c.drain() or st0
         if st.refused.get(reason, 0) - count0 >= n or any(s.cmd_seq != applied and s.cmd_seq in sent for s in log):
@@ -435,7 +438,7 @@ def check_refusal_counts(k: Kit) -> str:
         return all(st.refused.get(r, 0) - b >= n for r, (b, n) in k.refusals.items())
 
     try:
-        st = c.until(counted, 5.0, "state.refused counting every refusal")  # a loaded driver counts late
+        st = c.until(counted, COUNT_WAIT, "state.refused counting every refusal")  # a loaded driver counts late
     except ContractError:
         st = c.drain()  # type: ignore[assignment]
     assert st is not None
