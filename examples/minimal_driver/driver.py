@@ -138,8 +138,10 @@ class Robot:
         if not self.protective_stop:
             self.protective_stops += 1
             say(f"protective stop {self.protective_stops}: {reason}")
+        if not self.protective_stop or (self.at_rest() and key != self.ended):
+            self.ended, self.stale_stop = key, False    # the stop is this stream's (else it stays the first's)
         self.protective_stop, self.reason, self.code = True, reason, code
-        self.ended, self.stream, self.target = key, None, np.zeros_like(self.target)
+        self.stream, self.target = None, np.zeros_like(self.target)
 
     # -- the hardware ------------------------------------------------------------------------
     def ramp(self, target: np.ndarray) -> np.ndarray:
@@ -247,6 +249,7 @@ def main(argv: list[str] | None = None) -> int:
         cmds = session.declare_subscriber(f"{keys}/cmd", zenoh.handlers.RingChannel(1024))
         leases = session.liveliness().declare_subscriber(f"{keys}/lease/*", zenoh.handlers.FifoChannel(64),
                                                          history=True)
+        grips = session.declare_subscriber(f"{keys}/gripper", zenoh.handlers.FifoChannel(16))
         token = session.liveliness().declare_token(f"{keys}/alive/robot")
         if args.rt_priority:
             try:
@@ -264,6 +267,8 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             while (ev := leases.try_recv()) is not None:
                 bot.lease_event(str(ev.key_expr).rsplit("/", 1)[-1], ev.kind == zenoh.SampleKind.PUT)
+            while grips.try_recv() is not None:         # no gripper: counted, not applied
+                bot.refused["gripper"] = bot.refused.get("gripper", 0) + 1
             received = []
             while (s := cmds.try_recv()) is not None:
                 received.append(s.payload.to_bytes())
