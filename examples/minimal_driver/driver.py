@@ -25,6 +25,7 @@ import sys
 import time
 import uuid
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 import zenoh
@@ -185,8 +186,14 @@ class Robot:
             protective_code=self.code, refused=dict(self.refused))
 
 
+class Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> NoReturn:          # bad arguments: one line, exit 2
+        print(f"{self.prog}: error: {message}", file=sys.stderr)
+        sys.exit(2)
+
+
 def parse(argv: list[str] | None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(description="a minimal kinematic robot driver (docs/drivers.md)")
+    p = Parser(description="a minimal kinematic robot driver (docs/drivers.md)")
     p.add_argument("--robot-config", type=Path, default=None, metavar="FILE",
                    help="robot file (default: configs/robots/gen3_mecanum.toml)")
     p.add_argument("--service-config", type=Path, default=None, metavar="TOML",
