@@ -326,12 +326,14 @@ def test_the_console_in_play_mode_shows_the_recording_at_the_playback_time(host_
         assert "**mode** `track`" in c.status_md.content
         t_dm, dm = c.plot_dm.data
         assert dm[-1] == pytest.approx(dm_at(k)) and t_dm[-1] == pytest.approx(0.0, abs=0.01)
+        lo, hi = c.plot_dm.scales["y"]["range"]  # the whole recording's: fixed while it plays
+        assert lo <= dm_at(0) and hi >= dm_at(599)
         assert c.player.slider.value == pytest.approx(round(k / RATE + 0.002, 2))
         assert "**paused**" in c.player.text.content and "at the end: **loops**" in c.player.text.content
         c.player.slider.value = 0.555  # as the browser's slider moves it: a seek
         assert link.now() == pytest.approx(0.555)
         c._update(plots=True)
-        assert "**mode** `hold`" in c.status_md.content
+        assert "**mode** `hold`" in c.status_md.content and c.player.slider.value == pytest.approx(0.555, abs=0.006)
         for cb in c.player.play_button._impl.update_cb:  # the play button
             cb(None)
         assert link.clock.playing and c.player.play_button.label == "Pause"

@@ -202,7 +202,7 @@ class Console:
                                                    hint="every robot whose daemon this console sees")
             self.robot_md = gui.add_markdown("")
             self.robot_dropdown.on_update(self._on_robot_chosen)
-        with gui.add_folder("Mode"):
+        with gui.add_folder("Mode", expand_by_default=self.recording is None):  # playback: folded
             self.mode_buttons: dict[str, Any] = {}
             for m in MODES[1:]:
                 b = gui.add_button(MODE_LABELS[m], hint=f"mode {m}")
@@ -212,7 +212,7 @@ class Console:
                                              hint="u of eq. (8), base frame (used by the DM modes)")
             self.stop_button = gui.add_button("STOP (hold)", color="red", icon=None, hint="mode hold, at once")
             self.stop_button.on_click(partial(self._mode_clicked, "hold"))
-        with gui.add_folder("Gripper"):
+        with gui.add_folder("Gripper", expand_by_default=self.recording is None):
             self.gripper_buttons: dict[str, Any] = {}
             for action in ("open", "close"):
                 b = gui.add_button(f"{action.capitalize()} gripper", hint=f"{action} the gripper fully")
@@ -401,7 +401,9 @@ class Console:
                 return
             self.plot_dm.data = (t_dm, dm_s)
             self.plot_err.data = (t_err, err_s)
-            for plot, values, span in ((self.plot_dm, dm_s, DM_MIN_SPAN), (self.plot_err, err_s, ERR_MIN_SPAN)):
+            # a recording: its whole range (a uPlot whose scales change often while paused shows no line)
+            dm_r, err_r = self.recording.extent() if self.recording is not None else (dm_s, err_s)
+            for plot, values, span in ((self.plot_dm, dm_r, DM_MIN_SPAN), (self.plot_err, err_r, ERR_MIN_SPAN)):
                 rng = y_range(values, span)
                 if rng is not None and rng != self._y_ranges.get(id(plot)):
                     self._y_ranges[id(plot)] = rng

@@ -226,8 +226,12 @@ class RecordingLink:
             lo, hi = int(np.searchsorted(ch.t, tau - window, side="left")), ch.index(tau) + 1
             step = max(1, (hi - lo) // PLOT_POINTS)
             v = np.asarray(ch.v, float).reshape(len(ch.t), -1)[:, 0] if len(ch.t) else np.zeros(0)
-            out.append((ch.t[lo:hi:step] - tau, v[lo:hi:step]))
+            out.append((ch.t[lo:hi:step] - tau, np.ascontiguousarray(v[lo:hi:step])))
         return out[0], out[1]
+
+    def extent(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every DM and every ‖EE − target‖ of the recording (the plots' y ranges: fixed for the whole playback)."""
+        return self._dm.v[:, 0] if len(self._dm) else np.zeros(0), np.asarray(self._error.v, float)
 
     # ----------------------------------------------------------------- commands: none
     def send_setpoint(self, x: Sequence[float], q: Sequence[float] | None = None) -> None:
@@ -255,11 +259,12 @@ class PlaybackPanel:
     def __init__(self, gui: Any, link: RecordingLink) -> None:
         self.link = link
         c = link.clock
-        self._syncing = False
+        self._syncing = self._repush = False
         speeds = sorted({*SPEEDS, c.speed})
         with gui.add_folder("Playback"):
             self.play_button = gui.add_button("Pause", hint="pause or play the recording")
-            self.slider = gui.add_slider("Time [s]", min=0.0, max=max(c.duration, 0.01), step=0.01,
+            end = max(math.ceil(c.duration * 100) / 100, 0.01)  # the slider's steps are 0.01 s
+            self.slider = gui.add_slider("Time [s]", min=0.0, max=end, step=0.01,
                                          initial_value=0.0, hint="seconds since the recording's first message")
             self.speed = gui.add_dropdown("Speed", [f"{s:g}x" for s in speeds], initial_value=f"{c.speed:g}x")
             self.loop = gui.add_checkbox("Loop at the end", initial_value=c.loop,
@@ -278,6 +283,7 @@ class PlaybackPanel:
     def _seek(self, _: Any = None) -> None:
         if not self._syncing:  # the operator moved it (not update())
             self.link.clock.seek(float(self.slider.value))
+            self._repush = True
 
     def markdown(self, tau: float) -> str:
         c, tl = self.link.clock, self.link.timeline
@@ -294,11 +300,16 @@ class PlaybackPanel:
         """The slider, the button and the text at the playback time."""
         c = self.link.clock
         tau = c.now()
+        v = round(min(tau, self.slider.max), 2)
         self._syncing = True
         try:
-            self.slider.value = round(min(tau, self.slider.max), 2)
+            if self._repush and self.slider.value == v:
+                # the operator's seek can cross an update of ours on the wire (the browser then shows
+                # ours, older): say its value again, as viser sends only a value that changed
+                self.slider.value = v + 0.001
+            self.slider.value = v
         finally:
-            self._syncing = False
+            self._syncing = self._repush = False
         label = "Pause" if c.playing else "Play"
         if self.play_button.label != label:
             self.play_button.label = label

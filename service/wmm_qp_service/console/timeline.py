@@ -2,7 +2,7 @@
 
 :func:`load_timeline` reads a recording (``wmm-qp serve --record``, ``sim --embedded --record``, or a
 client's ``wmm-qp record``; a rotated one as one) and keeps, per channel, its samples in time order
-[s since the recording's first message, as ``wmm-qp plot``'s axis]: the measured states
+[s since the recording's earliest message, as ``wmm-qp plot``'s axis]: the measured states
 (``/arm/joint_states``, ``/base/wheel_states``, ``/odom``), the EE (``/ee/pose``: forward
 kinematics of the measured state) and its target (``/ee/target``), the statuses (``/wmm/status``),
 the modes (``/wmm/mode``) and DM (``/wmm/telemetry``). Those channels are common to the host's and
@@ -51,9 +51,9 @@ class Channel:
         return len(self.t)
 
 
-def _channel(rows: list[tuple[float, Any]], array: bool = True) -> Channel:
+def _channel(rows: list[tuple[int, Any]], t0_ns: int, array: bool = True) -> Channel:
     rows.sort(key=lambda r: r[0])  # stable: a channel's order where two samples share a stamp
-    t = np.array([r[0] for r in rows], dtype=float)
+    t = np.array([(r[0] - t0_ns) * 1e-9 for r in rows], dtype=float)
     if array:
         width = max((len(r[1]) for r in rows), default=0)
         v: Any = np.full((len(rows), width), math.nan)
@@ -73,8 +73,8 @@ class Timeline:
         meta: the ``wmm_qp`` metadata of its first file.
         files: the files read.
         error: why reading stopped before the recording's end, one line (None: read to its end).
-        t0: [s] wall clock of its first message (every ``t`` counts from it).
-        duration: [s] from its first message to its last.
+        t0: [s] wall clock of its earliest message (every ``t`` counts from it).
+        duration: [s] from its earliest message to its latest.
         q_arm, v_arm: measured joint positions and rates; ``wheels``: measured wheel speeds;
         q_base: [m, m, rad] the base's pose (odometry); ``ee``: [m] the EE (forward kinematics of
             the measured state); ``target``: [m] x_d, and ``quat_d`` its [x, y, z, w];
@@ -153,22 +153,17 @@ def load_timeline(path: str | Path) -> Timeline:
     from ..recording.reader import RecordingReader, chain
 
     ts = get_typestore(Stores.ROS2_HUMBLE)
-    rows: dict[str, list[tuple[float, Any]]] = {k: [] for k in (*CDR_TYPES, *JSON_TOPICS, "v_arm", "wheels",
+    rows: dict[str, list[tuple[int, Any]]] = {k: [] for k in (*CDR_TYPES, *JSON_TOPICS, "v_arm", "wheels",
                                                                  "quat_d")}
     meta: dict[str, str] = {}
     files: list[str] = []
     error = None
-    t0: float | None = None
-    last = -math.inf
+    first, last = 2**63, -1  # [ns] the earliest and latest log time (the channels interleave in the file)
     rid = None
     for f in chain(path):
         rd = RecordingReader(f)
-        for topic, ns, data in rd.messages(set(CDR_TYPES) | JSON_TOPICS):
-            t = ns * 1e-9
-            if t0 is None:
-                t0 = t
-            t -= t0
-            last = max(last, t)
+        for topic, t, data in rd.messages(set(CDR_TYPES) | JSON_TOPICS):
+            first, last = min(first, t), max(last, t)
             m: Any = ts.deserialize_cdr(data, CDR_TYPES[topic]) if topic in CDR_TYPES else msgspec.json.decode(data)
             if topic == "/arm/joint_states":
                 rows[topic].append((t, m.position))
@@ -202,9 +197,8 @@ def load_timeline(path: str | Path) -> Timeline:
     if not rows["/arm/joint_states"] or not rows["/odom"]:
         raise RecordingError(f"{path}: no robot states recorded (no /arm/joint_states and /odom messages)"
                              + (f"; {error}" if error else ""))
-    return Timeline(meta=meta, files=files, error=error, t0=t0 or 0.0, duration=max(last, 0.0),
-                    q_arm=_channel(rows["/arm/joint_states"]), v_arm=_channel(rows["v_arm"]),
-                    wheels=_channel(rows["wheels"]), q_base=_channel(rows["/odom"]), ee=_channel(rows["/ee/pose"]),
-                    target=_channel(rows["/ee/target"]), quat_d=_channel(rows["quat_d"]),
-                    statuses=_channel(rows["/wmm/status"], array=False), modes=_channel(rows["/wmm/mode"], array=False),
-                    dm=_channel(rows["/wmm/telemetry"]))
+    ch = {k: _channel(v, first, array=k not in ("/wmm/status", "/wmm/mode")) for k, v in rows.items()}
+    return Timeline(meta=meta, files=files, error=error, t0=first * 1e-9, duration=(last - first) * 1e-9,
+                    q_arm=ch["/arm/joint_states"], v_arm=ch["v_arm"], wheels=ch["wheels"], q_base=ch["/odom"],
+                    ee=ch["/ee/pose"], target=ch["/ee/target"], quat_d=ch["quat_d"], statuses=ch["/wmm/status"],
+                    modes=ch["/wmm/mode"], dm=ch["/wmm/telemetry"])
