@@ -20,6 +20,7 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 pytest.importorskip("mcap")
@@ -261,6 +262,30 @@ def test_a_client_records_the_robot_keys_and_plot_draws_both(recording: dict[str
         names = {p.name for p in out.glob("*.png")}
         assert {"joints.png", "wheels.png", "ee.png", "dm.png", "timing.png"} <= names, names
         assert all(p.stat().st_size > 10_000 for p in out.glob("*.png"))
+
+
+def test_the_console_plays_the_hosts_and_the_clients_recording(recording: dict[str, Any]) -> None:
+    """``console --play``'s link on both recordings of the run (the rotated host's read as one): every
+    mode of the run at its time, the states in time order, the host's states those of its ticks."""
+    from wmm_qp_service.console.playback import RecordingLink
+    from wmm_qp_service.console.timeline import load_timeline
+
+    host_states = None
+    for src in (recording["path"], recording["client"]):
+        tl = load_timeline(src)
+        link = RecordingLink(tl, src)
+        assert tl.error is None and tl.states > 100 and np.all(np.diff(tl.q_arm.t) >= 0)
+        assert link.attach().info.joints == json.loads(tl.meta["arm_joints"])
+        seen = {s.mode for tau in np.linspace(0.0, tl.duration, 200) if (s := link.status(float(tau))) is not None}
+        assert {"track", "dm_nullspace", "hold"} <= seen, (src, seen)
+        st = link.state(tl.duration)
+        assert st is not None and len(st.q_arm) == len(json.loads(tl.meta["arm_joints"]))
+        if host_states is None:
+            host_states = tl.states
+            msgs, _ = _decode(src)
+            assert len(tl.files) >= 2 and tl.states >= len(msgs["/arm/joint_states"])
+        else:
+            assert tl.states <= host_states  # the client saw at most the states the daemon ticked on
 
 
 def test_the_embedded_core_records_every_tick_and_replays(tmp_path: Path) -> None:
