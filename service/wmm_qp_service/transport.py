@@ -17,6 +17,7 @@ from wmm_qp import ConfigError
 
 from .acl import apply_credentials, check_listen_endpoints, file_endpoints
 from .config import ServiceConfig
+from .rate_loop import threads_started_at
 
 ROLE_DAEMON = "daemon"
 ROLE_SIM = "sim"
@@ -77,6 +78,14 @@ def session_config(cfg: ServiceConfig, role: str) -> zenoh.Config:
     return zc
 
 
-def open_session(cfg: ServiceConfig, role: str) -> zenoh.Session:
-    """Open a Zenoh session for ``role`` (see :func:`session_config`)."""
-    return zenoh.open(session_config(cfg, role))
+def open_session(cfg: ServiceConfig, role: str, priority: int = 0) -> zenoh.Session:
+    """Open a Zenoh session for ``role`` (see :func:`session_config`).
+
+    ``priority`` > 0: Zenoh's I/O threads run under SCHED_FIFO at that priority (the session
+    opens from this thread raised to it, its own scheduling given back after:
+    :func:`~.rate_loop.threads_started_at`); 0: they keep the caller's scheduling. A process
+    with a real-time loop gives :func:`~.rate_loop.io_priority` of the loop's priority.
+    """
+    zc = session_config(cfg, role)
+    with threads_started_at(priority):
+        return zenoh.open(zc)

@@ -25,6 +25,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--stale-timeout", type=float, default=None, metavar="S",
                    help="[s] commands older than this brake the arm to rest (default: configs/sim.toml's "
                         "stale_timeout, 0.025)")
+    p.add_argument("--rt-priority", type=int, default=None, metavar="N",
+                   help="SCHED_FIFO priority of libfranka's cycle (its Zenoh threads one below), 0 = normal "
+                        "scheduling (default: configs/sim.toml's rt_priority, 50: libfranka sets none with "
+                        "RealtimeConfig.kIgnore; without root or CAP_SYS_NICE the driver says so and runs normally)")
     e = add_embedded_arguments(
         p, "embedded mode: the control core in libfranka's cycle (no wmm-qp serve)",
         "host the control daemon's core in libfranka's 1 kHz cycle: each cycle reads the state, ticks and writes "
@@ -80,7 +84,11 @@ def run(args: argparse.Namespace) -> int:
         print("wmm-qp driver franka: error: --control-rate must be in (0, 1000] Hz (the robot's cycle)",
               file=sys.stderr)
         return 2
-    driver = FrankaDriver(svc, robot, stale_timeout=stale, referee=sim_cfg.referee)
+    prio = sim_cfg.rt_priority if args.rt_priority is None else args.rt_priority
+    if not 0 <= prio <= 99:
+        print("wmm-qp driver franka: error: --rt-priority must be in [0, 99]", file=sys.stderr)
+        return 2
+    driver = FrankaDriver(svc, robot, stale_timeout=stale, referee=sim_cfg.referee, rt_priority=prio)
     if args.embedded:
         code = _run_embedded(args, driver)
         if code is None:

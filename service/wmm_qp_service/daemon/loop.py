@@ -26,7 +26,7 @@ from wmm_qp.scene import Scene
 from ..config import ServiceConfig
 from ..keys import Keys
 from ..protocol import StateMsg, StatusMsg, encode
-from ..rate_loop import LoopTiming, RateLoop, StateLoop, realtime_priority
+from ..rate_loop import LoopTiming, RateLoop, StateLoop, io_priority, realtime_priority
 from ..tick_stages import POLL, QUERIES, STATUS, TELEMETRY, TickStages
 from ..transport import ROLE_DAEMON, open_session
 from . import reports
@@ -163,7 +163,7 @@ class Daemon:
             LeaseHeld: another daemon holds the robot's lease (and ``wait_lease`` is off), at
                 start or — after a start-up race the other one won — within ``LEASE_GRACE``.
         """
-        with open_session(self.svc, ROLE_DAEMON) as session:
+        with open_session(self.svc, ROLE_DAEMON, io_priority(self.svc.loop.rt_priority)) as session:
             self.core.lease = str(session.info.zid())
             if not acquire(session, self.keys, self.core.lease, self.wait_lease, stop):
                 return reports.status(self.core, self.loop, self.rejected(), self.accepted())
@@ -191,7 +191,7 @@ class Daemon:
             self.journal = TickJournal(self.record[0], recording_meta(core, "serve", svc.loop.trigger),
                                        core.robot.n_arm, core.robot.n_wheels, self.record[1], self.record[2],
                                        svc.loop.rate_hz)
-        # After the session opened: Zenoh's own threads keep normal priority, only this one is raised.
+        # Zenoh's threads run one priority below (opened so: io_priority), this one at the loop's.
         self.scheduling = realtime_priority(svc.loop.rt_priority)
         print(f"wmm-qp serve: control thread: {self.scheduling}; trigger {svc.loop.trigger}",
               file=sys.stderr, flush=True)

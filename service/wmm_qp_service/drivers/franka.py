@@ -68,6 +68,7 @@ from .. import robot_side
 from ..config import ServiceConfig
 from ..keys import Keys
 from ..protocol import CommandMsg, GripperMsg, StateMsg, TruthMsg, encode
+from ..rate_loop import io_priority, realtime_priority
 from ..transport import ROLE_SIM, open_session
 from ..validation import Validator
 from .franka_hand import FrankaHand
@@ -97,13 +98,17 @@ class FrankaDriver(LeaseGate):
         robot: the robot file (a fixed base; its ``jerk_max`` bounds the stream).
         stale_timeout: [s] commands older than this brake the arm to rest.
         referee: the referee's tolerances.
+        rt_priority: SCHED_FIFO priority of libfranka's cycle (the calling thread, once the robot is
+            connected), its Zenoh threads one below; 0: normal scheduling.
     """
 
     def __init__(self, svc: ServiceConfig, robot: w.RobotConfig, stale_timeout: float = 0.025,
-                 referee: RefereeConfig | None = None) -> None:
+                 referee: RefereeConfig | None = None, rt_priority: int = 0) -> None:
         svc = svc.with_robot(robot)
         self.svc = svc
         self.robot = robot
+        self.rt_priority = rt_priority
+        self.scheduling = "normal scheduling"
         self.keys = Keys.of(svc.prefix, svc.robot)
         LeaseGate.__init__(self, Validator(CommandMsg, svc.robot, svc.validation, n_arm=robot.n_arm,
                                            n_wheels=robot.n_wheels))
@@ -284,7 +289,7 @@ class FrankaDriver(LeaseGate):
             print("wmm-qp driver franka: error: needs pylibfranka (pip install 'wmm-qp[franka]')",
                   file=sys.stderr, flush=True)
             return 2
-        with open_session(self.svc, ROLE_SIM) as session:
+        with open_session(self.svc, ROLE_SIM, io_priority(self.rt_priority)) as session:
             k = self.keys
             sub = robot_side.command_subscriber(session, k, zenoh.handlers.FifoChannel(1024))
             sub_gripper = robot_side.input_subscriber(session, k, "gripper")
@@ -303,8 +308,9 @@ class FrankaDriver(LeaseGate):
                 if self.hand is not None:
                     self.hand.start(robot_ip)
                 token = robot_side.alive_token(session, k)
+                self.scheduling = realtime_priority(self.rt_priority)  # after the hand's child started
                 print(f"wmm-qp driver franka: {k.state.rsplit('/', 1)[0]} driving the robot at {robot_ip} "
-                      f"(instance {self.instance})", file=sys.stderr, flush=True)
+                      f"(instance {self.instance}; cycle: {self.scheduling})", file=sys.stderr, flush=True)
                 return self._loop(fr, link, (sub, sub_gripper), lease_sub, (pub, pub_truth), stop, max_cycles,
                                   robot_ip)
             finally:

@@ -41,6 +41,7 @@ from wmm_qp.scene import Scene
 from ..embedded import EmbeddedControl
 from ..embedded.service import embedded_session
 from ..protocol import CommandMsg, StateMsg
+from ..rate_loop import realtime_priority
 from .franka import DT, TRUTH_EVERY, FrankaDriver
 from .franka_link import FrankaLink, drive
 
@@ -176,7 +177,7 @@ class FrankaEmbedded:
         # pylibfranka's readOnce holds the GIL while it waits for the robot: the service side
         # runs in the cycle's slack, not on a thread that would starve
         with embedded_session(d.svc, self.control, stop, wait_lease=wait_lease, robot_inputs=("gripper",),
-                              threaded=False) as svc:
+                              rt_priority=d.rt_priority, threaded=False) as svc:
             if svc is None:
                 return 0
             try:
@@ -188,8 +189,9 @@ class FrankaEmbedded:
                 return 1
             if d.hand is not None:
                 d.hand.start(robot_ip)
+            d.scheduling = realtime_priority(d.rt_priority)  # after the hand's child started
             print(f"wmm-qp driver franka: {d.keys.root} driving the robot at {robot_ip} (instance {d.instance}), "
-                  f"the control core in its cycle at {self.control.timing.rate_hz:g} Hz, lease "
+                  f"the control core in its cycle at {self.control.timing.rate_hz:g} Hz ({d.scheduling}), lease "
                   f"{self.control.core.lease}", file=sys.stderr, flush=True)
             self.start()
             try:

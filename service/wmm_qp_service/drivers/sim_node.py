@@ -64,7 +64,7 @@ from .. import robot_side
 from ..config import ServiceConfig
 from ..keys import Keys
 from ..protocol import BoxMsg, CommandMsg, GripperMsg, ObstaclesMsg, StateMsg, TruthMsg, encode
-from ..rate_loop import RateLoop, realtime_priority
+from ..rate_loop import RateLoop, io_priority, realtime_priority
 from ..transport import ROLE_SIM, open_session
 from ..validation import Validator
 
@@ -346,7 +346,7 @@ class SimNode(LeaseGate):
 
     def run(self, stop: threading.Event, max_ticks: int | None = None) -> SimState:
         """Run until ``stop`` is set (or ``max_ticks``); returns the final state."""
-        with open_session(self.svc, ROLE_SIM) as session:
+        with open_session(self.svc, ROLE_SIM, io_priority(self.rt_priority)) as session:
             k = self.keys
             inbox: CommandInbox[bytes] = CommandInbox(clock=time.monotonic)
 

@@ -35,7 +35,7 @@ from ..daemon.lease import acquire
 from ..daemon.zenoh_service import matching
 from ..keys import Keys
 from ..protocol import encode
-from ..rate_loop import realtime_priority
+from ..rate_loop import io_priority, realtime_priority
 from ..transport import ROLE_EMBEDDED, open_session
 from .control import EmbeddedControl, telemetry_msg
 
@@ -197,7 +197,7 @@ def embedded_session(svc: ServiceConfig, control: EmbeddedControl, stop: threadi
         LeaseHeld: another daemon holds the robot's lease.
     """
     keys = Keys.of(svc.prefix, svc.robot)
-    with open_session(svc, ROLE_EMBEDDED) as session:
+    with open_session(svc, ROLE_EMBEDDED, io_priority(rt_priority)) as session:
         control.core.lease = str(session.info.zid())
         if not acquire(session, keys, control.core.lease, wait_lease, stop):
             yield None
