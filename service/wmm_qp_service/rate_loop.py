@@ -8,13 +8,12 @@ fake clock (tests never depend on real timing).
 
 from __future__ import annotations
 
-import contextlib
 import math
 import os
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from typing import Generic, TypeVar
 
 import numpy as np
@@ -42,40 +41,6 @@ def realtime_priority(priority: int) -> str:
     except (AttributeError, OSError) as e:  # not Linux, or not permitted
         return f"normal scheduling (SCHED_FIFO {priority} refused: {getattr(e, 'strerror', e)})"
     return f"SCHED_FIFO {priority}"
-
-
-def io_priority(rt_priority: int) -> int:
-    """The SCHED_FIFO priority of a real-time process's I/O threads (Zenoh's): one below its
-    loop's ``rt_priority`` (at least 1), so the loop preempts them; 0 (normal) when the loop is."""
-    return max(rt_priority - 1, 1) if rt_priority > 0 else 0
-
-
-@contextlib.contextmanager
-def threads_started_at(priority: int) -> Iterator[str]:
-    """Threads this thread starts inside the block run under SCHED_FIFO ``priority`` (Linux
-    threads inherit their creator's scheduling); this thread's own is given back on exit.
-
-    A process whose loop is real-time opens its Zenoh session inside it: Zenoh's I/O threads
-    (those the open starts, and those they start later for each link) then carry its states and
-    commands at a real-time priority, so a busy host's ordinary processes (a browser rendering
-    3-D in software on the same cores) cannot hold them back past the stale timeouts, nor hold the
-    GIL while preempted (a thread that takes the GIL from a Zenoh callback would make the loop
-    wait for it). Yields what happened, as :func:`realtime_priority` says it.
-    """
-    if priority <= 0:
-        yield "normal scheduling"
-        return
-    try:
-        before = os.sched_getscheduler(0), os.sched_getparam(0)
-    except (AttributeError, OSError) as e:  # not Linux
-        yield f"normal scheduling ({e})"
-        return
-    said = realtime_priority(priority)
-    try:
-        yield said
-    finally:
-        with contextlib.suppress(OSError):
-            os.sched_setscheduler(0, *before)
 
 
 class Mailbox(Generic[T]):

@@ -7,8 +7,10 @@ process at exit.
 
 from __future__ import annotations
 
+import contextlib
 import json
-from collections.abc import Sequence
+import os
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import zenoh
@@ -17,7 +19,7 @@ from wmm_qp import ConfigError
 
 from .acl import apply_credentials, check_listen_endpoints, file_endpoints
 from .config import ServiceConfig
-from .rate_loop import threads_started_at
+from .rate_loop import realtime_priority
 
 ROLE_DAEMON = "daemon"
 ROLE_SIM = "sim"
@@ -83,9 +85,43 @@ def open_session(cfg: ServiceConfig, role: str, priority: int = 0) -> zenoh.Sess
 
     ``priority`` > 0: Zenoh's I/O threads run under SCHED_FIFO at that priority (the session
     opens from this thread raised to it, its own scheduling given back after:
-    :func:`~.rate_loop.threads_started_at`); 0: they keep the caller's scheduling. A process
-    with a real-time loop gives :func:`~.rate_loop.io_priority` of the loop's priority.
+    :func:`threads_started_at`); 0: they keep the caller's scheduling. A process
+    with a real-time loop gives :func:`io_priority` of the loop's priority.
     """
     zc = session_config(cfg, role)
     with threads_started_at(priority):
         return zenoh.open(zc)
+
+
+def io_priority(rt_priority: int) -> int:
+    """The SCHED_FIFO priority of a real-time process's I/O threads (Zenoh's): one below its
+    loop's ``rt_priority`` (at least 1), so the loop preempts them; 0 (normal) when the loop is."""
+    return max(rt_priority - 1, 1) if rt_priority > 0 else 0
+
+
+@contextlib.contextmanager
+def threads_started_at(priority: int) -> Iterator[str]:
+    """Threads this thread starts inside the block run under SCHED_FIFO ``priority`` (Linux
+    threads inherit their creator's scheduling); this thread's own is given back on exit.
+
+    A process whose loop is real-time opens its Zenoh session inside it: Zenoh's I/O threads
+    (those the open starts, and those they start later for each link) then carry its states and
+    commands at a real-time priority, so a busy host's ordinary processes (a browser rendering
+    3-D in software on the same cores) cannot hold them back past the stale timeouts, nor hold the
+    GIL while preempted (a thread that takes the GIL from a Zenoh callback would make the loop
+    wait for it). Yields what happened, as :func:`realtime_priority` says it.
+    """
+    if priority <= 0:
+        yield "normal scheduling"
+        return
+    try:
+        before = os.sched_getscheduler(0), os.sched_getparam(0)
+    except (AttributeError, OSError) as e:  # not Linux
+        yield f"normal scheduling ({e})"
+        return
+    said = realtime_priority(priority)
+    try:
+        yield said
+    finally:
+        with contextlib.suppress(OSError):
+            os.sched_setscheduler(0, *before)

@@ -94,7 +94,7 @@ def test_a_session_opened_without_a_priority_leaves_zenoh_threads_at_normal_sche
 
 
 def test_io_priority_is_one_below_the_loop_and_never_raises_a_normal_loop() -> None:
-    from wmm_qp_service.rate_loop import io_priority
+    from wmm_qp_service.transport import io_priority
 
     assert [io_priority(p) for p in (0, 1, 2, 50, 99)] == [0, 1, 1, 49, 98]
 

@@ -26,9 +26,9 @@ from wmm_qp.scene import Scene
 from ..config import ServiceConfig
 from ..keys import Keys
 from ..protocol import StateMsg, StatusMsg, encode
-from ..rate_loop import LoopTiming, RateLoop, StateLoop, io_priority, realtime_priority
+from ..rate_loop import LoopTiming, RateLoop, StateLoop, realtime_priority
 from ..tick_stages import POLL, QUERIES, STATUS, TELEMETRY, TickStages
-from ..transport import ROLE_DAEMON, open_session
+from ..transport import ROLE_DAEMON, io_priority, open_session
 from . import reports
 from .core import ControlCore
 from .cycle import Cycle

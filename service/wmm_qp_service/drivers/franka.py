@@ -68,8 +68,8 @@ from .. import robot_side
 from ..config import ServiceConfig
 from ..keys import Keys
 from ..protocol import CommandMsg, GripperMsg, StateMsg, TruthMsg, encode
-from ..rate_loop import io_priority, realtime_priority
-from ..transport import ROLE_SIM, open_session
+from ..rate_loop import realtime_priority
+from ..transport import ROLE_SIM, io_priority, open_session
 from ..validation import Validator
 from .franka_hand import FrankaHand
 from .franka_link import FrankaLink, drive

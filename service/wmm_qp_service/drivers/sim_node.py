@@ -64,8 +64,8 @@ from .. import robot_side
 from ..config import ServiceConfig
 from ..keys import Keys
 from ..protocol import BoxMsg, CommandMsg, GripperMsg, ObstaclesMsg, StateMsg, TruthMsg, encode
-from ..rate_loop import RateLoop, io_priority, realtime_priority
-from ..transport import ROLE_SIM, open_session
+from ..rate_loop import RateLoop, realtime_priority
+from ..transport import ROLE_SIM, io_priority, open_session
 from ..validation import Validator
 
 P = TypeVar("P")

@@ -35,8 +35,8 @@ from ..daemon.lease import acquire
 from ..daemon.zenoh_service import matching
 from ..keys import Keys
 from ..protocol import encode
-from ..rate_loop import io_priority, realtime_priority
-from ..transport import ROLE_EMBEDDED, open_session
+from ..rate_loop import realtime_priority
+from ..transport import ROLE_EMBEDDED, io_priority, open_session
 from .control import EmbeddedControl, telemetry_msg
 
 if TYPE_CHECKING:
