@@ -4,13 +4,14 @@ recorder and daemon. What it sends for a phase, and which daemon ticks the trace
 from __future__ import annotations
 
 import math
+import time
 from typing import Any
 
 import numpy as np
 import pytest
 from wmm_qp_service.protocol import StateMsg, TelemetryMsg, TruthMsg, encode
 from wmm_qp_sim import BoxConfig
-from wmm_qp_tools.experiments.realtime import ClientProbe, Window, build_trace, run_phase
+from wmm_qp_tools.experiments.realtime import ClientProbe, Window, build_trace, caught_up, run_phase
 from wmm_qp_tools.experiments.recorder import Recorder
 from wmm_qp_tools.experiments.scenario import Anchor, Phase, Probe, Target
 from wmm_qp_tools.experiments.setup import make_setup
@@ -94,6 +95,31 @@ def test_a_phase_in_real_time_places_its_box_sends_its_mode_and_streams_its_targ
         np.testing.assert_allclose(c[2], X)
     first = next(m for m in link.telemetry if m.mode == "track")
     assert window == Window("p", "track", first.t, 5.0, link.telemetry[-1].t)
+
+
+class LateLink:
+    """A recorder whose receive lags: the daemon's ticks up to ``t_daemon`` arrive ``lag`` s of
+    wall time after the test starts, all at once."""
+
+    def __init__(self, t_daemon: float, lag: float) -> None:
+        self.telemetry = [telemetry(0.0, "track")]
+        self.at, self.t_daemon = time.monotonic() + lag, t_daemon
+
+    def drain(self) -> None:
+        if time.monotonic() >= self.at and self.telemetry[-1].t < self.t_daemon:
+            self.telemetry += [telemetry(0.002 * i, "track") for i in range(1, round(self.t_daemon / 0.002) + 1)]
+
+
+def test_a_phase_ends_at_the_daemons_tick_of_its_end_even_when_this_process_receives_late() -> None:
+    """A loaded client receives the daemon's ticks late: the phase's window waits for the tick of
+    its end rather than ending at the newest one received (which would drop the push's contact)."""
+    link = LateLink(t_daemon=1.0, lag=0.2)
+    caught_up(link, 0.99)  # type: ignore[arg-type]
+    assert link.telemetry[-1].t >= 0.99
+    never = LateLink(t_daemon=0.5, lag=0.0)  # the daemon stopped at 0.5 s: a bounded wait, no raise
+    t0 = time.monotonic()
+    caught_up(never, 0.99, timeout=0.1)  # type: ignore[arg-type]
+    assert 0.1 <= time.monotonic() - t0 < 2.0 and never.telemetry[-1].t == pytest.approx(0.5)
 
 
 def test_the_realtime_trace_keeps_each_phases_ticks_with_the_states_the_daemon_used() -> None:

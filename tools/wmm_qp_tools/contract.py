@@ -52,6 +52,8 @@ late; one that does not count at all costs each refusing check this long)."""
 MAX_RATE = 1.0
 """[rad/s] the fastest the kit moves a joint (its step and its run to a limit: half the joint's
 velocity limit, at most this)."""
+GOTO_GAIN = 6.0
+"""[1/s] the gain of the P law that brings the arm back to where the kit found it (:func:`goto`)."""
 ACCEL_WINDOW = 0.01
 """[s] the executed rates' acceleration is judged over windows of at least this much robot time
 (a real robot's measured rates are noisy from one cycle to the next)."""
@@ -642,10 +644,13 @@ def _limit_joint(c: Controller, q: np.ndarray) -> tuple[int, float] | None:
 
 def goto(c: Controller, q_target: Sequence[float] | np.ndarray, speed: float = 0.5, timeout: float = 20.0,
          tol: float = 0.01) -> StateMsg:
-    """Drive the arm to ``q_target`` [rad] (a P law, rates at most ``speed`` x the velocity
-    limits and :data:`MAX_RATE`, changed by at most the acceleration limits per period), then rest; the last state."""
+    """Drive the arm to ``q_target`` [rad] (a P law of gain :data:`GOTO_GAIN` capped by the rate
+    that stops within the error at half the acceleration limits, rates at most ``speed`` x the
+    velocity limits and :data:`MAX_RATE`, changed by at most the acceleration limits per period),
+    then rest; the last state."""
     vmax = np.minimum(speed * np.array(c.robot.arm.velocity_max, dtype=float), MAX_RATE)
-    amax = np.array(c.robot.arm.acceleration_max, dtype=float) * c.period
+    a = np.broadcast_to(np.array(c.robot.arm.acceleration_max, dtype=float), vmax.shape)
+    amax = a * c.period
     target = np.array(q_target, dtype=float)
     settle(c)
     v = np.zeros(c.robot.n_arm)
@@ -656,7 +661,7 @@ def goto(c: Controller, q_target: Sequence[float] | np.ndarray, speed: float = 0
         err = target - np.array(st.q_arm)
         if np.all(np.abs(err) < tol):
             break
-        want = np.clip(3.0 * err, -vmax, vmax)
+        want = np.sign(err) * np.minimum(np.minimum(GOTO_GAIN * np.abs(err), np.sqrt(a * np.abs(err))), vmax)
         if st.stale_stop and st.cmd_seq >= c.stream:  # this process stalled: go on from the rates there
             v = np.array(st.v_arm)
         v = v + np.clip(want - v, -amax, amax)

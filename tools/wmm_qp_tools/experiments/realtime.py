@@ -11,9 +11,10 @@ telemetry's ``x``: the EE the daemon estimates, odometry-based) and streams the 
 The client records (:class:`~.recorder.Recorder`) every state the sim publishes, its evaluation
 data (``sim/truth``: ground truth, box, referee, one per state, naming the state's seq) and
 every tick's telemetry of the daemon. A log row is one daemon tick of a phase — from the
-phase's first tick in its mode, for its duration, up to the newest tick received when it
-ended: the command and the reference come from the tick's telemetry, the state (joint angles,
-odometry, torques) is *the state the daemon used* (:func:`~.recorder.match_states`), and the
+phase's first tick in its mode, for its duration, up to the tick the daemon made when it
+ended (the client waits for that tick to arrive, :func:`caught_up`): the command and the
+reference come from the tick's telemetry, the state (joint angles, odometry, torques) is *the
+state the daemon used* (:func:`~.recorder.match_states`), and the
 truth of that seq gives its ground truth, the box and the stalled joint. The per-tick
 :class:`~.trace.Trace` is the in-process one, so the same metrics and the same CSV columns
 apply. Time ``t`` is the daemon's tick time since the scenario's first tick.
@@ -44,6 +45,7 @@ from wmm_qp_tools.experiments.trace import Trace
 
 SETPOINT_HZ = 100.0  # [Hz] rate of the scripted setpoint stream (feed-forward velocity included)
 SWITCH_TIMEOUT = 5.0  # [s] for the daemon's first tick in a phase's mode, for the sim to show a box
+CATCH_UP_SLACK = 0.01  # [s] a phase's window may end this much of daemon time before its wall-clock end
 
 
 @dataclass
@@ -149,8 +151,19 @@ def run_phase(c: Client, rec: Recorder, phase: Phase, probe: ClientProbe,
         progress(t)
         k += 1
         time.sleep(max(0.0, t0 + k / SETPOINT_HZ - time.monotonic()))
-    rec.drain()
+    caught_up(rec, first.t + min(time.monotonic() - t0, phase.duration) - CATCH_UP_SLACK)
     return Window(phase.name, mode, first.t, phase.duration, rec.telemetry[-1].t)
+
+
+def caught_up(rec: Recorder, t: float, timeout: float = SWITCH_TIMEOUT) -> None:
+    """Drain until a tick of daemon time ``t`` [s] or later has arrived (at most ``timeout`` s):
+    on a loaded host this process's receive lags the daemon, and a phase's window ends at the
+    newest tick received, so without the wait it would cut off ticks the daemon made in it."""
+    end = time.monotonic() + timeout
+    rec.drain()
+    while rec.telemetry[-1].t < t and time.monotonic() < end:
+        time.sleep(0.002)
+        rec.drain()
 
 
 def run_realtime(setup: Setup, scenario: Scenario, opts: StackOptions, *, progress: bool = True) -> RealtimeResult:
