@@ -214,7 +214,11 @@ def test_serve_tracks_through_the_driver_and_resumes_after_the_robot_braked_in_i
             assert mid is not None and mid.status.faults, mid  # the daemon saw its stream broken
             assert c.resume("track", timeout=20), "the daemon did not resume after the robot's stale stop"
             _follow(c, x0, 1.5, k)
-            state, truth = c.latest_state(), c.latest_truth() or c.wait_truth(1.0)
+            if c.resume_needed():  # a loaded host stalled a command past the timeout again: resume
+                c.resume("track", timeout=20)
+            state = _wait("a state of the robot streaming again", lambda: (st := c.wait_state(1.0)) is not None
+                          and not st.stale_stop and not st.protective_stop and st, 20.0, tmp_path)
+            truth = c.latest_truth() or c.wait_truth(1.0)
             info = c.info()
         assert state is not None and not state.stale_stop and not state.protective_stop, state
         assert truth is not None and not any(truth.violations.values()), truth.violations

@@ -7,7 +7,8 @@ the body (base frame), ok (False: the compiled distances do not cover the pair, 
 the body's index, the other side (a body ≥ 0, the floor −1, obstacle k −2 − k) and the pair's
 safety distance d_s [m]. Primitives come in arrays (:class:`~wmm_qp.limits.pair_search.Table`):
 kind 0 a swept segment [a0, a1] of radius r, 1 a box (centre c, rotation R, half extents h),
-2 anything else; ``centre`` and ``radii`` their bounding spheres.
+3 a convex vertex set (a mesh's hull: ``verts[vs:vs + vc]`` in its frame, placed by c and R; its
+distances by GJK, :mod:`._gjk`), 2 anything else; ``centre`` and ``radii`` their bounding spheres.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import math
 from .._jit import jit
 from .._typing import BoolArray, FloatArray, IntArray
 from ._distance import box_plane, swept_box, swept_plane, swept_swept
+from ._gjk import convex_pair, convex_plane
 
 
 @jit
@@ -47,12 +49,18 @@ def place_kernel(
 @jit
 def pair_one(
     ka: IntArray, a0: FloatArray, a1: FloatArray, ra: FloatArray, ca: FloatArray, Ra: FloatArray, ha: FloatArray,
+    va: FloatArray, vsa: IntArray, vca: IntArray,
     i: int, kb: IntArray, b0: FloatArray, b1: FloatArray, rb: FloatArray, cb: FloatArray, Rb: FloatArray,
-    hb: FloatArray, j: int, d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray, k: int,
+    hb: FloatArray, vb: FloatArray, vsb: IntArray, vcb: IntArray,
+    j: int, d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray, k: int,
 ) -> None:
     """Entry k ← the distance of A[i] to B[j] (ok False where coal must compute it)."""
     ok[k] = True
-    if ka[i] == 0 and kb[j] == 0:
+    if (ka[i] == 3 and kb[j] != 2) or (kb[j] == 3 and ka[i] != 2):  # a hull: GJK (touching cores: coal)
+        dd, got = convex_pair(ka, a0, a1, ra, ca, Ra, ha, va, vsa, vca, i, kb, b0, b1, rb, cb, Rb, hb, vb, vsb, vcb,
+                              j, P[k], Q[k], N[k])
+        d[k], ok[k] = dd, got
+    elif ka[i] == 0 and kb[j] == 0:
         d[k] = swept_swept(a0[i], a1[i], ra[i], b0[j], b1[j], rb[j], P[k], Q[k], N[k])
     elif ka[i] == 0 and kb[j] == 1:
         d[k] = swept_box(a0[i], a1[i], ra[i], cb[j], Rb[j], hb[j], P[k], Q[k], N[k])
@@ -68,17 +76,21 @@ def pair_one(
 @jit
 def pairs_kernel(
     ka: IntArray, a0: FloatArray, a1: FloatArray, ra: FloatArray, ca: FloatArray, Ra: FloatArray, ha: FloatArray,
+    va: FloatArray, vsa: IntArray, vca: IntArray,
     kb: IntArray, b0: FloatArray, b1: FloatArray, rb: FloatArray, cb: FloatArray, Rb: FloatArray, hb: FloatArray,
+    vb: FloatArray, vsb: IntArray, vcb: IntArray,
     first: IntArray, second: IntArray, d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray,
 ) -> None:
     """Entry k ← the distance of A[first[k]] to B[second[k]], for every k."""
     for k in range(first.shape[0]):
-        pair_one(ka, a0, a1, ra, ca, Ra, ha, first[k], kb, b0, b1, rb, cb, Rb, hb, second[k], d, P, Q, N, ok, k)
+        pair_one(ka, a0, a1, ra, ca, Ra, ha, va, vsa, vca, first[k], kb, b0, b1, rb, cb, Rb, hb, vb, vsb, vcb,
+                 second[k], d, P, Q, N, ok, k)
 
 
 @jit
 def plane_one(
     kind: IntArray, a0: FloatArray, a1: FloatArray, r: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
+    verts: FloatArray, vs: IntArray, vc: IntArray,
     i: int, normal: FloatArray, offset: float, d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray,
     ok: BoolArray, k: int,
 ) -> None:
@@ -88,6 +100,8 @@ def plane_one(
         d[k] = swept_plane(a0[i], a1[i], r[i], normal, offset, P[k], Q[k], N[k])
     elif kind[i] == 1:
         d[k] = box_plane(c[i], R[i], h[i], normal, offset, P[k], Q[k], N[k])
+    elif kind[i] == 3:
+        d[k] = convex_plane(c, R, verts, vs, vc, i, normal, offset, P[k], Q[k], N[k])
     else:
         ok[k] = False
 
@@ -95,6 +109,7 @@ def plane_one(
 @jit
 def self_pass(
     kind: IntArray, a0: FloatArray, a1: FloatArray, r: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
+    verts: FloatArray, vs: IntArray, vc: IntArray,
     centre: FloatArray, pairs: IntArray, pair_r: FloatArray, d_i: float, d_s: float,
     d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray, body: IntArray, other: IntArray,
     safety: FloatArray, n: int,
@@ -106,7 +121,8 @@ def self_pass(
         x, y, z = centre[i, 0] - centre[j, 0], centre[i, 1] - centre[j, 1], centre[i, 2] - centre[j, 2]
         if not math.sqrt(x * x + y * y + z * z) - pair_r[k] <= d_i:
             continue
-        pair_one(kind, a0, a1, r, c, R, h, i, kind, a0, a1, r, c, R, h, j, d, P, Q, N, ok, n)
+        pair_one(kind, a0, a1, r, c, R, h, verts, vs, vc, i, kind, a0, a1, r, c, R, h, verts, vs, vc, j,
+                 d, P, Q, N, ok, n)
         body[n], other[n], safety[n] = i, j, d_s
         n += 1
     return n
@@ -115,6 +131,7 @@ def self_pass(
 @jit
 def plane_pass(
     kind: IntArray, a0: FloatArray, a1: FloatArray, r: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
+    verts: FloatArray, vs: IntArray, vc: IntArray,
     centre: FloatArray, radii: FloatArray, idx: IntArray, cull: bool, normal: FloatArray, offset: float,
     d_i: float, code: int, d_s: float,
     d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray, body: IntArray, other: IntArray,
@@ -128,7 +145,7 @@ def plane_pass(
             gap = offset - (normal[0] * centre[i, 0] + normal[1] * centre[i, 1] + normal[2] * centre[i, 2]) - radii[i]
             if not gap <= d_i:
                 continue
-        plane_one(kind, a0, a1, r, c, R, h, i, normal, offset, d, P, Q, N, ok, n)
+        plane_one(kind, a0, a1, r, c, R, h, verts, vs, vc, i, normal, offset, d, P, Q, N, ok, n)
         body[n], other[n], safety[n] = i, code, d_s
         n += 1
     return n
@@ -137,9 +154,10 @@ def plane_pass(
 @jit
 def solid_pass(
     kind: IntArray, a0: FloatArray, a1: FloatArray, r: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
-    centre: FloatArray, radii: FloatArray,
+    verts: FloatArray, vs: IntArray, vc: IntArray, centre: FloatArray, radii: FloatArray,
     okind: IntArray, o0: FloatArray, o1: FloatArray, orad: FloatArray, oc: FloatArray, oR: FloatArray,
-    oh: FloatArray, ocentre: FloatArray, oradii: FloatArray, checked: BoolArray, solid: IntArray,
+    oh: FloatArray, overts: FloatArray, ovs: IntArray, ovc: IntArray,
+    ocentre: FloatArray, oradii: FloatArray, checked: BoolArray, solid: IntArray,
     d_i: float, d_s: float,
     d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray, body: IntArray, other: IntArray,
     safety: FloatArray, n: int,
@@ -164,7 +182,8 @@ def solid_pass(
                 gap = math.sqrt(x * x + y * y + z * z) - radii[b] - oradii[o]
             if not gap <= d_i:
                 continue
-            pair_one(kind, a0, a1, r, c, R, h, b, okind, o0, o1, orad, oc, oR, oh, o, d, P, Q, N, ok, n)
+            pair_one(kind, a0, a1, r, c, R, h, verts, vs, vc, b, okind, o0, o1, orad, oc, oR, oh, overts, ovs, ovc, o,
+                     d, P, Q, N, ok, n)
             body[n], other[n], safety[n] = b, -2 - solid[o], d_s
             n += 1
     return n

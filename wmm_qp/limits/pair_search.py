@@ -3,8 +3,9 @@ distance, closest points and normal, each tick.
 
 Self pairs, the floor and the obstacles go through compiled passes (:mod:`._pair_passes`: a
 bounding-sphere broad phase, then the distances of swept spheres, boxes and planes of
-:mod:`._distance`) into one candidate buffer (:class:`Candidates`); coal fills the entries those
-do not cover (box–box, convex meshes, a capsule whose segment is inside a box). Everything is in
+:mod:`._distance` and GJK's for the convex hulls of meshes, :mod:`._gjk`) into one candidate
+buffer (:class:`Candidates`); coal fills the entries those do not cover (box–box, a hull whose
+core touches or overlaps the other's, a capsule whose segment is inside a box). Everything is in
 the base frame: the bodies placed by the arm's joint placements, the obstacles by the base pose.
 Which rows the candidates become is :mod:`.collision`'s business.
 """
@@ -29,15 +30,19 @@ obstacle k: −2 − k)."""
 
 
 class Table:
-    """Primitives in arrays, for the compiled distances (``_distance.py``): kind 0 a swept segment
-    [a0, a1] of radius r (sphere, capsule), 1 a box (centre c, rotation R, half extents h), 2 any
-    other shape (coal computes its distances); ``centre`` is each one's bounding-sphere centre."""
+    """Primitives in arrays, for the compiled distances (``_distance.py``, ``_gjk.py``): kind 0 a
+    swept segment [a0, a1] of radius r (sphere, capsule), 1 a box (centre c, rotation R, half
+    extents h), 3 a convex vertex set (a mesh's hull: its vertices ``verts[vs:vs + vc]`` in its
+    own frame, placed by c and R), 2 any other shape (coal computes its distances); ``centre`` is
+    each one's bounding-sphere centre."""
 
     def __init__(self, n: int) -> None:
         self.kind = np.full(n, 2, dtype=np.int64)
         self.a0, self.a1, self.c, self.h, self.centre = (np.zeros((n, 3)) for _ in range(5))
         self.r = np.zeros(n)
         self.R = np.tile(np.eye(3), (n, 1, 1))
+        self.verts = np.zeros((0, 3))
+        self.vs, self.vc = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
 
     def set(self, k: int, shape: coal.CollisionGeometry, M: pin.SE3, centre: FloatArray) -> None:
         """Entry k: ``shape`` at pose M (its frame's), bounding-sphere centre ``centre`` (shape frame)."""
@@ -52,8 +57,22 @@ class Table:
             self.a0[k] = self.a1[k] = M.translation
         elif isinstance(shape, coal.Box):
             self.kind[k], self.h[k] = 1, shape.halfSide
+        elif isinstance(shape, coal.ConvexBase) and shape.num_points > 0 and shape.getSweptSphereRadius() == 0.0:
+            pts = np.array([np.asarray(shape.point(i), dtype=float) for i in range(shape.num_points)])
+            self.kind[k], self.vs[k], self.vc[k] = 3, self.verts.shape[0], pts.shape[0]
+            self.verts = np.ascontiguousarray(np.vstack([self.verts, pts]))
         else:
             self.kind[k] = 2
+
+    def same_shapes(self, other: Table) -> None:
+        """This table's kinds, radii, half extents and vertex sets ← ``other``'s (its poses apart)."""
+        self.kind[:], self.r[:], self.h[:] = other.kind, other.r, other.h
+        self.verts, self.vs[:], self.vc[:] = other.verts, other.vs, other.vc
+
+    def shapes(self) -> tuple[IntArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray,
+                              FloatArray, IntArray, IntArray]:
+        """The arrays the compiled passes take for each primitive, in their order."""
+        return self.kind, self.a0, self.a1, self.r, self.c, self.R, self.h, self.verts, self.vs, self.vc
 
 
 def place(Hj: FloatArray, joint: IntArray, local: Table, out: Table) -> None:
@@ -66,8 +85,8 @@ def _pair_distances(A: Table, first: IntArray, second: IntArray, B: Table, buf: 
     """Distances of A[first[k]] to B[second[k]] into buf = (d, p, q, n, ok) (ok False where coal
     must compute it: box-box, meshes, a capsule whose segment is inside a box)."""
     d, P, Q, N, ok = buf
-    pairs_kernel(A.kind, A.a0, A.a1, A.r, A.c, A.R, A.h, B.kind, B.a0, B.a1, B.r, B.c, B.R, B.h,
-                 np.asarray(first, dtype=np.int64), np.asarray(second, dtype=np.int64), d, P, Q, N, ok)
+    pairs_kernel(*A.shapes(), *B.shapes(), np.asarray(first, dtype=np.int64), np.asarray(second, dtype=np.int64),
+                 d, P, Q, N, ok)
     return d, P, Q, N, ok
 
 
@@ -78,6 +97,7 @@ class Obstacle:
     Attributes:
         name: its id (the rows' names).
         shape: its coal geometry (a plane's half-space is built in the base frame when needed).
+        row: the shape its rows keep apart (:func:`row_shape`: a cylinder's capsule).
         world: its pose in the world.
         center, radius: [m] its row shape's bounding sphere (its frame; a plane: 0, inf).
         plane: it is a plane.
@@ -101,6 +121,7 @@ class Obstacle:
     normal_b: FloatArray = field(default_factory=lambda: np.zeros(3))
     offset_b: float = 0.0
     velocity_w: FloatArray = field(default_factory=lambda: np.zeros(3))
+    row: coal.CollisionGeometry | None = None
 
     @classmethod
     def of(cls, s: ShapeConfig, geometry: RobotGeometry) -> Obstacle:
@@ -109,7 +130,8 @@ class Obstacle:
         plane = s.kind == "plane"
         center, radius = (np.zeros(3), math.inf) if plane else bounding_sphere(row_shape(shape))
         mask = exempt_mask(geometry, s.exempt)
-        o = cls(s.name, shape, shape_pose(s), center, radius, plane, mask, np.flatnonzero(mask).astype(np.int64))
+        o = cls(s.name, shape, shape_pose(s), center, radius, plane, mask, np.flatnonzero(mask).astype(np.int64),
+                row=shape if plane else row_shape(shape))
         if plane:
             o.normal_w, o.offset_w = np.asarray(s.normal, dtype=float), s.offset
         if s.velocity is not None:
@@ -189,16 +211,16 @@ class PairSearch:
         for k, b in enumerate(bodies):
             self._shapes.set(k, b.row, b.placement, b.row_center)
         self.placed = Table(len(bodies))  # the bodies in the base frame, this tick
-        self.placed.kind[:] = self._shapes.kind
-        self.placed.r[:], self.placed.h[:] = self._shapes.r, self._shapes.h
+        self.placed.same_shapes(self._shapes)
         self._Hj = np.tile(np.eye(4), (len(joints), 1, 1))
         self._body_H = [b.placement.homogeneous for b in bodies]  # each body in its joint's frame
         self._joint_ids = [int(j) for j in joints]
         self._oMi = geometry.arm.data.oMi  # the proxy, once: fetching data.oMi costs ~1 µs each time
         self._H_world = np.eye(4)[None].copy()  # world → base frame, refilled each tick
         self._solid_joint = np.zeros(0, dtype=np.int64)
-        self._solid: tuple = (np.zeros(0, dtype=np.int64), Table(0), Table(0), np.zeros(0),
-                              np.zeros((0, len(bodies)), dtype=bool), [])
+        self._solid: tuple[IntArray, Table, Table, FloatArray, BoolArray, list[int]] = (
+            np.zeros(0, dtype=np.int64), Table(0), Table(0), np.zeros(0),
+            np.zeros((0, len(bodies)), dtype=bool), [])
         self.candidates = Candidates.room(self._pairs.shape[0] + self._floor_idx.shape[0])
 
     def set_obstacles(self, obstacles: tuple[ShapeConfig, ...] | list[ShapeConfig]) -> None:
@@ -214,7 +236,7 @@ class PairSearch:
         for r, k in enumerate(solid):
             o = obs[k]
             world.set(r, row_shape(o.shape), o.world, o.center)  # o.center, o.radius: of the row shape
-        placed.kind[:], placed.r[:], placed.h[:] = world.kind, world.r, world.h
+        placed.same_shapes(world)
         checked = np.array([obs[k].checked for k in solid], dtype=bool).reshape(len(solid), len(self.geo.bodies))
         radii = np.array([obs[k].radius for k in solid], dtype=float)
         self._solid = (np.array(solid, dtype=np.int64), world, placed, radii, checked,
@@ -237,11 +259,10 @@ class PairSearch:
         buf = (c.d, c.p_a, c.p_b, c.normal, c.ok, c.body, c.other, c.safety)
         n = 0
         if self._pairs.shape[0]:  # robot vs robot (base frame; the base's motion cancels)
-            n = self_pass(pl.kind, pl.a0, pl.a1, pl.r, pl.c, pl.R, pl.h, pl.centre, self._pairs, self._pair_r, d_i,
-                          p.safety_distance, *buf, n)
+            n = self_pass(*pl.shapes(), pl.centre, self._pairs, self._pair_r, d_i, p.safety_distance, *buf, n)
         if self._floor_idx.shape[0]:  # robot vs the floor z = floor_z (the same plane in the base frame)
-            n = plane_pass(pl.kind, pl.a0, pl.a1, pl.r, pl.c, pl.R, pl.h, pl.centre, self._radii, self._floor_idx,
-                           True, self._floor_n, self._floor_o, d_i, FLOOR, p.floor_margin, *buf, n)
+            n = plane_pass(*pl.shapes(), pl.centre, self._radii, self._floor_idx, True, self._floor_n, self._floor_o,
+                           d_i, FLOOR, p.floor_margin, *buf, n)
         Rb = tb = None
         if self.obstacles:  # robot vs obstacles, in the base frame at this base pose
             cos, sin = math.cos(q_base[2]), math.sin(q_base[2])
@@ -253,22 +274,21 @@ class PairSearch:
                 H = self._H_world  # world → base frame
                 H[0, :3, :3], H[0, :3, 3] = Rb.T, -(Rb.T @ tb)
                 place(H, self._solid_joint, world, placed)
-                n = solid_pass(pl.kind, pl.a0, pl.a1, pl.r, pl.c, pl.R, pl.h, pl.centre, self._radii,
-                               placed.kind, placed.a0, placed.a1, placed.r, placed.c, placed.R, placed.h,
-                               placed.centre, radii, checked, solid, d_i, p.safety_distance, *buf, n)
+                n = solid_pass(*pl.shapes(), pl.centre, self._radii, *placed.shapes(), placed.centre, radii, checked,
+                               solid, d_i, p.safety_distance, *buf, n)
             for index in planes:
                 o = self.obstacles[index]
                 o.place(Rb, tb)
-                n = plane_pass(pl.kind, pl.a0, pl.a1, pl.r, pl.c, pl.R, pl.h, pl.centre, self._radii, o.checked_idx,
-                               False, o.normal_b, o.offset_b, d_i, -2 - index, p.safety_distance, *buf, n)
+                n = plane_pass(*pl.shapes(), pl.centre, self._radii, o.checked_idx, False, o.normal_b, o.offset_b, d_i,
+                               -2 - index, p.safety_distance, *buf, n)
         if n and not c.ok[:n].all():
             self._coal_fill(n, Rb, tb)
         c.n = n
         return c
 
     def _coal_fill(self, n: int, Rb: FloatArray | None, tb: FloatArray | None) -> None:
-        """The candidates the compiled distances left to coal (box-box, meshes, a capsule whose
-        segment is inside a box), computed by coal in place."""
+        """The candidates the compiled distances left to coal (box-box, a hull whose core touches
+        or overlaps the other's, a capsule whose segment is inside a box), computed by coal in place."""
         c, bodies = self.candidates, self.geo.bodies
         poses: dict[int, coal.Transform3s] = {}  # each body's, once this tick
 
@@ -281,19 +301,19 @@ class PairSearch:
 
         for k in np.flatnonzero(~c.ok[:n]).tolist():
             body, other = int(c.body[k]), int(c.other[k])
-            if other >= 0:
-                got = self._coal(bodies[body].shape, T(body), bodies[other].shape, T(other))
+            if other >= 0:  # the row shapes, as the compiled passes take them (a cylinder's capsule)
+                got = self._coal(bodies[body].row, T(body), bodies[other].row, T(other))
             elif other == FLOOR:
-                got = self._coal(bodies[body].shape, T(body), self._floor, self._identity)
+                got = self._coal(bodies[body].row, T(body), self._floor, self._identity)
             else:
                 assert Rb is not None and tb is not None
                 o = self.obstacles[-2 - other]
                 if o.plane:  # coal's half-space, built when a body needs it
                     o.shape = coal.Halfspace(-o.normal_b, -o.offset_b)  # coal: solid where n'·p ≤ d
-                    got = self._coal(bodies[body].shape, T(body), o.shape, self._identity)
+                    got = self._coal(bodies[body].row, T(body), o.shape, self._identity)
                 else:
                     Mo = pin.SE3(Rb.T @ o.world.rotation, Rb.T @ (o.world.translation - tb))
-                    got = self._coal(bodies[body].shape, T(body), o.shape, transform(Mo))
+                    got = self._coal(bodies[body].row, T(body), o.row or o.shape, transform(Mo))
             c.d[k], c.p_a[k], c.p_b[k], c.normal[k] = got
 
     def name(self, body: int, other: int) -> str:

@@ -1,0 +1,184 @@
+"""The compiled GJK of the collision rows (wmm_qp/limits/_gjk.py) against coal: convex hulls
+against hulls, boxes, capsules, spheres and planes at random poses; cores that touch or overlap
+are left to coal; and the pair search with GJK gives the candidates coal gives, pair for pair."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import coal
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import wmm_qp as w
+from wmm_qp.limits import _gjk as G  # noqa: N812
+from wmm_qp.limits.pair_search import PairSearch, Table
+from wmm_qp.model.collision import convex_hull
+
+REQ = coal.DistanceRequest()
+
+
+def hull(rng: np.random.Generator, n: int = 40, scale: float = 0.1) -> coal.ConvexBase:
+    """The convex hull of n random points (a random ellipsoid's worth)."""
+    m = coal.BVHModelOBBRSS()
+    pts = rng.normal(size=(n, 3)) * scale * rng.uniform(0.3, 1.5, 3)
+    m.beginModel(0, n)
+    for p in pts:
+        m.addVertex(p)
+    m.endModel()
+    return convex_hull(m)
+
+
+def table(*shapes: tuple[Any, pin.SE3]) -> Table:
+    t = Table(len(shapes))
+    for k, (s, M) in enumerate(shapes):
+        t.set(k, s, M, np.zeros(3))
+    return t
+
+
+def coal_d(a: Any, Ma: pin.SE3, b: Any, Mb: pin.SE3) -> float:
+    return float(coal.distance(a, coal.Transform3s(Ma.rotation, Ma.translation), b,
+                               coal.Transform3s(Mb.rotation, Mb.translation), REQ, coal.DistanceResult()))
+
+
+def test_hull_distances_agree_with_coal_and_touching_cores_are_left_to_it() -> None:
+    rng = np.random.default_rng(7)
+    p, q, n = np.empty(3), np.empty(3), np.empty(3)
+    seen = {"separated": 0, "left": 0}
+    for k in range(1200):
+        A = hull(rng)
+        B = (hull(rng), coal.Box(*rng.uniform(0.05, 0.3, 3)), coal.Capsule(rng.uniform(0.02, 0.08), 0.2),
+             coal.Sphere(rng.uniform(0.02, 0.1)))[k % 4]
+        Ma = pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(scale=0.25, size=3))
+        Mb = pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(scale=0.25, size=3))
+        t = table((A, Ma), (B, Mb))
+        assert t.kind[0] == 3
+        d, ok = G.convex_pair(*t.shapes(), 0, *t.shapes(), 1, p, q, n)
+        ref = coal_d(A, Ma, B, Mb)
+        if not ok:  # only where the cores touch or overlap: the shapes are then in contact or nearly
+            seen["left"] += 1
+            assert ref < 0.2 + 1e-9, ref  # (the capsule's and the sphere's radii are at most 0.1)
+            continue
+        seen["separated"] += 1
+        assert d == pytest.approx(ref, abs=1e-6), (k, d, ref)
+        np.testing.assert_allclose(p - q, d * n, atol=1e-9)
+        assert np.linalg.norm(n) == pytest.approx(1.0)
+    assert seen["separated"] > 900 and seen["left"] > 20, seen  # both branches ran
+
+
+def test_a_hull_against_a_plane_is_its_deepest_vertex() -> None:
+    rng = np.random.default_rng(3)
+    floor = coal.Halfspace(np.array([0.0, 0.0, 1.0]), -0.2)  # solid z <= -0.2
+    p, q, n = np.empty(3), np.empty(3), np.empty(3)
+    for _ in range(200):
+        A = hull(rng)
+        Ma = pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(scale=0.2, size=3))
+        t = table((A, Ma))
+        d = G.convex_plane(t.c, t.R, t.verts, t.vs, t.vc, 0, np.array([0.0, 0.0, -1.0]), 0.2, p, q, n)
+        assert d == pytest.approx(coal_d(A, Ma, floor, pin.SE3.Identity()), abs=1e-9)
+        assert q[2] == pytest.approx(-0.2) and n.tolist() == [0.0, 0.0, 1.0]
+
+
+def test_a_broken_support_function_is_caught() -> None:
+    """The check above can fail: a hull that forgets its last vertex is farther than coal says
+    for some pose (the vertex it drops is the nearest one)."""
+    rng = np.random.default_rng(11)
+    p, q, n = np.empty(3), np.empty(3), np.empty(3)
+    wrong = 0
+    for _ in range(200):
+        A, B = hull(rng), hull(rng)
+        Ma, Mb = pin.SE3.Identity(), pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(size=3))
+        t = table((A, Ma), (B, Mb))
+        t.vc[0] -= 1  # the mutation
+        d, ok = G.convex_pair(*t.shapes(), 0, *t.shapes(), 1, p, q, n)
+        wrong += ok and abs(d - coal_d(A, Ma, B, Mb)) > 1e-6
+    assert wrong > 0
+
+
+@pytest.mark.parametrize("robot", ["fr3.toml", "tiago.toml"])
+def test_the_pair_search_with_gjk_gives_coals_candidates(robot: str) -> None:
+    """Every step of a random walk of the arm: the same pairs, distances and normals as the search
+    that leaves every hull to coal (coal at a GJK tolerance of 1e-12: its default's normals are
+    ~1e-3 off at a centimetre)."""
+    from wmm_qp_tools.bench.collision import load_scene
+
+    from wmm_qp.config import default_config_dir
+
+    model = w.WmmModel(w.load_robot_config(default_config_dir() / "robots" / robot))
+    ctl = w.make_controller("qp", model, w.load_controller_config().with_(collision={"enabled": True}))
+    ctl.set_scene(load_scene())
+    gjk = next(v for v in vars(ctl.collision).values() if isinstance(v, PairSearch))  # type: ignore[attr-defined]
+    coal_only = PairSearch(gjk.geo, gjk.p)
+    coal_only.set_obstacles(gjk.shapes)
+    coal_only._req.gjk_tolerance = 1e-12  # coal's default 1e-6 leaves its normals ~1e-3 off at 1 cm
+    for t in (coal_only._shapes, coal_only.placed):
+        t.kind[t.kind == 3] = 2
+    assert (gjk._shapes.kind == 3).sum() >= 9
+    arm = model.arm
+    rng = np.random.default_rng(2)
+    q = np.array(model.config.arm.start, dtype=float)
+    limits = model.config.arm
+    lo = np.where(np.isfinite(limits.position_lower), limits.position_lower, -np.pi)
+    hi = np.where(np.isfinite(limits.position_upper), limits.position_upper, np.pi)
+    by_gjk = 0
+    for _ in range(60):
+        q = np.clip(q + rng.normal(scale=0.15, size=q.shape), lo, hi)
+        pin.forwardKinematics(arm.model, arm.data, q)
+        gjk.search(np.zeros(3))
+        coal_only.search(np.zeros(3))
+        a, b = gjk.candidates, coal_only.candidates
+        assert a.n == b.n and (a.body[:a.n] == b.body[:b.n]).all() and (a.other[:a.n] == b.other[:b.n]).all()
+        np.testing.assert_allclose(a.d[:a.n], b.d[:b.n], atol=1e-9)
+        far = b.d[:b.n] > 1e-3  # the normal is defined well away from contact
+        np.testing.assert_allclose(a.normal[:a.n][far], b.normal[:b.n][far], atol=1e-6)
+        by_gjk += int(a.ok[:a.n].sum() - b.ok[:b.n].sum())
+    assert by_gjk > 100  # GJK, not coal, computed the hulls' pairs
+
+
+def test_parallel_faces_give_the_exact_gap_not_a_fallback() -> None:
+    """A hull of a cube's corners facing a box face to face (flat simplices, many equally near
+    supports): the gap itself, by GJK, at every offset and small tilt."""
+    m = coal.BVHModelOBBRSS()
+    corners = [np.array([x, y, z]) * 0.1 for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]
+    m.beginModel(0, 8)
+    for c in corners:
+        m.addVertex(c)
+    m.endModel()
+    cube = convex_hull(m)
+    box = coal.Box(0.3, 0.5, 0.2)
+    p, q, n = np.empty(3), np.empty(3), np.empty(3)
+    for gap in (0.001, 0.0473, 0.12):
+        for tilt in (0.0, 1e-9, 1e-4):
+            Mb = pin.SE3(pin.exp3(np.array([0.0, 0.0, tilt])), np.array([0.1 + 0.15 + gap, 0.03, 0.02]))
+            t = table((cube, pin.SE3.Identity()), (box, Mb))
+            d, ok = G.convex_pair(*t.shapes(), 0, *t.shapes(), 1, p, q, n)
+            assert ok, (gap, tilt)
+            assert d == pytest.approx(coal_d(cube, pin.SE3.Identity(), box, Mb), abs=1e-9)
+            if tilt == 0.0:
+                assert d == pytest.approx(gap, abs=1e-12)
+
+
+def test_tiagos_column_against_its_arm_link_is_gjks_where_a_step_stalls_on_rounding() -> None:
+    """A TIAGo configuration of the bench's circle where a GJK step on its column's box and
+    arm_6_link's hull gets no nearer through rounding: GJK's distance stands (within 1e-9 m of
+    the bound that step gives), every hull pair is GJK's and equals coal's."""
+    from wmm_qp.config import default_config_dir
+
+    model = w.WmmModel(w.load_robot_config(default_config_dir() / "robots" / "tiago.toml"))
+    ctl = w.make_controller("qp", model, w.load_controller_config().with_(collision={"enabled": True}))
+    search = next(v for v in vars(ctl.collision).values() if isinstance(v, PairSearch))  # type: ignore[attr-defined]
+    coal_only = PairSearch(search.geo, search.p)
+    coal_only._req.gjk_tolerance = 1e-12
+    for t in (coal_only._shapes, coal_only.placed):
+        t.kind[t.kind == 3] = 2
+    q = [0.16785213350729672, 0.42460319762495263, -1.3691945807292063, -0.3332646455706371, 1.6772312133895007,
+         -1.7939971571707616, 0.5741980904734524, 5.551984119496981e-16]
+    pin.forwardKinematics(model.arm.model, model.arm.data, np.array(q))
+    a, b = search.search(np.zeros(3)), coal_only.search(np.zeros(3))
+    kinds = search.placed.kind
+    hull_pairs = [k for k in range(a.n) if a.other[k] >= 0 and 3 in (kinds[a.body[k]], kinds[a.other[k]])]
+    names = [search.name(int(a.body[k]), int(a.other[k])) for k in hull_pairs]
+    assert "torso_fixed_column_link_0/arm_6_link_0" in names, names
+    assert all(a.ok[k] for k in hull_pairs), [n for k, n in zip(hull_pairs, names, strict=True) if not a.ok[k]]
+    np.testing.assert_allclose(a.d[hull_pairs], b.d[hull_pairs], atol=1e-9)

@@ -1,0 +1,285 @@
+"""Compiled GJK distances for the collision rows: convex vertex sets (the hulls of a URDF's
+collision meshes) against each other, against swept segments (spheres, capsules) and boxes,
+and against planes, in one compiled pass with the other primitives (checked against coal in
+``tests/core/test_gjk.py``).
+
+A shape is given by its support point (the farthest point along a direction): a segment's end
+(its radius is added after), a box's corner, a hull's vertex. GJK (Gilbert, Johnson, Keerthi
+1988; in the form of van den Bergen, *Collision Detection in Interactive 3D Environments*, 4.3)
+walks a simplex of the Minkowski difference A − B towards the origin; the closest point on each
+simplex is the affine projection of the origin on the one face whose barycentric coordinates
+are all positive and which lies nearest (every face tried: at most 15 for a tetrahedron). The
+distance between the cores is then exact up to the termination tolerance, and the closest points
+come from the barycentric coordinates of the support points. Where the cores touch or overlap
+(the origin in the simplex, or a core distance under :data:`TOUCH`) GJK gives no distance: the
+caller leaves the pair to coal (EPA), as it does for any pair GJK does not finish.
+
+Kinds as in :mod:`._pair_passes`: 0 a swept segment [a0, a1] of radius r, 1 a box (centre c,
+rotation R, half extents h), 3 a convex vertex set (vertices ``verts[vs:vs + vc]`` in the shape's
+own frame, placed by c, R).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .._jit import jit
+from .._typing import FloatArray, IntArray
+
+TOUCH = 1e-6
+"""[m] core distances below this are left to coal (touching or overlapping cores: no GJK distance)."""
+ABS_TOL = 1e-15
+"""[m²] added to GJK's stopping test: ‖v‖ then exceeds the distance by at most 1e-15 / ‖v‖ more
+(≤ 1e-9 m above :data:`TOUCH`), where rounding keeps the relative test from ever passing."""
+STALL_TOL = 1e-9
+"""[m] a step of GJK that does not get nearer (rounding, parallel faces) ends it with the distance
+it has if that is within this of the lower bound the step's support point gives; else coal."""
+MAX_ITERATIONS = 64
+"""GJK's iterations before it gives the pair up to coal (polytopes of ~100 vertices take ~5–15)."""
+REL_TOL = 1e-12
+"""GJK stops when ‖v‖² − v·w ≤ REL_TOL ‖v‖² (v the closest point so far, w the new support
+point): ‖v‖ then exceeds the cores' distance by at most REL_TOL ‖v‖."""
+
+
+@jit
+def support(kind: IntArray, a0: FloatArray, a1: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
+            verts: FloatArray, vs: IntArray, vc: IntArray, i: int, dx: float, dy: float, dz: float,
+            out: FloatArray) -> None:
+    """``out`` ← the point of shape i's core farthest along (dx, dy, dz)."""
+    k = kind[i]
+    if k == 0:
+        e0 = a0[i, 0] * dx + a0[i, 1] * dy + a0[i, 2] * dz
+        e1 = a1[i, 0] * dx + a1[i, 1] * dy + a1[i, 2] * dz
+        src = a0 if e0 >= e1 else a1
+        out[0], out[1], out[2] = src[i, 0], src[i, 1], src[i, 2]
+        return
+    # the direction in the shape's frame: Rᵀ d
+    lx = R[i, 0, 0] * dx + R[i, 1, 0] * dy + R[i, 2, 0] * dz
+    ly = R[i, 0, 1] * dx + R[i, 1, 1] * dy + R[i, 2, 1] * dz
+    lz = R[i, 0, 2] * dx + R[i, 1, 2] * dy + R[i, 2, 2] * dz
+    if k == 1:
+        px = h[i, 0] if lx >= 0.0 else -h[i, 0]
+        py = h[i, 1] if ly >= 0.0 else -h[i, 1]
+        pz = h[i, 2] if lz >= 0.0 else -h[i, 2]
+    else:
+        best, m = -math.inf, vs[i]
+        for t in range(vs[i], vs[i] + vc[i]):
+            e = verts[t, 0] * lx + verts[t, 1] * ly + verts[t, 2] * lz
+            if e > best:
+                best, m = e, t
+        px, py, pz = verts[m, 0], verts[m, 1], verts[m, 2]
+    for r in range(3):
+        out[r] = c[i, r] + R[i, r, 0] * px + R[i, r, 1] * py + R[i, r, 2] * pz
+
+
+@jit
+def _origin(kind: IntArray, a0: FloatArray, a1: FloatArray, c: FloatArray, i: int) -> FloatArray:
+    """A point inside shape i's core: a segment's middle, a box's or vertex set's frame origin."""
+    if kind[i] == 0:
+        return 0.5 * (a0[i] + a1[i])
+    return c[i].copy()
+
+
+@jit
+def _project(W: FloatArray, idx: IntArray, m: int, lam: FloatArray) -> float:
+    """The affine projection of the origin on the points W[idx[:m]]: its barycentric coordinates
+    into ``lam`` (first m entries); returns its squared norm, or inf where the points are
+    degenerate or a coordinate is not positive (the projection is outside their hull). Solves the
+    normal equations G μ = b of the edges e_r = y_r − y_0 (scalars: no temporaries)."""
+    i0 = idx[0]
+    y0x, y0y, y0z = W[i0, 0], W[i0, 1], W[i0, 2]
+    if m == 1:
+        lam[0] = 1.0
+        return y0x * y0x + y0y * y0y + y0z * y0z
+    i1 = idx[1]
+    e1x, e1y, e1z = W[i1, 0] - y0x, W[i1, 1] - y0y, W[i1, 2] - y0z
+    g11 = e1x * e1x + e1y * e1y + e1z * e1z
+    b1 = -(e1x * y0x + e1y * y0y + e1z * y0z)
+    mu1 = mu2 = mu3 = 0.0
+    if m == 2:
+        if g11 <= 1e-24:
+            return math.inf
+        mu1 = b1 / g11
+    else:
+        i2 = idx[2]
+        e2x, e2y, e2z = W[i2, 0] - y0x, W[i2, 1] - y0y, W[i2, 2] - y0z
+        g12 = e1x * e2x + e1y * e2y + e1z * e2z
+        g22 = e2x * e2x + e2y * e2y + e2z * e2z
+        b2 = -(e2x * y0x + e2y * y0y + e2z * y0z)
+        if m == 3:
+            det = g11 * g22 - g12 * g12
+            scale = g11 + g22
+            if not abs(det) > 1e-14 * scale * scale:
+                return math.inf
+            mu1 = (b1 * g22 - g12 * b2) / det
+            mu2 = (g11 * b2 - b1 * g12) / det
+        else:
+            i3 = idx[3]
+            e3x, e3y, e3z = W[i3, 0] - y0x, W[i3, 1] - y0y, W[i3, 2] - y0z
+            g13 = e1x * e3x + e1y * e3y + e1z * e3z
+            g23 = e2x * e3x + e2y * e3y + e2z * e3z
+            g33 = e3x * e3x + e3y * e3y + e3z * e3z
+            b3 = -(e3x * y0x + e3y * y0y + e3z * y0z)
+            c11 = g22 * g33 - g23 * g23  # the cofactors of the symmetric G
+            c12 = g13 * g23 - g12 * g33
+            c13 = g12 * g23 - g13 * g22
+            det = g11 * c11 + g12 * c12 + g13 * c13
+            scale = g11 + g22 + g33
+            if not abs(det) > 1e-14 * scale * scale * scale:
+                return math.inf
+            c22 = g11 * g33 - g13 * g13
+            c23 = g12 * g13 - g11 * g23
+            c33 = g11 * g22 - g12 * g12
+            mu1 = (c11 * b1 + c12 * b2 + c13 * b3) / det
+            mu2 = (c12 * b1 + c22 * b2 + c23 * b3) / det
+            mu3 = (c13 * b1 + c23 * b2 + c33 * b3) / det
+    lam0 = 1.0 - mu1 - mu2 - mu3
+    if not (lam0 > 0.0 and mu1 > 0.0 and (m < 3 or mu2 > 0.0) and (m < 4 or mu3 > 0.0)):
+        return math.inf
+    lam[0], lam[1] = lam0, mu1
+    x = lam0 * y0x + mu1 * W[i1, 0]
+    y = lam0 * y0y + mu1 * W[i1, 1]
+    z = lam0 * y0z + mu1 * W[i1, 2]
+    if m >= 3:
+        lam[2] = mu2
+        x += mu2 * W[idx[2], 0]
+        y += mu2 * W[idx[2], 1]
+        z += mu2 * W[idx[2], 2]
+    if m == 4:
+        lam[3] = mu3
+        x += mu3 * W[idx[3], 0]
+        y += mu3 * W[idx[3], 1]
+        z += mu3 * W[idx[3], 2]
+    return x * x + y * y + z * z
+
+
+@jit
+def gjk(kA: IntArray, a0A: FloatArray, a1A: FloatArray, cA: FloatArray, RA: FloatArray, hA: FloatArray,
+        vA: FloatArray, vsA: IntArray, vcA: IntArray, i: int,
+        kB: IntArray, a0B: FloatArray, a1B: FloatArray, cB: FloatArray, RB: FloatArray, hB: FloatArray,
+        vB: FloatArray, vsB: IntArray, vcB: IntArray, j: int, p: FloatArray, q: FloatArray) -> float:
+    """The distance of shape i of A's core to shape j of B's, its closest points into p and q;
+    −1 where GJK gives none (cores within :data:`TOUCH` or overlapping, or no convergence)."""
+    W, SA, SB = np.zeros((4, 3)), np.zeros((4, 3)), np.zeros((4, 3))
+    sa, sb, v = np.zeros(3), np.zeros(3), np.zeros(3)
+    # the first point: the supports facing each other along the line between the shapes' origins
+    dx, dy, dz = _origin(kB, a0B, a1B, cB, j) - _origin(kA, a0A, a1A, cA, i)
+    support(kA, a0A, a1A, cA, RA, hA, vA, vsA, vcA, i, dx, dy, dz, sa)
+    support(kB, a0B, a1B, cB, RB, hB, vB, vsB, vcB, j, -dx, -dy, -dz, sb)
+    W[0], SA[0], SB[0] = sa - sb, sa, sb
+    v[:] = W[0]
+    n = 1
+    lam = np.zeros(4)
+    lam[0] = 1.0
+    idx = np.zeros(4, dtype=np.int64)
+    tl = np.zeros(4)
+    vv = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+    done = False
+    for _ in range(MAX_ITERATIONS):
+        if vv < TOUCH * TOUCH:
+            return -1.0
+        support(kA, a0A, a1A, cA, RA, hA, vA, vsA, vcA, i, -v[0], -v[1], -v[2], sa)
+        support(kB, a0B, a1B, cB, RB, hB, vB, vsB, vcB, j, v[0], v[1], v[2], sb)
+        wx, wy, wz = sa[0] - sb[0], sa[1] - sb[1], sa[2] - sb[2]
+        vw = v[0] * wx + v[1] * wy + v[2] * wz
+        if vv - vw <= REL_TOL * vv + ABS_TOL:  # w no nearer than v: v is the closest
+            done = True
+            break
+        lower = vw / math.sqrt(vv)  # the distance is at least this (A − B is beyond the plane of w ⊥ v)
+        dup = False
+        for t in range(n):
+            if W[t, 0] == wx and W[t, 1] == wy and W[t, 2] == wz:
+                dup = True
+        if dup:  # w is a vertex already: v is the closest
+            done = True
+            break
+        W[n, 0], W[n, 1], W[n, 2] = wx, wy, wz
+        SA[n], SB[n] = sa, sb
+        n += 1
+        # the nearest face of the simplex and the barycentric coordinates of v on it
+        best, best_mask = math.inf, 0
+        for mask in range(1, 1 << n):
+            m = 0
+            for t in range(n):
+                if mask & (1 << t):
+                    idx[m] = t
+                    m += 1
+            dd = _project(W, idx, m, tl)
+            if dd < best:
+                best, best_mask = dd, mask
+                lam[:m] = tl[:m]
+        if best_mask == 0 or (n == 4 and best_mask == 15):
+            return -1.0  # no face projects into its hull (degenerate), or the origin is inside
+        m = 0
+        for t in range(n):
+            if best_mask & (1 << t):  # t >= m: copying down never overwrites a vertex still to come
+                for r in range(3):
+                    W[m, r], SA[m, r], SB[m, r] = W[t, r], SA[t, r], SB[t, r]
+                m += 1
+        n = m
+        new_vv = best
+        if not new_vv < vv:  # no progress (rounding in a flat simplex: parallel faces)
+            if math.sqrt(new_vv) - lower <= STALL_TOL:  # the face's point is that close to the distance
+                done = True
+                break
+            return -1.0  # else coal decides
+        vv = new_vv
+        v[:] = 0.0
+        for r in range(n):
+            v += lam[r] * W[r]
+    if not done:
+        return -1.0
+    p[:] = 0.0
+    q[:] = 0.0
+    for r in range(n):
+        p += lam[r] * SA[r]
+        q += lam[r] * SB[r]
+    dist = math.sqrt((p[0] - q[0]) ** 2 + (p[1] - q[1]) ** 2 + (p[2] - q[2]) ** 2)
+    if not dist >= TOUCH:
+        return -1.0
+    return dist
+
+
+@jit
+def convex_pair(kA: IntArray, a0A: FloatArray, a1A: FloatArray, rA: FloatArray, cA: FloatArray, RA: FloatArray,
+                hA: FloatArray, vA: FloatArray, vsA: IntArray, vcA: IntArray, i: int,
+                kB: IntArray, a0B: FloatArray, a1B: FloatArray, rB: FloatArray, cB: FloatArray, RB: FloatArray,
+                hB: FloatArray, vB: FloatArray, vsB: IntArray, vcB: IntArray, j: int,
+                p: FloatArray, q: FloatArray, n: FloatArray) -> tuple[float, bool]:
+    """Shape i of A against shape j of B (either a vertex set, segment or box): the signed distance
+    (the cores' less both radii), the closest points on the shapes into p and q, the unit normal
+    from B to A into n; and whether GJK gave it (False: leave the pair to coal)."""
+    dist = gjk(kA, a0A, a1A, cA, RA, hA, vA, vsA, vcA, i, kB, a0B, a1B, cB, RB, hB, vB, vsB, vcB, j, p, q)
+    if dist < 0.0:
+        return 0.0, False
+    ra = rA[i] if kA[i] == 0 else 0.0
+    rb = rB[j] if kB[j] == 0 else 0.0
+    for r in range(3):
+        n[r] = (p[r] - q[r]) / dist
+        p[r] -= ra * n[r]
+        q[r] += rb * n[r]
+    return dist - ra - rb, True
+
+
+@jit
+def convex_plane(c: FloatArray, R: FloatArray, verts: FloatArray, vs: IntArray, vc: IntArray, i: int,
+                 normal: FloatArray, offset: float, p: FloatArray, q: FloatArray, n: FloatArray) -> float:
+    """A vertex set against the plane normal·x = offset (solid where normal·x > offset): its
+    deepest vertex."""
+    lx = R[i, 0, 0] * normal[0] + R[i, 1, 0] * normal[1] + R[i, 2, 0] * normal[2]
+    ly = R[i, 0, 1] * normal[0] + R[i, 1, 1] * normal[1] + R[i, 2, 1] * normal[2]
+    lz = R[i, 0, 2] * normal[0] + R[i, 1, 2] * normal[1] + R[i, 2, 2] * normal[2]
+    best, m = -math.inf, vs[i]
+    for t in range(vs[i], vs[i] + vc[i]):
+        e = verts[t, 0] * lx + verts[t, 1] * ly + verts[t, 2] * lz
+        if e > best:
+            best, m = e, t
+    for r in range(3):
+        p[r] = c[i, r] + R[i, r, 0] * verts[m, 0] + R[i, r, 1] * verts[m, 1] + R[i, r, 2] * verts[m, 2]
+    gap = offset - (normal[0] * p[0] + normal[1] * p[1] + normal[2] * p[2])
+    for r in range(3):
+        n[r] = -normal[r]
+        q[r] = p[r] + gap * normal[r]
+    return gap
