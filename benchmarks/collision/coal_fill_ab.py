@@ -16,7 +16,7 @@ from typing import Any
 
 import coal
 import numpy as np
-from wmm_qp_tools.bench.collision import IdealRobot, circle, load_scene
+from wmm_qp_tools.bench.collision import IdealRobot, circle, rows_on_the_default_scene
 
 import wmm_qp as w
 import wmm_qp.limits.pair_search as ps
@@ -51,11 +51,7 @@ def main() -> None:
     ap.add_argument("robot_config")
     ap.add_argument("--ticks", type=int, default=3000)
     a = ap.parse_args()
-    model = w.WmmModel(w.load_robot_config(a.robot_config))
-    on = w.make_controller("qp", model, w.load_controller_config().with_(collision={"enabled": True}))
-    on.warm_up()
-    on.set_scene(load_scene())
-    search = next(v for v in vars(on.collision).values() if isinstance(v, ps.PairSearch))
+    model, on, search = rows_on_the_default_scene(a.robot_config)
     bot = IdealRobot.at_start(model)
     x0 = model.ee_position(bot.q_base, bot.q_arm)
     times: dict[str, list[int]] = {"before": [], "after": []}

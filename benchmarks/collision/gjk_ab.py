@@ -16,7 +16,7 @@ import argparse
 import time
 
 import numpy as np
-from wmm_qp_tools.bench.collision import IdealRobot, circle, load_scene
+from wmm_qp_tools.bench.collision import IdealRobot, circle, load_scene, rows_on_the_default_scene
 
 import wmm_qp as w
 import wmm_qp.limits.pair_search as ps
@@ -27,11 +27,7 @@ def main() -> None:
     ap.add_argument("robot_config")
     ap.add_argument("--ticks", type=int, default=3000)
     a = ap.parse_args()
-    model = w.WmmModel(w.load_robot_config(a.robot_config))
-    on = w.make_controller("qp", model, w.load_controller_config().with_(collision={"enabled": True}))
-    on.warm_up()
-    on.set_scene(load_scene())
-    gjk = next(v for v in vars(on.collision).values() if isinstance(v, ps.PairSearch))
+    model, on, gjk = rows_on_the_default_scene(a.robot_config)
     coal_only = ps.PairSearch(gjk.geo, gjk.p)
     coal_only.set_obstacles(gjk.shapes)
     for t in (coal_only._shapes, coal_only.placed):  # the hulls as kind 2: coal's, one pair at a time

@@ -30,6 +30,19 @@ from wmm_qp_tools.bench.stats import now_ns, summarize_ns
 from wmm_qp_tools.bench.trajectory import IdealRobot, circle
 
 
+def rows_on_the_default_scene(robot_config: str | Path) -> tuple[w.WmmModel, Any, Any]:
+    """The robot's model, a warmed-up qp controller with the default rows and scene, and its pair
+    search (the benchmarks of ``benchmarks/collision/``)."""
+    from wmm_qp.limits.pair_search import PairSearch
+
+    model = w.WmmModel(w.load_robot_config(robot_config))
+    on = w.make_controller("qp", model, w.load_controller_config().with_(collision={"enabled": True}))
+    on.warm_up()
+    on.set_scene(load_scene())
+    search = next(v for v in vars(on.collision).values() if isinstance(v, PairSearch))  # type: ignore[attr-defined]
+    return model, on, search
+
+
 def bench_scene(x0: np.ndarray) -> w.scene.Scene:
     """The cluttered scene plus a ball 0.2 m beside the EE's start, on the circle's inside."""
     scene = load_scene(default_config_dir() / "scenes" / "cluttered.toml")
