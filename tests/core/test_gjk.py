@@ -67,6 +67,29 @@ def test_hull_distances_agree_with_coal_and_touching_cores_are_left_to_it() -> N
     assert seen["separated"] > 900 and seen["left"] > 20, seen  # both branches ran
 
 
+def test_box_distances_agree_with_coal_and_touching_boxes_are_left_to_it() -> None:
+    """Two boxes (TIAGo's hand and column, the FR3's fingers): GJK on their corners, as coal's."""
+    rng = np.random.default_rng(5)
+    p, q, n = np.empty(3), np.empty(3), np.empty(3)
+    seen = {"separated": 0, "left": 0}
+    for _ in range(600):
+        A, B = coal.Box(*rng.uniform(0.02, 0.4, 3)), coal.Box(*rng.uniform(0.02, 0.4, 3))
+        Ma = pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(scale=0.25, size=3))
+        Mb = pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(scale=0.25, size=3))
+        t = table((A, Ma), (B, Mb))
+        assert t.kind.tolist() == [1, 1]
+        d, ok = G.convex_pair(*t.shapes(), 0, *t.shapes(), 1, p, q, n)
+        ref = coal_d(A, Ma, B, Mb)
+        if not ok:
+            seen["left"] += 1
+            assert ref < 1e-6, ref  # touching or overlapping
+            continue
+        seen["separated"] += 1
+        assert d == pytest.approx(ref, abs=1e-6)
+        np.testing.assert_allclose(p - q, d * n, atol=1e-9)
+    assert seen["separated"] > 200 and seen["left"] > 50, seen
+
+
 def test_a_hull_against_a_plane_is_its_deepest_vertex() -> None:
     rng = np.random.default_rng(3)
     floor = coal.Halfspace(np.array([0.0, 0.0, 1.0]), -0.2)  # solid z <= -0.2
@@ -112,8 +135,8 @@ def test_the_pair_search_with_gjk_gives_coals_candidates(robot: str) -> None:
     coal_only = PairSearch(gjk.geo, gjk.p)
     coal_only.set_obstacles(gjk.shapes)
     coal_only._req.gjk_tolerance = 1e-12  # coal's default 1e-6 leaves its normals ~1e-3 off at 1 cm
-    for t in (coal_only._shapes, coal_only.placed):
-        t.kind[t.kind == 3] = 2
+    for t in (coal_only._shapes, coal_only.placed):  # hulls and boxes to coal (a box's capsules: compiled)
+        t.kind[(t.kind == 3) | (t.kind == 1)] = 2
     assert (gjk._shapes.kind == 3).sum() >= 9
     arm = model.arm
     rng = np.random.default_rng(2)

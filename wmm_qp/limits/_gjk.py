@@ -1,6 +1,6 @@
 """Compiled GJK distances for the collision rows: convex vertex sets (the hulls of a URDF's
 collision meshes) against each other, against swept segments (spheres, capsules) and boxes,
-and against planes, in one compiled pass with the other primitives (checked against coal in
+boxes against boxes, and vertex sets against planes, in one compiled pass with the other primitives (checked against coal in
 ``tests/core/test_gjk.py``).
 
 A shape is given by its support point (the farthest point along a direction): a segment's end
@@ -75,11 +75,11 @@ def support(kind: IntArray, a0: FloatArray, a1: FloatArray, c: FloatArray, R: Fl
 
 
 @jit
-def _origin(kind: IntArray, a0: FloatArray, a1: FloatArray, c: FloatArray, i: int) -> FloatArray:
+def _origin(kind: IntArray, a0: FloatArray, a1: FloatArray, c: FloatArray, i: int) -> tuple[float, float, float]:
     """A point inside shape i's core: a segment's middle, a box's or vertex set's frame origin."""
     if kind[i] == 0:
-        return 0.5 * (a0[i] + a1[i])
-    return c[i].copy()
+        return 0.5 * (a0[i, 0] + a1[i, 0]), 0.5 * (a0[i, 1] + a1[i, 1]), 0.5 * (a0[i, 2] + a1[i, 2])
+    return c[i, 0], c[i, 1], c[i, 2]
 
 
 @jit
@@ -161,29 +161,36 @@ def gjk(kA: IntArray, a0A: FloatArray, a1A: FloatArray, cA: FloatArray, RA: Floa
         kB: IntArray, a0B: FloatArray, a1B: FloatArray, cB: FloatArray, RB: FloatArray, hB: FloatArray,
         vB: FloatArray, vsB: IntArray, vcB: IntArray, j: int, p: FloatArray, q: FloatArray) -> float:
     """The distance of shape i of A's core to shape j of B's, its closest points into p and q;
-    −1 where GJK gives none (cores within :data:`TOUCH` or overlapping, or no convergence)."""
-    W, SA, SB = np.zeros((4, 3)), np.zeros((4, 3)), np.zeros((4, 3))
-    sa, sb, v = np.zeros(3), np.zeros(3), np.zeros(3)
+    −1 where GJK gives none (cores within :data:`TOUCH` or overlapping, or no convergence).
+
+    Three scratch allocations per call (views into them) and scalar arithmetic: an iteration is
+    ~100 ns of arithmetic, and an allocation costs about as much."""
+    buf = np.empty((14, 3))
+    W, SA, SB = buf[0:4], buf[4:8], buf[8:12]  # the simplex (A − B) and its support points on A and B
+    sa, sb = buf[12], buf[13]
+    coords = np.empty(8)
+    lam, tl = coords[:4], coords[4:]  # barycentric coordinates (the best face's, a trial face's)
+    idx = np.empty(4, dtype=np.int64)
     # the first point: the supports facing each other along the line between the shapes' origins
-    dx, dy, dz = _origin(kB, a0B, a1B, cB, j) - _origin(kA, a0A, a1A, cA, i)
+    ax, ay, az = _origin(kA, a0A, a1A, cA, i)
+    bx, by, bz = _origin(kB, a0B, a1B, cB, j)
+    dx, dy, dz = bx - ax, by - ay, bz - az
     support(kA, a0A, a1A, cA, RA, hA, vA, vsA, vcA, i, dx, dy, dz, sa)
     support(kB, a0B, a1B, cB, RB, hB, vB, vsB, vcB, j, -dx, -dy, -dz, sb)
-    W[0], SA[0], SB[0] = sa - sb, sa, sb
-    v[:] = W[0]
+    for r in range(3):
+        W[0, r], SA[0, r], SB[0, r] = sa[r] - sb[r], sa[r], sb[r]
+    vx, vy, vz = W[0, 0], W[0, 1], W[0, 2]
     n = 1
-    lam = np.zeros(4)
     lam[0] = 1.0
-    idx = np.zeros(4, dtype=np.int64)
-    tl = np.zeros(4)
-    vv = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+    vv = vx * vx + vy * vy + vz * vz
     done = False
     for _ in range(MAX_ITERATIONS):
         if vv < TOUCH * TOUCH:
             return -1.0
-        support(kA, a0A, a1A, cA, RA, hA, vA, vsA, vcA, i, -v[0], -v[1], -v[2], sa)
-        support(kB, a0B, a1B, cB, RB, hB, vB, vsB, vcB, j, v[0], v[1], v[2], sb)
+        support(kA, a0A, a1A, cA, RA, hA, vA, vsA, vcA, i, -vx, -vy, -vz, sa)
+        support(kB, a0B, a1B, cB, RB, hB, vB, vsB, vcB, j, vx, vy, vz, sb)
         wx, wy, wz = sa[0] - sb[0], sa[1] - sb[1], sa[2] - sb[2]
-        vw = v[0] * wx + v[1] * wy + v[2] * wz
+        vw = vx * wx + vy * wy + vz * wz
         if vv - vw <= REL_TOL * vv + ABS_TOL:  # w no nearer than v: v is the closest
             done = True
             break
@@ -196,7 +203,8 @@ def gjk(kA: IntArray, a0A: FloatArray, a1A: FloatArray, cA: FloatArray, RA: Floa
             done = True
             break
         W[n, 0], W[n, 1], W[n, 2] = wx, wy, wz
-        SA[n], SB[n] = sa, sb
+        for r in range(3):
+            SA[n, r], SB[n, r] = sa[r], sb[r]
         n += 1
         # the nearest face of the simplex and the barycentric coordinates of v on it
         best, best_mask = math.inf, 0
@@ -209,7 +217,8 @@ def gjk(kA: IntArray, a0A: FloatArray, a1A: FloatArray, cA: FloatArray, RA: Floa
             dd = _project(W, idx, m, tl)
             if dd < best:
                 best, best_mask = dd, mask
-                lam[:m] = tl[:m]
+                for t in range(m):
+                    lam[t] = tl[t]
         if best_mask == 0 or (n == 4 and best_mask == 15):
             return -1.0  # no face projects into its hull (degenerate), or the origin is inside
         m = 0
@@ -226,16 +235,18 @@ def gjk(kA: IntArray, a0A: FloatArray, a1A: FloatArray, cA: FloatArray, RA: Floa
                 break
             return -1.0  # else coal decides
         vv = new_vv
-        v[:] = 0.0
+        vx = vy = vz = 0.0
         for r in range(n):
-            v += lam[r] * W[r]
+            vx += lam[r] * W[r, 0]
+            vy += lam[r] * W[r, 1]
+            vz += lam[r] * W[r, 2]
     if not done:
         return -1.0
-    p[:] = 0.0
-    q[:] = 0.0
-    for r in range(n):
-        p += lam[r] * SA[r]
-        q += lam[r] * SB[r]
+    for c in range(3):
+        p[c] = q[c] = 0.0
+        for r in range(n):
+            p[c] += lam[r] * SA[r, c]
+            q[c] += lam[r] * SB[r, c]
     dist = math.sqrt((p[0] - q[0]) ** 2 + (p[1] - q[1]) ** 2 + (p[2] - q[2]) ** 2)
     if not dist >= TOUCH:
         return -1.0

@@ -8,7 +8,7 @@ the body's index, the other side (a body ≥ 0, the floor −1, obstacle k −2 
 safety distance d_s [m]. Primitives come in arrays (:class:`~wmm_qp.limits.pair_search.Table`):
 kind 0 a swept segment [a0, a1] of radius r, 1 a box (centre c, rotation R, half extents h),
 3 a convex vertex set (a mesh's hull: ``verts[vs:vs + vc]`` in its frame, placed by c and R; its
-distances by GJK, :mod:`._gjk`), 2 anything else; ``centre`` and ``radii`` their bounding spheres.
+distances, and a box's to a box, by GJK, :mod:`._gjk`), 2 anything else; ``centre`` and ``radii`` their bounding spheres.
 """
 
 from __future__ import annotations
@@ -56,7 +56,8 @@ def pair_one(
 ) -> None:
     """Entry k ← the distance of A[i] to B[j] (ok False where coal must compute it)."""
     ok[k] = True
-    if (ka[i] == 3 and kb[j] != 2) or (kb[j] == 3 and ka[i] != 2):  # a hull: GJK (touching cores: coal)
+    if (ka[i] == 3 and kb[j] != 2) or (kb[j] == 3 and ka[i] != 2) or (ka[i] == 1 and kb[j] == 1):
+        # a hull, or two boxes: GJK (touching cores: coal)
         dd, got = convex_pair(ka, a0, a1, ra, ca, Ra, ha, va, vsa, vca, i, kb, b0, b1, rb, cb, Rb, hb, vb, vsb, vcb,
                               j, P[k], Q[k], N[k])
         d[k], ok[k] = dd, got

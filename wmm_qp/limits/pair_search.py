@@ -4,7 +4,7 @@ distance, closest points and normal, each tick.
 Self pairs, the floor and the obstacles go through compiled passes (:mod:`._pair_passes`: a
 bounding-sphere broad phase, then the distances of swept spheres, boxes and planes of
 :mod:`._distance` and GJK's for the convex hulls of meshes, :mod:`._gjk`) into one candidate
-buffer (:class:`Candidates`); coal fills the entries those do not cover (box–box, a hull whose
+buffer (:class:`Candidates`); coal fills the entries those do not cover (a hull or box whose
 core touches or overlaps the other's, a capsule whose segment is inside a box). Everything is in
 the base frame: the bodies placed by the arm's joint placements, the obstacles by the base pose.
 Which rows the candidates become is :mod:`.collision`'s business.
@@ -83,7 +83,7 @@ def place(Hj: FloatArray, joint: IntArray, local: Table, out: Table) -> None:
 
 def _pair_distances(A: Table, first: IntArray, second: IntArray, B: Table, buf: tuple) -> tuple:
     """Distances of A[first[k]] to B[second[k]] into buf = (d, p, q, n, ok) (ok False where coal
-    must compute it: box-box, meshes, a capsule whose segment is inside a box)."""
+    must compute it: touching cores, a capsule whose segment is inside a box)."""
     d, P, Q, N, ok = buf
     pairs_kernel(*A.shapes(), *B.shapes(), np.asarray(first, dtype=np.int64), np.asarray(second, dtype=np.int64),
                  d, P, Q, N, ok)
@@ -287,7 +287,7 @@ class PairSearch:
         return c
 
     def _coal_fill(self, n: int, Rb: FloatArray | None, tb: FloatArray | None) -> None:
-        """The candidates the compiled distances left to coal (box-box, a hull whose core touches
+        """The candidates the compiled distances left to coal (a hull or box whose core touches
         or overlaps the other's, a capsule whose segment is inside a box), computed by coal in place."""
         c, bodies = self.candidates, self.geo.bodies
         poses: dict[int, coal.Transform3s] = {}  # each body's, once this tick
