@@ -334,6 +334,85 @@ def test_after_a_failure_the_stage_goes_to_daqp_first_for_a_window(monkeypatch: 
     assert calls == ["full"]  # and the window ended there
 
 
+def test_failures_right_after_windows_lengthen_them_and_daqps_infeasible_verdict_stands(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A stage the configured solver keeps failing on (TIAGo's rows at its column): each failure
+    on the first solve after a window opens one four times as long (up to DAQP_FIRST_MAX); a
+    plain success brings it back to DAQP_FIRST; a success only on the cold retry opens a window
+    and keeps its answer; DAQP's "infeasible" inside a window is the stage's answer (None), the
+    configured solver is not asked, and the window goes on."""
+    import copy
+
+    from wmm_qp.controllers.qp.cascade import DAQP_FIRST, DAQP_FIRST_MAX
+    from wmm_qp.solvers import QPSolution
+
+    ctl = qp("proxsuite", closed_form_first=False)
+    x = model().ee_position(np.zeros(3), Q0)
+    ctl.step(w.RobotState(np.zeros(3), Q0), w.Reference("dm_nullspace", x_d=x))
+    problem = ctl.last_problem
+    assert problem is not None
+    full, daqp = ctl._full, ctl._fallback
+    assert daqp is not None
+    mode = ["fail"]
+    solve_full, solve_daqp = full.solve, daqp.solve
+    calls: list[str] = []
+
+    def full_solve(p: QPProblem) -> QPSolution:
+        calls.append("full")
+        if mode[0] == "fail":
+            return QPSolution(z=None, ok=False, status="forced")
+        sol = solve_full(p)
+        sol.retried = mode[0] == "retried"
+        return sol
+
+    def daqp_solve(p: QPProblem) -> QPSolution:
+        calls.append("daqp")
+        return solve_daqp(p)
+
+    monkeypatch.setattr(full, "solve", full_solve)
+    monkeypatch.setattr(daqp, "solve", daqp_solve)
+
+    def solve() -> object:
+        return ctl._solve(full, copy.deepcopy(problem))
+
+    def window() -> int:
+        """Solves that go to DAQP first before the configured solver is asked again (and is)."""
+        n = 0
+        while True:
+            calls.clear()
+            solve()
+            if calls[0] == "full":
+                return n
+            n += 1
+
+    solve()  # the first failure: a window of DAQP_FIRST
+    lengths = [window() for _ in range(5)]  # the configured solver fails again at each window's end
+    assert lengths == [DAQP_FIRST, 4 * DAQP_FIRST, 16 * DAQP_FIRST, min(64 * DAQP_FIRST, DAQP_FIRST_MAX),
+                       DAQP_FIRST_MAX], lengths
+    mode[0] = "ok"
+    assert window() == DAQP_FIRST_MAX  # ... and now succeeds: the next failure opens DAQP_FIRST again
+    mode[0] = "fail"
+    calls.clear()
+    solve()
+    assert calls == ["full", "daqp"]
+    mode[0] = "ok"
+    assert window() == DAQP_FIRST
+    mode[0] = "retried"
+    calls.clear()
+    assert solve() is not None and calls == ["full"]  # solved on the cold retry: its answer kept ...
+    mode[0] = "ok"
+    assert window() == DAQP_FIRST  # ... and a window opened
+    mode[0] = "fail"
+    solve()  # a window again
+    monkeypatch.setattr(daqp, "solve", lambda p: (calls.append("daqp"), QPSolution(z=None, ok=False,
+                                                                                    status="infeasible"))[1])
+    calls.clear()
+    assert solve() is None and calls == ["daqp"]  # DAQP's exact verdict stands inside the window
+    calls.clear()
+    solve()
+    assert calls == ["daqp"]  # and the window goes on
+
+
 def test_jumpy_reference_stream_never_needs_a_safe_stop() -> None:
     """Regression: warm-started ProxQP stalled after reference jumps (now: cold retry, then DAQP)."""
     ctl = qp("proxsuite").__class__(model(), config().with_(rate_hz=1000.0))

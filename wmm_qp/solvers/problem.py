@@ -54,9 +54,11 @@ class QPProblem:
 
 @dataclass(slots=True)
 class QPSolution:
-    """A backend's answer: z (None if it failed), whether it is optimal, and why not."""
+    """A backend's answer: z (None if it failed), whether it is optimal, and why not; ``retried``:
+    solved only when tried again cold after a failed warm start (a hard instance)."""
 
     z: FloatArray | None
     ok: bool
     status: str
     iterations: int = 0
+    retried: bool = False

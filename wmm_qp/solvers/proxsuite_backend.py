@@ -56,6 +56,7 @@ class ProxsuiteBackend(QPBackend):
             self.reset()
             cold = self._solve(problem)
             cold.iterations += sol.iterations
+            cold.retried = True
             if cold.ok:
                 cold.status = f"{cold.status} (cold retry)"
             else:

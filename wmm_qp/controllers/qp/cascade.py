@@ -9,8 +9,15 @@
    holding the arm: about every other solve ended at proxsuite's iteration cap, and so did its
    cold retry, before DAQP solved it; ``benchmarks/collision/ball_tick.py``), so after the
    configured backend failed on a stage, that stage's next :data:`DAQP_FIRST` solves go to DAQP
-   first. A DAQP failure in that window ends it (the configured backend then tries the same
-   problem); at its end the configured backend starts again cold.
+   first. DAQP's verdict that a stage is infeasible stands (it is exact: the stage logic then
+   relaxes its rows); any other DAQP failure in that window ends it (the configured backend then
+   tries the same problem); at its end the configured backend starts again cold. If it fails again on its first
+   solve after a window, the next window is four times as long (up to :data:`DAQP_FIRST_MAX`): on a
+   robot whose rows keep every stage hard (TIAGo's 48 rows at its column) each failure costs the
+   iteration cap twice (~1.5 ms), and a window of fixed length met one every 50 solves. A solve
+   that succeeded only on the backend's cold retry (the cap reached once) opens a window too,
+   its answer kept. A plain success of the configured backend brings the window back to
+   ``DAQP_FIRST``.
 4. The answer clipped to the box bounds: a no-op for exact solvers, the guarantee for iterative
    solvers' tolerances.
 5. Strict priority: the slack's exact penalty keeps s = 0 only while ρ₁ exceeds the task's
@@ -34,6 +41,8 @@ from .kernels import _closed_form, task_residual
 SLACK_ACCEPT = 1e-7  # [m/s] slack below this counts as "the task is met"
 DAQP_FIRST = 50
 """Solves of a stage that go to DAQP first after the configured backend failed on it."""
+DAQP_FIRST_MAX = 6400
+"""The longest such window (after repeated failures at the windows' ends: ×4 each)."""
 
 
 class SolveCascade(Controller):
@@ -59,6 +68,8 @@ class SolveCascade(Controller):
         self.fallbacks = 0  # stages the fallback solved after the configured backend failed
         self.daqp_first = 0  # stages DAQP solved first, in a window after such a failure
         self._daqp_first: dict[int, int] = {}  # id(stage backend) -> solves left that go to DAQP first
+        self._window: dict[int, int] = {}  # id(stage backend) -> the length of its next window
+        self._after_window: set[int] = set()  # stage backends whose window just ended
         self.closed_form_hits = 0  # stages solved in closed form (no bound active)
         self._closed_form_hit = False  # the last _solve was answered in closed form
         self.task_checks = 0  # stages that left slack and were re-solved with the task as an equality
@@ -79,6 +90,8 @@ class SolveCascade(Controller):
         self._arm.reset()
         self._full.reset()
         self._daqp_first.clear()
+        self._window.clear()
+        self._after_window.clear()
 
     def clear_statistics(self) -> None:
         self.fallbacks = self.daqp_first = self.closed_form_hits = self.task_checks = 0
@@ -114,22 +127,35 @@ class SolveCascade(Controller):
                 self._closed_form_hit = True
                 return z
         fallback = self._fallback if self.solver != "daqp" else None
-        left = self._daqp_first.get(id(backend), 0)
+        key = id(backend)
+        left = self._daqp_first.get(key, 0)
         if fallback is not None and left > 0:  # in a run of hard instances
-            self._daqp_first[id(backend)] = left - 1
+            self._daqp_first[key] = left - 1
             if left == 1:
                 backend.reset()  # the window ends: the configured backend starts again cold
+                self._after_window.add(key)
             sol = fallback.solve(problem)
             self.daqp_first += int(sol.ok)
-            if not sol.ok or sol.z is None:
-                self._daqp_first[id(backend)] = 0  # DAQP failed: the window ends here
+            if (not sol.ok or sol.z is None) and sol.status != "infeasible":
+                self._daqp_first[key] = 0  # DAQP failed (not its exact verdict): the window ends here
                 sol = backend.solve(problem)
         else:
             sol = backend.solve(problem)
-            if (not sol.ok or sol.z is None) and fallback is not None:
-                self._daqp_first[id(backend)] = DAQP_FIRST
-                sol = fallback.solve(problem)
-                self.fallbacks += int(sol.ok)
+            failed = not sol.ok or sol.z is None
+            window = self._window.get(key, DAQP_FIRST)
+            if not (failed or sol.retried):
+                self._window[key] = DAQP_FIRST
+            elif fallback is not None:  # failed, or solved only cold after a failure: a hard instance
+                if key in self._after_window:  # again right after a window: a longer one
+                    window = min(4 * window, DAQP_FIRST_MAX)
+                else:
+                    window = DAQP_FIRST
+                self._window[key] = window
+                self._daqp_first[key] = window
+                if failed:
+                    sol = fallback.solve(problem)
+                    self.fallbacks += int(sol.ok)
+            self._after_window.discard(key)
         if not sol.ok or sol.z is None:
             return None
         z = np.clip(sol.z, problem.lb, problem.ub)  # hard bounds exactly, whatever the tolerance
