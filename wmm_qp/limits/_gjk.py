@@ -1,7 +1,7 @@
 """Compiled GJK distances for the collision rows: convex vertex sets (the hulls of a URDF's
 collision meshes) against each other, against swept segments (spheres, capsules) and boxes,
-boxes against boxes, and vertex sets against planes, in one compiled pass with the other primitives (checked against coal in
-``tests/core/test_gjk.py``).
+boxes against boxes, and vertex sets against planes, in one compiled pass with the other
+primitives (checked against coal in ``tests/core/test_gjk.py``).
 
 A shape is given by its support point (the farthest point along a direction): a segment's end
 (its radius is added after), a box's corner, a hull's vertex. GJK (Gilbert, Johnson, Keerthi

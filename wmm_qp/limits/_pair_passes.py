@@ -8,7 +8,8 @@ the body's index, the other side (a body ≥ 0, the floor −1, obstacle k −2 
 safety distance d_s [m]. Primitives come in arrays (:class:`~wmm_qp.limits.pair_search.Table`):
 kind 0 a swept segment [a0, a1] of radius r, 1 a box (centre c, rotation R, half extents h),
 3 a convex vertex set (a mesh's hull: ``verts[vs:vs + vc]`` in its frame, placed by c and R; its
-distances, and a box's to a box, by GJK, :mod:`._gjk`), 2 anything else; ``centre`` and ``radii`` their bounding spheres.
+distances, and a box's to a box, by GJK, :mod:`._gjk`), 2 anything else; ``centre`` and
+``radii`` their bounding spheres.
 """
 
 from __future__ import annotations

@@ -146,10 +146,8 @@ class SolveCascade(Controller):
             if not (failed or sol.retried):
                 self._window[key] = DAQP_FIRST
             elif fallback is not None:  # failed, or solved only cold after a failure: a hard instance
-                if key in self._after_window:  # again right after a window: a longer one
-                    window = min(4 * window, DAQP_FIRST_MAX)
-                else:
-                    window = DAQP_FIRST
+                # again right after a window: a longer one
+                window = min(4 * window, DAQP_FIRST_MAX) if key in self._after_window else DAQP_FIRST
                 self._window[key] = window
                 self._daqp_first[key] = window
                 if failed:
