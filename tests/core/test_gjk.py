@@ -17,6 +17,7 @@ from wmm_qp.limits.pair_search import PairSearch, Table
 from wmm_qp.model.collision import convex_hull
 
 REQ = coal.DistanceRequest()
+COLD = np.zeros((1, 3))  # no warm start
 
 
 def hull(rng: np.random.Generator, n: int = 40, scale: float = 0.1) -> coal.ConvexBase:
@@ -54,7 +55,7 @@ def test_hull_distances_agree_with_coal_and_touching_cores_are_left_to_it() -> N
         Mb = pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(scale=0.25, size=3))
         t = table((A, Ma), (B, Mb))
         assert t.kind[0] == 3
-        d, ok = G.convex_pair(*t.shapes(), 0, *t.shapes(), 1, p, q, n)
+        d, ok = G.convex_pair(*t.shapes(), 0, *t.shapes(), 1, p, q, n, COLD, -1)
         ref = coal_d(A, Ma, B, Mb)
         if not ok:  # only where the cores touch or overlap: the shapes are then in contact or nearly
             seen["left"] += 1
@@ -78,7 +79,7 @@ def test_box_distances_agree_with_coal_and_touching_boxes_are_left_to_it() -> No
         Mb = pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(scale=0.25, size=3))
         t = table((A, Ma), (B, Mb))
         assert t.kind.tolist() == [1, 1]
-        d, ok = G.convex_pair(*t.shapes(), 0, *t.shapes(), 1, p, q, n)
+        d, ok = G.convex_pair(*t.shapes(), 0, *t.shapes(), 1, p, q, n, COLD, -1)
         ref = coal_d(A, Ma, B, Mb)
         if not ok:
             seen["left"] += 1
@@ -114,7 +115,7 @@ def test_a_broken_support_function_is_caught() -> None:
         Ma, Mb = pin.SE3.Identity(), pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(size=3))
         t = table((A, Ma), (B, Mb))
         t.vc[0] -= 1  # the mutation
-        d, ok = G.convex_pair(*t.shapes(), 0, *t.shapes(), 1, p, q, n)
+        d, ok = G.convex_pair(*t.shapes(), 0, *t.shapes(), 1, p, q, n, COLD, -1)
         wrong += ok and abs(d - coal_d(A, Ma, B, Mb)) > 1e-6
     assert wrong > 0
 
@@ -157,6 +158,7 @@ def test_the_pair_search_with_gjk_gives_coals_candidates(robot: str) -> None:
         np.testing.assert_allclose(a.normal[:a.n][far], b.normal[:b.n][far], atol=1e-6)
         by_gjk += int(a.ok[:a.n].sum() - b.ok[:b.n].sum())
     assert by_gjk > 100  # GJK, not coal, computed the hulls' pairs
+    assert (gjk._warm != 0.0).any(axis=1).sum() >= 10  # ... each from where its last call ended
 
 
 def test_parallel_faces_give_the_exact_gap_not_a_fallback() -> None:
@@ -175,7 +177,7 @@ def test_parallel_faces_give_the_exact_gap_not_a_fallback() -> None:
         for tilt in (0.0, 1e-9, 1e-4):
             Mb = pin.SE3(pin.exp3(np.array([0.0, 0.0, tilt])), np.array([0.1 + 0.15 + gap, 0.03, 0.02]))
             t = table((cube, pin.SE3.Identity()), (box, Mb))
-            d, ok = G.convex_pair(*t.shapes(), 0, *t.shapes(), 1, p, q, n)
+            d, ok = G.convex_pair(*t.shapes(), 0, *t.shapes(), 1, p, q, n, COLD, -1)
             assert ok, (gap, tilt)
             assert d == pytest.approx(coal_d(cube, pin.SE3.Identity(), box, Mb), abs=1e-9)
             if tilt == 0.0:

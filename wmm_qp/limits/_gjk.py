@@ -159,9 +159,16 @@ def _project(W: FloatArray, idx: IntArray, m: int, lam: FloatArray) -> float:
 def gjk(kA: IntArray, a0A: FloatArray, a1A: FloatArray, cA: FloatArray, RA: FloatArray, hA: FloatArray,
         vA: FloatArray, vsA: IntArray, vcA: IntArray, i: int,
         kB: IntArray, a0B: FloatArray, a1B: FloatArray, cB: FloatArray, RB: FloatArray, hB: FloatArray,
-        vB: FloatArray, vsB: IntArray, vcB: IntArray, j: int, p: FloatArray, q: FloatArray) -> float:
+        vB: FloatArray, vsB: IntArray, vcB: IntArray, j: int, p: FloatArray, q: FloatArray,
+        warm: FloatArray, w: int) -> float:
     """The distance of shape i of A's core to shape j of B's, its closest points into p and q;
     −1 where GJK gives none (cores within :data:`TOUCH` or overlapping, or no convergence).
+
+    ``warm[w]`` (w ≥ 0): the direction from A's closest point to B's found by the last call for
+    this pair, where GJK starts (a pair moves little in a tick: its supports along it are the
+    closest or nearly, and GJK ends in one or two iterations instead of several); updated here.
+    Zero, or w < 0: it starts on the line between the shapes' origins. Either start gives the
+    same distance within GJK's tolerance.
 
     Three scratch allocations per call (views into them) and scalar arithmetic: an iteration is
     ~100 ns of arithmetic, and an allocation costs about as much."""
@@ -172,9 +179,12 @@ def gjk(kA: IntArray, a0A: FloatArray, a1A: FloatArray, cA: FloatArray, RA: Floa
     lam, tl = coords[:4], coords[4:]  # barycentric coordinates (the best face's, a trial face's)
     idx = np.empty(4, dtype=np.int64)
     # the first point: the supports facing each other along the line between the shapes' origins
-    ax, ay, az = _origin(kA, a0A, a1A, cA, i)
-    bx, by, bz = _origin(kB, a0B, a1B, cB, j)
-    dx, dy, dz = bx - ax, by - ay, bz - az
+    if w >= 0 and (warm[w, 0] != 0.0 or warm[w, 1] != 0.0 or warm[w, 2] != 0.0):
+        dx, dy, dz = warm[w, 0], warm[w, 1], warm[w, 2]
+    else:
+        ax, ay, az = _origin(kA, a0A, a1A, cA, i)
+        bx, by, bz = _origin(kB, a0B, a1B, cB, j)
+        dx, dy, dz = bx - ax, by - ay, bz - az
     support(kA, a0A, a1A, cA, RA, hA, vA, vsA, vcA, i, dx, dy, dz, sa)
     support(kB, a0B, a1B, cB, RB, hB, vB, vsB, vcB, j, -dx, -dy, -dz, sb)
     for r in range(3):
@@ -250,6 +260,9 @@ def gjk(kA: IntArray, a0A: FloatArray, a1A: FloatArray, cA: FloatArray, RA: Floa
     dist = math.sqrt((p[0] - q[0]) ** 2 + (p[1] - q[1]) ** 2 + (p[2] - q[2]) ** 2)
     if not dist >= TOUCH:
         return -1.0
+    if w >= 0:
+        for c in range(3):
+            warm[w, c] = q[c] - p[c]
     return dist
 
 
@@ -258,11 +271,12 @@ def convex_pair(kA: IntArray, a0A: FloatArray, a1A: FloatArray, rA: FloatArray, 
                 hA: FloatArray, vA: FloatArray, vsA: IntArray, vcA: IntArray, i: int,
                 kB: IntArray, a0B: FloatArray, a1B: FloatArray, rB: FloatArray, cB: FloatArray, RB: FloatArray,
                 hB: FloatArray, vB: FloatArray, vsB: IntArray, vcB: IntArray, j: int,
-                p: FloatArray, q: FloatArray, n: FloatArray) -> tuple[float, bool]:
+                p: FloatArray, q: FloatArray, n: FloatArray, warm: FloatArray, w: int) -> tuple[float, bool]:
     """Shape i of A against shape j of B (either a vertex set, segment or box): the signed distance
     (the cores' less both radii), the closest points on the shapes into p and q, the unit normal
-    from B to A into n; and whether GJK gave it (False: leave the pair to coal)."""
-    dist = gjk(kA, a0A, a1A, cA, RA, hA, vA, vsA, vcA, i, kB, a0B, a1B, cB, RB, hB, vB, vsB, vcB, j, p, q)
+    from B to A into n; and whether GJK gave it (False: leave the pair to coal). ``warm``, ``w``:
+    GJK's start for this pair (:func:`gjk`)."""
+    dist = gjk(kA, a0A, a1A, cA, RA, hA, vA, vsA, vcA, i, kB, a0B, a1B, cB, RB, hB, vB, vsB, vcB, j, p, q, warm, w)
     if dist < 0.0:
         return 0.0, False
     ra = rA[i] if kA[i] == 0 else 0.0

@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from .._jit import jit
 from .._typing import BoolArray, FloatArray, IntArray
 from ._distance import box_plane, swept_box, swept_plane, swept_swept
@@ -54,13 +56,15 @@ def pair_one(
     i: int, kb: IntArray, b0: FloatArray, b1: FloatArray, rb: FloatArray, cb: FloatArray, Rb: FloatArray,
     hb: FloatArray, vb: FloatArray, vsb: IntArray, vcb: IntArray,
     j: int, d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray, k: int,
+    warm: FloatArray, w: int,
 ) -> None:
-    """Entry k ← the distance of A[i] to B[j] (ok False where coal must compute it)."""
+    """Entry k ← the distance of A[i] to B[j] (ok False where coal must compute it); ``warm[w]``:
+    GJK's start for the pair (w < 0: none; :func:`._gjk.gjk`)."""
     ok[k] = True
     if (ka[i] == 3 and kb[j] != 2) or (kb[j] == 3 and ka[i] != 2) or (ka[i] == 1 and kb[j] == 1):
         # a hull, or two boxes: GJK (touching cores: coal)
         dd, got = convex_pair(ka, a0, a1, ra, ca, Ra, ha, va, vsa, vca, i, kb, b0, b1, rb, cb, Rb, hb, vb, vsb, vcb,
-                              j, P[k], Q[k], N[k])
+                              j, P[k], Q[k], N[k], warm, w)
         d[k], ok[k] = dd, got
     elif ka[i] == 0 and kb[j] == 0:
         d[k] = swept_swept(a0[i], a1[i], ra[i], b0[j], b1[j], rb[j], P[k], Q[k], N[k])
@@ -83,10 +87,11 @@ def pairs_kernel(
     vb: FloatArray, vsb: IntArray, vcb: IntArray,
     first: IntArray, second: IntArray, d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray,
 ) -> None:
-    """Entry k ← the distance of A[first[k]] to B[second[k]], for every k."""
+    """Entry k ← the distance of A[first[k]] to B[second[k]], for every k (GJK from its cold start)."""
+    cold = np.zeros((1, 3))
     for k in range(first.shape[0]):
         pair_one(ka, a0, a1, ra, ca, Ra, ha, va, vsa, vca, first[k], kb, b0, b1, rb, cb, Rb, hb, vb, vsb, vcb,
-                 second[k], d, P, Q, N, ok, k)
+                 second[k], d, P, Q, N, ok, k, cold, -1)
 
 
 @jit
@@ -114,17 +119,18 @@ def self_pass(
     verts: FloatArray, vs: IntArray, vc: IntArray,
     centre: FloatArray, pairs: IntArray, pair_r: FloatArray, d_i: float, d_s: float,
     d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray, body: IntArray, other: IntArray,
-    safety: FloatArray, n: int,
+    safety: FloatArray, n: int, warm: FloatArray,
 ) -> int:
     """The robot's own pairs whose bounding spheres are within d_i (the broad phase), their
-    distances appended to the candidates from entry n; returns the new count."""
+    distances appended to the candidates from entry n; returns the new count. ``warm[k]``: GJK's
+    start for pair k (:func:`._gjk.gjk`)."""
     for k in range(pairs.shape[0]):
         i, j = pairs[k, 0], pairs[k, 1]
         x, y, z = centre[i, 0] - centre[j, 0], centre[i, 1] - centre[j, 1], centre[i, 2] - centre[j, 2]
         if not math.sqrt(x * x + y * y + z * z) - pair_r[k] <= d_i:
             continue
         pair_one(kind, a0, a1, r, c, R, h, verts, vs, vc, i, kind, a0, a1, r, c, R, h, verts, vs, vc, j,
-                 d, P, Q, N, ok, n)
+                 d, P, Q, N, ok, n, warm, k)
         body[n], other[n], safety[n] = i, j, d_s
         n += 1
     return n
@@ -162,11 +168,12 @@ def solid_pass(
     ocentre: FloatArray, oradii: FloatArray, checked: BoolArray, solid: IntArray,
     d_i: float, d_s: float,
     d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray, body: IntArray, other: IntArray,
-    safety: FloatArray, n: int,
+    safety: FloatArray, n: int, warm: FloatArray,
 ) -> int:
     """Every checked body against every solid obstacle (placed in the base frame) within d_i: the
     broad phase on the bodies' bounding spheres (against a box: the sphere's distance to the box
-    itself), appended from entry n (the other side coded −2 − the obstacle's index)."""
+    itself), appended from entry n (the other side coded −2 − the obstacle's index). ``warm[o ×
+    bodies + b]``: GJK's start for the pair (:func:`._gjk.gjk`)."""
     for o in range(okind.shape[0]):
         for b in range(kind.shape[0]):
             if not checked[o, b]:
@@ -185,7 +192,7 @@ def solid_pass(
             if not gap <= d_i:
                 continue
             pair_one(kind, a0, a1, r, c, R, h, verts, vs, vc, b, okind, o0, o1, orad, oc, oR, oh, overts, ovs, ovc, o,
-                     d, P, Q, N, ok, n)
+                     d, P, Q, N, ok, n, warm, o * kind.shape[0] + b)
             body[n], other[n], safety[n] = b, -2 - solid[o], d_s
             n += 1
     return n

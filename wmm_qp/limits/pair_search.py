@@ -222,6 +222,8 @@ class PairSearch:
             np.zeros(0, dtype=np.int64), Table(0), Table(0), np.zeros(0),
             np.zeros((0, len(bodies)), dtype=bool), [])
         self.candidates = Candidates.room(self._pairs.shape[0] + self._floor_idx.shape[0])
+        self._warm = np.zeros((self._pairs.shape[0], 3))  # GJK's start for each self pair (the last result)
+        self._warm_solid = np.zeros((0, 3))  # ... for each (solid obstacle, body)
 
     def set_obstacles(self, obstacles: tuple[ShapeConfig, ...] | list[ShapeConfig]) -> None:
         """Replace the obstacle set (atomically: the next tick sees the new set only).
@@ -242,6 +244,7 @@ class PairSearch:
         self._solid = (np.array(solid, dtype=np.int64), world, placed, radii, checked,
                        [k for k, o in enumerate(obs) if o.plane])
         self._solid_joint = np.zeros(len(solid), dtype=np.int64)  # every obstacle placed by the one H
+        self._warm_solid = np.zeros((len(solid) * len(self.geo.bodies), 3))
         self.obstacles = obs
         n = self._pairs.shape[0] + self._floor_idx.shape[0] + len(obs) * len(self.geo.bodies)
         self.candidates = Candidates.room(n)
@@ -259,7 +262,8 @@ class PairSearch:
         buf = (c.d, c.p_a, c.p_b, c.normal, c.ok, c.body, c.other, c.safety)
         n = 0
         if self._pairs.shape[0]:  # robot vs robot (base frame; the base's motion cancels)
-            n = self_pass(*pl.shapes(), pl.centre, self._pairs, self._pair_r, d_i, p.safety_distance, *buf, n)
+            n = self_pass(*pl.shapes(), pl.centre, self._pairs, self._pair_r, d_i, p.safety_distance, *buf, n,
+                          self._warm)
         if self._floor_idx.shape[0]:  # robot vs the floor z = floor_z (the same plane in the base frame)
             n = plane_pass(*pl.shapes(), pl.centre, self._radii, self._floor_idx, True, self._floor_n, self._floor_o,
                            d_i, FLOOR, p.floor_margin, *buf, n)
@@ -275,7 +279,7 @@ class PairSearch:
                 H[0, :3, :3], H[0, :3, 3] = Rb.T, -(Rb.T @ tb)
                 place(H, self._solid_joint, world, placed)
                 n = solid_pass(*pl.shapes(), pl.centre, self._radii, *placed.shapes(), placed.centre, radii, checked,
-                               solid, d_i, p.safety_distance, *buf, n)
+                               solid, d_i, p.safety_distance, *buf, n, self._warm_solid)
             for index in planes:
                 o = self.obstacles[index]
                 o.place(Rb, tb)
