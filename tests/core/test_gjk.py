@@ -159,6 +159,8 @@ def test_the_pair_search_with_gjk_gives_coals_candidates(robot: str) -> None:
         by_gjk += int(a.ok[:a.n].sum() - b.ok[:b.n].sum())
     assert by_gjk > 100  # GJK, not coal, computed the hulls' pairs
     assert (gjk._warm != 0.0).any(axis=1).sum() >= 10  # ... each from where its last call ended
+    ctl.reset()  # a reset forgets them, as it does the solvers' warm starts
+    assert not gjk._warm.any()
 
 
 def test_parallel_faces_give_the_exact_gap_not_a_fallback() -> None:

@@ -250,6 +250,11 @@ class PairSearch:
         self.candidates = Candidates.room(n)
         self.moving = any(bool(o.velocity_w.any()) for o in obs)
 
+    def reset(self) -> None:
+        """GJK starts every pair afresh (its warm starts forgotten)."""
+        self._warm[:] = 0.0
+        self._warm_solid[:] = 0.0
+
     def search(self, q_base: FloatArray) -> Candidates:
         """Every pair the broad phase lets through at the state the arm's data was last computed
         at (its joint placements current), the base at ``q_base`` [m, m, rad]: its distance,

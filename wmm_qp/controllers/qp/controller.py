@@ -106,6 +106,12 @@ class QpController(QpStages, SolveCascade):
         self.reset()
         self.clear_statistics()
 
+    def reset(self) -> None:
+        """Every warm start forgotten: the solvers' (:meth:`SolveCascade.reset`) and GJK's."""
+        super().reset()
+        if self.collision is not None:
+            self.collision.search.reset()
+
     def clear_statistics(self) -> None:
         self.ee_box_corrections = self.braking_stages = self.floor_dropped = 0
         super().clear_statistics()
