@@ -270,7 +270,7 @@ def test_the_console_plays_the_hosts_and_the_clients_recording(recording: dict[s
     from wmm_qp_service.console.playback import RecordingLink
     from wmm_qp_service.console.timeline import load_timeline
 
-    host_states = None
+    host_states: int | None = None
     for src in (recording["path"], recording["client"]):
         tl = load_timeline(src)
         link = RecordingLink(tl, src)
@@ -284,8 +284,8 @@ def test_the_console_plays_the_hosts_and_the_clients_recording(recording: dict[s
             host_states = tl.states
             msgs, _ = _decode(src)
             assert len(tl.files) >= 2 and tl.states >= len(msgs["/arm/joint_states"])
-        else:
-            assert tl.states <= host_states  # the client saw at most the states the daemon ticked on
+        # (no count compared between the two: the client records every state the sim publishes
+        # while it runs, the daemon one per tick it made; which is larger depends on the timing)
 
 
 def test_the_embedded_core_records_every_tick_and_replays(tmp_path: Path) -> None:
