@@ -387,4 +387,5 @@ def test_default_section_runs_what_users_run(capsys: pytest.CaptureFixture[str])
     assert set(d["loops"]) == {"rate 500", "embedded 500", "rate 1000", "embedded 1000", "floor 500", "floor 1000"}
     for key in ("rate 500", "embedded 1000"):
         assert d["loops"][key]["available"] and d["ratios"]["loops"][key]["in_loop_over_isolated_step_p50"] > 0
+        assert d["loops"][key]["collision"] is True  # the loops with the default rows, as users run them
     assert "default: rows_p99_under_1ms_every_robot" in out["targets"]

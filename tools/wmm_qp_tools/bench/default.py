@@ -46,7 +46,8 @@ def run(cfg: w.ControllerConfig, robot: w.RobotConfig, ticks: int, max_seconds: 
         for trigger in ("rate", "embedded"):
             print(f"default: {trigger} loop, {r:g} Hz for {ticks} ticks ({ticks / r:.0f} s)", file=sys.stderr,
                   flush=True)
-            loops[f"{trigger} {r:g}"] = e2e.run_case(trigger, r, ticks, robot=robot, controller_file=controller_file)
+            loops[f"{trigger} {r:g}"] = e2e.run_case(trigger, r, ticks, robot=robot, controller_file=controller_file,
+                                                     collision=True)
     spin_us, rt = load_service_config().loop.spin_us, load_sim_config().rt_priority
     for r in rates:
         n = min(ticks, int(60 * r))

@@ -104,6 +104,7 @@ def run_case(
     breakdown: bool = False,
     plain: bool = False,
     extra_daemon_args: list[str] | None = None,
+    collision: bool = False,
 ) -> dict[str, Any]:
     """One case: start the stack, track the circle for ``ticks`` ticks, measure, stop.
 
@@ -121,6 +122,8 @@ def run_case(
             published a command, start-up included).
         plain: the embedded stack without its cycle's cost cuts (``--plain-cycle``).
         extra_daemon_args: more arguments of the daemon (``--record FILE``: :mod:`.record`).
+        collision: the collision rows as the controller config has them (on by default, with the
+            daemon's default scene); False: ``--no-collision``, the loop as §5's figures were taken.
 
     Returns:
         The figures of the module docstring, plus the load average, exit codes and faults.
@@ -139,12 +142,13 @@ def run_case(
         "duration_s": round(duration, 2),
         "loadavg_before": loadavg(),
         "logs": str(log_dir),
-        "collision": False,
+        "collision": collision,
     }
     embedded = trigger == "embedded"
     args = [] if embedded else ["--trigger", trigger]
     args += [] if controller_file is None else ["--controller-config", str(controller_file)]
-    args += ["--no-collision"]  # the loop as its figures were taken (docs/benchmarks.md §5); rows: collision_default
+    if not collision:
+        args += ["--no-collision"]  # the loop as §5 (docs/benchmarks.md) took its figures
     breakdown_file = log_dir / "breakdown.json"
     cycle_file = log_dir / "cycle.json"
     if breakdown and not embedded:
@@ -224,6 +228,8 @@ def run_case(
         "rejected": dict(info1.status.rejected),
         "last_fault": info1.status.last_fault,
         "faults": dict(info1.status.faults),
+        "collision": bool(info1.status.collision),  # the daemon's own word: its controller had rows
+        "collision_summary": info1.status.collision_summary,
         "loadavg_after": loadavg(),
     }
 
