@@ -30,7 +30,7 @@ from ..model.collision import RobotGeometry
 from ..scene import obstacles_from_tables
 from .dampers import DamperRows, damper_bounds
 from .inside_pairs import InsidePairs
-from .pair_search import Obstacle, PairSearch
+from .pair_search import Obstacle, PairNames, PairSearch
 from .rows import Rows, Tick
 
 PARALLEL = 0.995  # two rows of one pair of links this parallel (cos) are one
@@ -138,7 +138,7 @@ class CollisionRows(DamperRows):
         else:
             out.C, out.l, out.l_brake, out.damper = C[keep], l[keep], l_brake[keep], damper[keep]
             out.distances = dist[keep]
-        out.names = [self.search.name(int(body[k]), int(other[k])) for k in keep.tolist()]
+        out.names = PairNames(self.search.name, body[keep], other[keep])
         inside = np.flatnonzero(dist < safety)
         if inside.shape[0]:
             self._add_inside(out, body[inside], other[inside], safety[inside], q_base, q_arm, v_prev, lb, ub)
@@ -171,7 +171,8 @@ class CollisionRows(DamperRows):
         out.C, out.l = np.vstack((out.C, C)), np.concatenate((out.l, l))
         out.l_brake, out.damper = np.concatenate((out.l_brake, l_brake)), np.concatenate((out.damper, damper))
         out.distances = np.concatenate((out.distances, d))
-        out.names = out.names + [self.search.name(i, j) for i, j in zip(body.tolist(), other.tolist(), strict=True)]
+        names = out.names if isinstance(out.names, PairNames) else PairNames(self.search.name, body[:0], other[:0])
+        out.names = names + PairNames(self.search.name, body, other)
 
 
 def warm_up_obstacles(x: FloatArray) -> tuple[ShapeConfig, ...]:

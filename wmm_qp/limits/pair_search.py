@@ -13,7 +13,9 @@ Which rows the candidates become is :mod:`.collision`'s business.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import overload
 
 import coal
 import numpy as np
@@ -173,6 +175,46 @@ class Candidates:
     def room(cls, n: int) -> Candidates:
         return cls(np.empty(n), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.ones(n, dtype=np.bool_),
                    np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.empty(n))
+
+
+class PairNames(Sequence[str]):
+    """The names of pairs (:meth:`PairSearch.name`), made when one is read: a tick's rows carry
+    dozens (TIAGo's 48), and only a reason that cites a row reads one.
+
+    Args:
+        name: the pair's name of (body, other).
+        body, other: the pairs, coded as :class:`Candidates`'.
+    """
+
+    def __init__(self, name: Callable[[int, int], str], body: IntArray, other: IntArray) -> None:
+        self._name, self.body, self.other = name, body, other
+
+    def __len__(self) -> int:
+        return int(self.body.shape[0])
+
+    @overload
+    def __getitem__(self, k: int) -> str: ...
+
+    @overload
+    def __getitem__(self, k: slice) -> list[str]: ...
+
+    def __getitem__(self, k: int | slice) -> str | list[str]:
+        if isinstance(k, slice):
+            return [self[i] for i in range(*k.indices(len(self)))]
+        if not -len(self) <= k < len(self):
+            raise IndexError(k)
+        return self._name(int(self.body[k]), int(self.other[k]))
+
+    def __add__(self, more: PairNames) -> PairNames:
+        return PairNames(self._name, np.concatenate((self.body, more.body)), np.concatenate((self.other, more.other)))
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Sequence) and list(self) == list(other)
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        return repr(list(self))
 
 
 class PairSearch:

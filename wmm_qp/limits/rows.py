@@ -17,6 +17,7 @@ from __future__ import annotations
 import enum
 import math
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -59,7 +60,7 @@ class Rows:
     l: FloatArray
     l_brake: FloatArray = field(default_factory=lambda: np.zeros(0))
     damper: FloatArray = field(default_factory=lambda: np.zeros(0))
-    names: list[str] = field(default_factory=list)
+    names: Sequence[str] = field(default_factory=list)
     distances: FloatArray = field(default_factory=lambda: np.zeros(0))
     min_distance: float = math.inf
     closest: str = ""
