@@ -287,6 +287,7 @@ def test_after_a_failure_the_stage_goes_to_daqp_first_for_a_window(monkeypatch: 
     ctl.step(w.RobotState(np.zeros(3), Q0), w.Reference("dm_nullspace", x_d=x))
     problem = ctl.last_problem  # the full stage's QP of one step at Q0
     assert problem is not None
+    ctl.reset()  # (that step's solve may have opened a window: its QP is a hard one)
     full, daqp = ctl._full, ctl._fallback
     assert daqp is not None
     calls: list[str] = []
@@ -338,7 +339,7 @@ def test_failures_right_after_windows_lengthen_them_and_daqps_infeasible_verdict
         monkeypatch: pytest.MonkeyPatch) -> None:
     """A stage the configured solver keeps failing on (TIAGo's rows at its column): each failure
     on the first solve after a window opens one four times as long (up to DAQP_FIRST_MAX); a
-    plain success brings it back to DAQP_FIRST; a success only on the cold retry opens a window
+    plain success brings it back to DAQP_FIRST; a success the backend reports hard opens a window
     and keeps its answer; DAQP's "infeasible" inside a window is the stage's answer (None), the
     configured solver is not asked, and the window goes on."""
     import copy
@@ -351,6 +352,7 @@ def test_failures_right_after_windows_lengthen_them_and_daqps_infeasible_verdict
     ctl.step(w.RobotState(np.zeros(3), Q0), w.Reference("dm_nullspace", x_d=x))
     problem = ctl.last_problem
     assert problem is not None
+    ctl.reset()
     full, daqp = ctl._full, ctl._fallback
     assert daqp is not None
     mode = ["fail"]
@@ -362,7 +364,7 @@ def test_failures_right_after_windows_lengthen_them_and_daqps_infeasible_verdict
         if mode[0] == "fail":
             return QPSolution(z=None, ok=False, status="forced")
         sol = solve_full(p)
-        sol.retried = mode[0] == "retried"
+        sol.hard = mode[0] == "hard"
         return sol
 
     def daqp_solve(p: QPProblem) -> QPSolution:
@@ -397,9 +399,9 @@ def test_failures_right_after_windows_lengthen_them_and_daqps_infeasible_verdict
     assert calls == ["full", "daqp"]
     mode[0] = "ok"
     assert window() == DAQP_FIRST
-    mode[0] = "retried"
+    mode[0] = "hard"
     calls.clear()
-    assert solve() is not None and calls == ["full"]  # solved on the cold retry: its answer kept ...
+    assert solve() is not None and calls == ["full"]  # solved, but hard: its answer kept ...
     mode[0] = "ok"
     assert window() == DAQP_FIRST  # ... and a window opened
     mode[0] = "fail"
@@ -411,6 +413,38 @@ def test_failures_right_after_windows_lengthen_them_and_daqps_infeasible_verdict
     calls.clear()
     solve()
     assert calls == ["daqp"]  # and the window goes on
+
+
+def test_proxsuite_reports_a_cold_retry_or_many_iterations_as_hard(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The backend's side of the windows: an easy solve is not hard; one that reached
+    HARD_ITERATIONS is; so is one solved only on the cold retry after a failed warm start."""
+    from wmm_qp.solvers import proxsuite_backend as pb
+
+    ctl = qp("proxsuite", closed_form_first=False)
+    x = model().ee_position(np.zeros(3), Q0)
+    ctl.step(w.RobotState(np.zeros(3), Q0), w.Reference("dm_nullspace", x_d=x))
+    problem = ctl.last_problem
+    assert problem is not None
+    backend = pb.ProxsuiteBackend()
+    easy = backend.solve(problem)
+    assert easy.ok and not easy.hard and easy.iterations < pb.HARD_ITERATIONS
+    monkeypatch.setattr(pb, "HARD_ITERATIONS", max(1, easy.iterations))
+    backend.reset()  # the same cold solve again (warm, it takes none)
+    assert backend.solve(problem).hard  # as many iterations as the threshold: hard
+    monkeypatch.setattr(pb, "HARD_ITERATIONS", 1000)
+    backend.reset()
+    real = backend._solve
+    first = [True]
+
+    def warm_fails(p: QPProblem) -> pb.QPSolution:
+        if first[0]:
+            first[0] = False
+            return pb.QPSolution(z=None, ok=False, status="PROXQP_MAX_ITER_REACHED", iterations=30)
+        return real(p)
+
+    monkeypatch.setattr(backend, "_solve", warm_fails)
+    retried = backend.solve(problem)
+    assert retried.ok and retried.hard and "cold retry" in retried.status
 
 
 def test_jumpy_reference_stream_never_needs_a_safe_stop() -> None:

@@ -54,11 +54,12 @@ class QPProblem:
 
 @dataclass(slots=True)
 class QPSolution:
-    """A backend's answer: z (None if it failed), whether it is optimal, and why not; ``retried``:
-    solved only when tried again cold after a failed warm start (a hard instance)."""
+    """A backend's answer: z (None if it failed), whether it is optimal, and why not; ``hard``:
+    solved, but with what the backend counts as a hard instance's effort (proxsuite: a cold retry
+    after a failed warm start, or at least its ``HARD_ITERATIONS``)."""
 
     z: FloatArray | None
     ok: bool
     status: str
     iterations: int = 0
-    retried: bool = False
+    hard: bool = False

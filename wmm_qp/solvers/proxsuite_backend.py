@@ -37,6 +37,11 @@ from .problem import QPProblem, QPSolution
 _OUT = proxsuite.proxqp.QPSolverOutput
 MAX_ITER = 30  # outer iterations
 MAX_ITER_IN = 50  # inner (semi-smooth Newton) iterations per outer one
+HARD_ITERATIONS = 20
+"""A solve that took this many outer iterations or more is a hard instance (``QPSolution.hard``):
+on the default rows' QPs on the track circle 99.9 % of the Panda's solves take fewer (p99 9,
+~70-180 µs), a cold start of the Gen3's stage 14; TIAGo's that take 20 or more ran 0.6-1.5 ms
+(docs/benchmarks.md §12)."""
 
 
 class ProxsuiteBackend(QPBackend):
@@ -56,7 +61,7 @@ class ProxsuiteBackend(QPBackend):
             self.reset()
             cold = self._solve(problem)
             cold.iterations += sol.iterations
-            cold.retried = True
+            cold.hard = True
             if cold.ok:
                 cold.status = f"{cold.status} (cold retry)"
             else:
@@ -91,6 +96,7 @@ class ProxsuiteBackend(QPBackend):
                 ok=ok,
                 status=str(info.status).rsplit(".", 1)[-1],
                 iterations=int(info.iter),
+                hard=ok and int(info.iter) >= HARD_ITERATIONS,
             )
         except Exception as e:  # a backend's exception never leaks
             self.reset()

@@ -15,8 +15,9 @@
    solve after a window, the next window is four times as long (up to :data:`DAQP_FIRST_MAX`): on a
    robot whose rows keep every stage hard (TIAGo's 48 rows at its column) each failure costs the
    iteration cap twice (~1.5 ms), and a window of fixed length met one every 50 solves. A solve
-   that succeeded only on the backend's cold retry (the cap reached once) opens a window too,
-   its answer kept. A plain success of the configured backend brings the window back to
+   the backend reports hard (``QPSolution.hard``: proxsuite's cold retry after its cap, or at
+   least ``HARD_ITERATIONS`` iterations, 0.3-1.5 ms on those stages) counts as a failure for the
+   windows, its answer kept. An easy success of the configured backend brings the window back to
    ``DAQP_FIRST``.
 4. The answer clipped to the box bounds: a no-op for exact solvers, the guarantee for iterative
    solvers' tolerances.
@@ -143,9 +144,9 @@ class SolveCascade(Controller):
             sol = backend.solve(problem)
             failed = not sol.ok or sol.z is None
             window = self._window.get(key, DAQP_FIRST)
-            if not (failed or sol.retried):
+            if not (failed or sol.hard):
                 self._window[key] = DAQP_FIRST
-            elif fallback is not None:  # failed, or solved only cold after a failure: a hard instance
+            elif fallback is not None:  # failed, or solved with a hard instance's effort
                 # again right after a window: a longer one
                 window = min(4 * window, DAQP_FIRST_MAX) if key in self._after_window else DAQP_FIRST
                 self._window[key] = window
