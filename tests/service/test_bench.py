@@ -362,11 +362,14 @@ def test_default_ratios_and_targets_are_computed_from_the_run_s_own_figures() ->
         "loops": {"rate 1000": {"step_us": {"p50": 120.0}, "misses_per_10k": 1.0},
                   "embedded 1000": {"step_us": {"p50": 120.0}, "misses_per_10k": 6.0},
                   "floor 1000": {"misses_per_10k": 2.0}},
-        "pink": {"gen3": {"available": True, "ratio_p50": 3.4}, "z1": {"available": False}}}
+        "pink": {"gen3": {"available": True, "ratio_p50": 3.4}, "z1": {"available": False}},
+        "paced": {"ticks": 10, "back_to_back": {"p50": 100.0}, "1000": {"p50": 80.0}}}
     r = ratios(run)
     assert r["isolated_step_p50_us"] == 100.0 and set(r["rows"]) == {"gen3", "tiago"}
-    assert r["loops"]["embedded 1000"] == {"in_loop_over_isolated_step_p50": 1.2, "misses_per_10k": 6.0,
-                                           "floor_misses_per_10k": 2.0, "misses_over_floor": 3.0}
+    assert r["loops"]["embedded 1000"] == {"in_loop_over_isolated_step_p50": 1.2, "in_loop_over_paced_step_p50": 1.5,
+                                           "misses_per_10k": 6.0, "floor_misses_per_10k": 2.0,
+                                           "misses_over_floor": 3.0}
+    assert r["paced_step_p50_us"] == {"back_to_back": 100.0, "1000": 80.0}
     t = default_targets(r)
     assert t["default: rows_p99_under_1ms_every_robot"] is True
     assert t["default: rows_cost_within_2x_p50_every_robot"] is False  # tiago's 2.5×
@@ -388,4 +391,6 @@ def test_default_section_runs_what_users_run(capsys: pytest.CaptureFixture[str])
     for key in ("rate 500", "embedded 1000"):
         assert d["loops"][key]["available"] and d["ratios"]["loops"][key]["in_loop_over_isolated_step_p50"] > 0
         assert d["loops"][key]["collision"] is True  # the loops with the default rows, as users run them
+        assert d["ratios"]["loops"][key]["in_loop_over_paced_step_p50"] > 0
+    assert d["paced"]["back_to_back"]["p50"] > 0 and d["paced"]["500"]["p50"] > 0
     assert "default: rows_p99_under_1ms_every_robot" in out["targets"]
