@@ -376,6 +376,10 @@ def test_default_ratios_and_targets_are_computed_from_the_run_s_own_figures() ->
     assert t["default rate 1000: in_loop_step_within_1_3x"] is True
     assert t["default embedded 1000: misses_within_2x_floor"] is False
     assert t["default: at_least_3x_pink_every_holonomic_robot"] is True
+    run["loops"]["floor 1000"]["misses_per_10k"] = 0.0  # an empty loop that missed none: no ratio, still judged
+    t = default_targets(ratios(run))
+    assert ratios(run)["loops"]["embedded 1000"]["misses_over_floor"] is None
+    assert t["default embedded 1000: misses_within_2x_floor"] is False
 
 
 @pytest.mark.integration

@@ -325,8 +325,9 @@ def default_targets(ratios: dict[str, Any]) -> dict[str, Any]:
     for key, v in ratios.get("loops", {}).items():
         if v["in_loop_over_isolated_step_p50"] is not None:
             t[f"default {key}: in_loop_step_within_1_3x"] = v["in_loop_over_isolated_step_p50"] <= 1.3
-        if key == "embedded 1000" and v["misses_over_floor"] is not None:
-            t["default embedded 1000: misses_within_2x_floor"] = v["misses_over_floor"] <= 2.0
+        if key == "embedded 1000" and v["misses_per_10k"] is not None and v["floor_misses_per_10k"] is not None:
+            # (an empty loop that missed none: the loop may miss none either)
+            t["default embedded 1000: misses_within_2x_floor"] = v["misses_per_10k"] <= 2.0 * v["floor_misses_per_10k"]
     pink = ratios.get("pink_over_ours_p50", {})
     if pink:
         t["default: at_least_3x_pink_every_holonomic_robot"] = all((v or 0.0) >= 3.0 for v in pink.values())
