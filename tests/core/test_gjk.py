@@ -209,3 +209,27 @@ def test_tiagos_column_against_its_arm_link_is_gjks_where_a_step_stalls_on_round
     assert "torso_fixed_column_link_0/arm_6_link_0" in names, names
     assert all(a.ok[k] for k in hull_pairs), [n for k, n in zip(hull_pairs, names, strict=True) if not a.ok[k]]
     np.testing.assert_allclose(a.d[hull_pairs], b.d[hull_pairs], atol=1e-9)
+
+
+def test_obstacle_pairs_keep_their_warm_starts_and_the_rows_their_names_until_reset() -> None:
+    """The (obstacle, body) pairs keep GJK's start as the self pairs do (a reset forgets them);
+    a tick's row names stay that tick's when the obstacle set changes afterwards."""
+    from wmm_qp.config import default_config_dir
+    from wmm_qp.limits.collision import warm_up_obstacles
+
+    model = w.WmmModel(w.load_robot_config(default_config_dir() / "robots" / "fr3.toml"))
+    ctl = w.make_controller("qp", model, w.load_controller_config().with_(collision={"enabled": True}))
+    q = ctl.warm_up_configuration()
+    obstacles = warm_up_obstacles(model.ee_position(np.zeros(3), q))
+    ctl.set_obstacles(obstacles)
+    search = next(v for v in vars(ctl.collision).values() if isinstance(v, PairSearch))  # type: ignore[attr-defined]
+    ctl.step(w.RobotState(np.zeros(3), q), w.Reference("hold"))
+    assert (search._warm_solid != 0.0).any(axis=1).sum() >= 3  # the hulls against the box and sphere
+    rows = ctl.last_collision_rows()
+    assert rows is not None
+    names = list(rows.names)
+    assert any(n.endswith("/warm-up sphere") for n in names), names
+    ctl.set_obstacles(list(reversed(obstacles))[:1])  # another set: other indices, one obstacle
+    assert list(rows.names) == names
+    ctl.reset()
+    assert not search._warm_solid.any() and not search._warm.any()

@@ -406,6 +406,11 @@ def test_failures_right_after_windows_lengthen_them_and_daqps_infeasible_verdict
     assert window() == DAQP_FIRST  # ... and a window opened
     mode[0] = "fail"
     solve()  # a window again
+    assert daqp._prev is not None  # DAQP's primal start, kept between its solves ...
+    ctl.reset()
+    assert daqp._prev is None  # ... and forgotten by a reset, as every warm start
+    mode[0] = "fail"
+    solve()  # a window again
     monkeypatch.setattr(daqp, "solve", lambda p: (calls.append("daqp"), QPSolution(z=None, ok=False,
                                                                                     status="infeasible"))[1])
     calls.clear()

@@ -138,7 +138,7 @@ class CollisionRows(DamperRows):
         else:
             out.C, out.l, out.l_brake, out.damper = C[keep], l[keep], l_brake[keep], damper[keep]
             out.distances = dist[keep]
-        out.names = PairNames(self.search.name, body[keep], other[keep])
+        out.names = PairNames(self.search.namer(), body[keep], other[keep])
         inside = np.flatnonzero(dist < safety)
         if inside.shape[0]:
             self._add_inside(out, body[inside], other[inside], safety[inside], q_base, q_arm, v_prev, lb, ub)
@@ -171,8 +171,9 @@ class CollisionRows(DamperRows):
         out.C, out.l = np.vstack((out.C, C)), np.concatenate((out.l, l))
         out.l_brake, out.damper = np.concatenate((out.l_brake, l_brake)), np.concatenate((out.damper, damper))
         out.distances = np.concatenate((out.distances, d))
-        names = out.names if isinstance(out.names, PairNames) else PairNames(self.search.name, body[:0], other[:0])
-        out.names = names + PairNames(self.search.name, body, other)
+        namer = self.search.namer()
+        names = out.names if isinstance(out.names, PairNames) else PairNames(namer, body[:0], other[:0])
+        out.names = names + PairNames(namer, body, other)
 
 
 def warm_up_obstacles(x: FloatArray) -> tuple[ShapeConfig, ...]:

@@ -13,9 +13,9 @@ Which rows the candidates become is :mod:`.collision`'s business.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import overload
+from typing import Any, overload
 
 import coal
 import numpy as np
@@ -182,7 +182,7 @@ class PairNames(Sequence[str]):
     dozens (TIAGo's 48), and only a reason that cites a row reads one.
 
     Args:
-        name: the pair's name of (body, other).
+        name: the pair's name of (body, other) (:meth:`PairSearch.namer`: the tick's obstacles).
         body, other: the pairs, coded as :class:`Candidates`'.
     """
 
@@ -204,6 +204,10 @@ class PairNames(Sequence[str]):
         if not -len(self) <= k < len(self):
             raise IndexError(k)
         return self._name(int(self.body[k]), int(self.other[k]))
+
+    def __iter__(self) -> Iterator[str]:  # (not Sequence's: an IndexError of a name is no end)
+        for k in range(len(self)):
+            yield self[k]
 
     def __add__(self, more: PairNames) -> PairNames:
         return PairNames(self._name, np.concatenate((self.body, more.body)), np.concatenate((self.other, more.other)))
@@ -369,13 +373,13 @@ class PairSearch:
 
     def name(self, body: int, other: int) -> str:
         """A pair's name: "a/b" (bodies), "a/floor", "a/<obstacle id>"."""
-        key = (body, other)
-        name = self._names.get(key)
-        if name is None:
-            bodies = self.geo.bodies
-            rest = bodies[other].name if other >= 0 else "floor" if other == FLOOR else self.obstacles[-2 - other].name
-            name = self._names[key] = f"{bodies[body].name}/{rest}"
-        return name
+        return _pair_name(self.geo.bodies, self.obstacles, self._names, body, other)
+
+    def namer(self) -> Callable[[int, int], str]:
+        """:meth:`name` with this tick's obstacle set: it names the pairs of this tick's candidates
+        whatever set the search holds later (``set_obstacles`` makes a new list and cache)."""
+        bodies, obstacles, cache = self.geo.bodies, self.obstacles, self._names
+        return lambda body, other: _pair_name(bodies, obstacles, cache, body, other)
 
     def _coal(self, a: coal.CollisionGeometry, Ta: coal.Transform3s, b: coal.CollisionGeometry,
               Tb: coal.Transform3s) -> tuple[float, FloatArray, FloatArray, FloatArray]:
@@ -383,6 +387,17 @@ class PairSearch:
         res.clear()
         d = coal.distance(a, Ta, b, Tb, self._req, res)
         return float(d), np.asarray(res.getNearestPoint1()), np.asarray(res.getNearestPoint2()), unit_normal(res)
+
+
+def _pair_name(bodies: Sequence[Any], obstacles: list[Obstacle], cache: dict[tuple[int, int], str], body: int,
+               other: int) -> str:
+    """"a/b" (bodies), "a/floor", "a/<obstacle id>" (``cache``: the names made so far)."""
+    key = (body, other)
+    name = cache.get(key)
+    if name is None:
+        rest = bodies[other].name if other >= 0 else "floor" if other == FLOOR else obstacles[-2 - other].name
+        name = cache[key] = f"{bodies[body].name}/{rest}"
+    return name
 
 
 def unit_normal(res: coal.DistanceResult) -> FloatArray:

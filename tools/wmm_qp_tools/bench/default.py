@@ -75,7 +75,7 @@ def run(cfg: w.ControllerConfig, robot: w.RobotConfig, ticks: int, max_seconds: 
 
 
 def paced(cfg: w.ControllerConfig, robot: w.RobotConfig, rates: tuple[float, ...], ticks: int) -> dict[str, Any]:
-    """The track step with the default rows on the paper's circle, in this process alone: back to
+    """The track step with ``cfg`` (the default: rows on) on the paper's circle, in this process alone: back to
     back, then at each rate r with the thread asleep until the next 1/r deadline between ticks
     (each from the robot's start, a fresh controller). No transport, thread or sim runs: a paced
     step slower than the back-to-back one is the idle CPU's (caches, predictors, clock) cost,
@@ -88,7 +88,7 @@ def paced(cfg: w.ControllerConfig, robot: w.RobotConfig, rates: tuple[float, ...
     out: dict[str, Any] = {"ticks": ticks}
     for r in (None, *rates):
         model = w.WmmModel(robot)
-        ctl = w.make_controller("qp", model, cfg.with_(collision={"enabled": True}))
+        ctl = w.make_controller("qp", model, cfg)  # as the loops run it (the default: rows on)
         ctl.warm_up()
         ctl.set_scene(scene)
         bot = IdealRobot.at_start(model)

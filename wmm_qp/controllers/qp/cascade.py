@@ -9,16 +9,17 @@
    holding the arm: about every other solve ended at proxsuite's iteration cap, and so did its
    cold retry, before DAQP solved it; ``benchmarks/collision/ball_tick.py``), so after the
    configured backend failed on a stage, that stage's next :data:`DAQP_FIRST` solves go to DAQP
-   first. DAQP's verdict that a stage is infeasible stands (it is exact: the stage logic then
-   relaxes its rows); any other DAQP failure in that window ends it (the configured backend then
-   tries the same problem); at its end the configured backend starts again cold. If it fails again on its first
-   solve after a window, the next window is four times as long (up to :data:`DAQP_FIRST_MAX`): on a
-   robot whose rows keep every stage hard (TIAGo's 48 rows at its column) each failure costs the
-   iteration cap twice (~1.5 ms), and a window of fixed length met one every 50 solves. A solve
-   the backend reports hard (``QPSolution.hard``: proxsuite's cold retry after its cap, or at
-   least ``HARD_ITERATIONS`` iterations, 0.3-1.5 ms on those stages) counts as a failure for the
-   windows, its answer kept. An easy success of the configured backend brings the window back to
-   ``DAQP_FIRST``.
+   first. DAQP's verdict that a stage is infeasible stands (it is exact; next to a singularity,
+   where a huge DM term can make it call a barely feasible stage infeasible, the stage logic's
+   relaxation gives a safe, more cautious command); any other DAQP failure in that window ends
+   it (the configured backend then tries the same problem); at its end the configured backend
+   starts again cold. If it fails again on its first solve after a window, the next window is
+   four times as long (up to :data:`DAQP_FIRST_MAX`): on a robot whose rows keep every stage
+   hard (TIAGo's 48 rows at its column) each failure costs the iteration cap twice (~1.5 ms), and
+   a window of fixed length met one every 50 solves. A solve the backend reports hard
+   (``QPSolution.hard``: proxsuite's cold retry after its cap, or at least ``HARD_ITERATIONS``
+   iterations, 0.6-1.5 ms on those stages) counts as a failure for the windows, its answer kept.
+   An easy success of the configured backend brings the window back to ``DAQP_FIRST``.
 4. The answer clipped to the box bounds: a no-op for exact solvers, the guarantee for iterative
    solvers' tolerances.
 5. Strict priority: the slack's exact penalty keeps s = 0 only while ρ₁ exceeds the task's
@@ -90,6 +91,8 @@ class SolveCascade(Controller):
     def reset(self) -> None:
         self._arm.reset()
         self._full.reset()
+        if self._fallback is not None:  # its primal start too: a reset forgets every warm start
+            self._fallback.reset()
         self._daqp_first.clear()
         self._window.clear()
         self._after_window.clear()
@@ -139,6 +142,7 @@ class SolveCascade(Controller):
             self.daqp_first += int(sol.ok)
             if (not sol.ok or sol.z is None) and sol.status != "infeasible":
                 self._daqp_first[key] = 0  # DAQP failed (not its exact verdict): the window ends here
+                self._after_window.add(key)  # (the configured backend failing next grows the next one)
                 sol = backend.solve(problem)
         else:
             sol = backend.solve(problem)
