@@ -204,7 +204,7 @@ def test_serve_tracks_through_the_driver_and_resumes_after_the_robot_braked_in_i
             x0 = np.array(info.status.x)
             assert c.resume("track", timeout=20), (tmp_path / "serve.log").read_text()
             k = _follow(c, x0, 3.0, 0)
-            st = _hold_until_moved(c, x0 + [0.0, 0.05 * np.sin(0.005 * k), 0.0], x0, 0.02, 15.0)
+            st = _hold_until_moved(c, x0 + [0.0, 0.05 * np.sin(0.005 * k), 0.0], x0, 0.02, 60.0)
             assert st is not None and abs(st.status.x[1] - x0[1]) > 0.02, (st, x0)
             os.kill(procs["serve"].pid, signal.SIGSTOP)  # the daemon freezes: no command for 0.3 s
             time.sleep(0.3)
@@ -246,7 +246,9 @@ def test_a_libfranka_reflex_is_a_protective_stop_the_arm_brakes_and_a_mode_messa
             x0 = np.array(info.status.x)
             assert c.resume("track", timeout=20), (tmp_path / "serve.log").read_text()
             q_start = sim.q()
-            k = _follow(c, x0, 1.0, 0)
+            k, t_end = 0, time.monotonic() + 30.0  # (a loaded host moves it slower: the motion, not its speed)
+            while np.max(np.abs(sim.q() - q_start)) <= 0.005 and time.monotonic() < t_end:
+                k = _follow(c, x0, 0.5, k)
             assert np.max(np.abs(sim.q() - q_start)) > 0.005, "the arm did not move before the reflex"
             stops = c.latest_state().protective_stops  # type: ignore[union-attr]
             sim.trip.set()  # the reflex, while the arm moves
