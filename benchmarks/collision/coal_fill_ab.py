@@ -9,14 +9,13 @@ The "before" is replayed here for the robot and the floor (the default scene has
 
 from __future__ import annotations
 
-import argparse
 import time
 import types
 from typing import Any
 
 import coal
 import numpy as np
-from wmm_qp_tools.bench.collision import IdealRobot, circle, rows_on_the_default_scene
+from wmm_qp_tools.bench.collision import IdealRobot, circle, robot_and_ticks, rows_on_the_default_scene
 
 import wmm_qp as w
 import wmm_qp.limits.pair_search as ps
@@ -47,10 +46,7 @@ def old_fill(self: ps.PairSearch, n: int, Rb: Any, tb: Any) -> None:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("robot_config")
-    ap.add_argument("--ticks", type=int, default=3000)
-    a = ap.parse_args()
+    a = robot_and_ticks(__doc__)
     model, on, search = rows_on_the_default_scene(a.robot_config)
     bot = IdealRobot.at_start(model)
     x0 = model.ee_position(bot.q_base, bot.q_arm)

@@ -12,26 +12,26 @@ the hulls left to coal, rows off; their p50 and p99 and the ratios.
 
 from __future__ import annotations
 
-import argparse
 import time
 
 import numpy as np
-from wmm_qp_tools.bench.collision import IdealRobot, circle, load_scene, rows_on_the_default_scene
+from wmm_qp_tools.bench.collision import (
+    IdealRobot,
+    circle,
+    coal_search,
+    leave_to_coal,
+    load_scene,
+    robot_and_ticks,
+    rows_on_the_default_scene,
+)
 
 import wmm_qp as w
-import wmm_qp.limits.pair_search as ps
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("robot_config")
-    ap.add_argument("--ticks", type=int, default=3000)
-    a = ap.parse_args()
+    a = robot_and_ticks(__doc__)
     model, on, gjk = rows_on_the_default_scene(a.robot_config)
-    coal_only = ps.PairSearch(gjk.geo, gjk.p)
-    coal_only.set_obstacles(gjk.shapes)
-    for t in (coal_only._shapes, coal_only.placed):  # the hulls as kind 2: coal's, one pair at a time
-        t.kind[t.kind == 3] = 2
+    coal_only = coal_search(gjk)  # the hulls to coal, one pair at a time
     hulls = int((gjk._shapes.kind == 3).sum())
     bot = IdealRobot.at_start(model)
     x0 = model.ee_position(bot.q_base, bot.q_arm)
@@ -68,9 +68,7 @@ def ticks(model: w.WmmModel, n: int) -> None:
         ctl.warm_up()
         if name != "off":
             ctl.set_scene(load_scene())  # type: ignore[attr-defined]
-    s = next(v for v in vars(ctls["coal"].collision).values() if isinstance(v, ps.PairSearch))  # type: ignore[attr-defined]
-    for t in (s._shapes, s.placed):
-        t.kind[t.kind == 3] = 2
+    leave_to_coal(ctls["coal"].collision.search)  # type: ignore[attr-defined]
     bot = IdealRobot.at_start(model)
     x0 = model.ee_position(bot.q_base, bot.q_arm)
     times: dict[str, list[int]] = {k: [] for k in ctls}

@@ -10,10 +10,11 @@ import coal
 import numpy as np
 import pinocchio as pin
 import pytest
+from wmm_qp_tools.bench.collision import coal_search
 
 import wmm_qp as w
 from wmm_qp.limits import _gjk as G  # noqa: N812
-from wmm_qp.limits.pair_search import PairSearch, Table
+from wmm_qp.limits.pair_search import Table
 from wmm_qp.model.collision import convex_hull
 
 REQ = coal.DistanceRequest()
@@ -132,12 +133,10 @@ def test_the_pair_search_with_gjk_gives_coals_candidates(robot: str) -> None:
     model = w.WmmModel(w.load_robot_config(default_config_dir() / "robots" / robot))
     ctl = w.make_controller("qp", model, w.load_controller_config().with_(collision={"enabled": True}))
     ctl.set_scene(load_scene())
-    gjk = next(v for v in vars(ctl.collision).values() if isinstance(v, PairSearch))  # type: ignore[attr-defined]
-    coal_only = PairSearch(gjk.geo, gjk.p)
-    coal_only.set_obstacles(gjk.shapes)
-    coal_only._req.gjk_tolerance = 1e-12  # coal's default 1e-6 leaves its normals ~1e-3 off at 1 cm
-    for t in (coal_only._shapes, coal_only.placed):  # hulls and boxes to coal (a box's capsules: compiled)
-        t.kind[(t.kind == 3) | (t.kind == 1)] = 2
+    gjk = ctl.collision.search  # type: ignore[attr-defined]
+    # hulls and boxes to coal (a box's capsules: compiled); coal's default GJK tolerance, 1e-6,
+    # leaves its normals ~1e-3 off at 1 cm
+    coal_only = coal_search(gjk, kinds=(3, 1), gjk_tolerance=1e-12)
     assert (gjk._shapes.kind == 3).sum() >= 9
     arm = model.arm
     rng = np.random.default_rng(2)
@@ -194,11 +193,8 @@ def test_tiagos_column_against_its_arm_link_is_gjks_where_a_step_stalls_on_round
 
     model = w.WmmModel(w.load_robot_config(default_config_dir() / "robots" / "tiago.toml"))
     ctl = w.make_controller("qp", model, w.load_controller_config().with_(collision={"enabled": True}))
-    search = next(v for v in vars(ctl.collision).values() if isinstance(v, PairSearch))  # type: ignore[attr-defined]
-    coal_only = PairSearch(search.geo, search.p)
-    coal_only._req.gjk_tolerance = 1e-12
-    for t in (coal_only._shapes, coal_only.placed):
-        t.kind[t.kind == 3] = 2
+    search = ctl.collision.search  # type: ignore[attr-defined]
+    coal_only = coal_search(search, gjk_tolerance=1e-12)
     q = [0.16785213350729672, 0.42460319762495263, -1.3691945807292063, -0.3332646455706371, 1.6772312133895007,
          -1.7939971571707616, 0.5741980904734524, 5.551984119496981e-16]
     pin.forwardKinematics(model.arm.model, model.arm.data, np.array(q))
@@ -222,7 +218,7 @@ def test_obstacle_pairs_keep_their_warm_starts_and_the_rows_their_names_until_re
     q = ctl.warm_up_configuration()
     obstacles = warm_up_obstacles(model.ee_position(np.zeros(3), q))
     ctl.set_obstacles(obstacles)
-    search = next(v for v in vars(ctl.collision).values() if isinstance(v, PairSearch))  # type: ignore[attr-defined]
+    search = ctl.collision.search  # type: ignore[attr-defined]
     ctl.step(w.RobotState(np.zeros(3), q), w.Reference("hold"))
     assert (search._warm_solid != 0.0).any(axis=1).sum() >= 3  # the hulls against the box and sphere
     rows = ctl.last_collision_rows()

@@ -15,6 +15,7 @@ and the sim's step on the same commands with its referee's motion budget and wit
 
 from __future__ import annotations
 
+import argparse
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -39,8 +40,37 @@ def rows_on_the_default_scene(robot_config: str | Path) -> tuple[w.WmmModel, Any
     on = w.make_controller("qp", model, w.load_controller_config().with_(collision={"enabled": True}))
     on.warm_up()
     on.set_scene(load_scene())
-    search = next(v for v in vars(on.collision).values() if isinstance(v, PairSearch))  # type: ignore[attr-defined]
+    search: PairSearch = on.collision.search  # type: ignore[attr-defined]
     return model, on, search
+
+
+def robot_and_ticks(doc: str) -> argparse.Namespace:
+    """The collision benchmarks' arguments: ``robot_config`` and ``--ticks`` (3000)."""
+    ap = argparse.ArgumentParser(description=doc.split("\n\n")[0])
+    ap.add_argument("robot_config")
+    ap.add_argument("--ticks", type=int, default=3000)
+    return ap.parse_args()
+
+
+def leave_to_coal(search: Any, kinds: tuple[int, ...] = (3,)) -> None:
+    """``search`` (a :class:`~wmm_qp.limits.pair_search.PairSearch`) leaves its primitives of
+    ``kinds`` (3 the hulls, 1 the boxes) to coal, one pair at a time: the reference its compiled
+    distances are checked and timed against."""
+    for t in (search._shapes, search.placed):
+        t.kind[np.isin(t.kind, kinds)] = 2
+
+
+def coal_search(search: Any, kinds: tuple[int, ...] = (3,), gjk_tolerance: float | None = None) -> Any:
+    """A search of ``search``'s geometry, parameters and obstacles that leaves ``kinds`` to coal
+    (:func:`leave_to_coal`), coal's GJK at ``gjk_tolerance`` where given."""
+    from wmm_qp.limits.pair_search import PairSearch
+
+    out = PairSearch(search.geo, search.p)
+    out.set_obstacles(search.shapes)
+    if gjk_tolerance is not None:
+        out._req.gjk_tolerance = gjk_tolerance
+    leave_to_coal(out, kinds)
+    return out
 
 
 def bench_scene(x0: np.ndarray) -> w.scene.Scene:
