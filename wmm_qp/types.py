@@ -85,7 +85,8 @@ class RobotState:
         )
 
     def is_finite(self) -> bool:
-        return all(all_finite(a) for a in (self.q_base, self.q_arm, self.v_arm, self.wheel_speeds))
+        return (all_finite(self.q_base) and all_finite(self.q_arm) and all_finite(self.v_arm)
+                and all_finite(self.wheel_speeds))
 
 
 @dataclass(slots=True)

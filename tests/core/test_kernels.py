@@ -5,12 +5,18 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 import pytest
-from support.core_fixtures import Q0, config, model
+from support.core_fixtures import Q0, config, model, random_arm_q
 
 import wmm_qp as w
 from wmm_qp import _jit
+from wmm_qp.controllers.qp.stage_rows import RowGroup, StageRows
+from wmm_qp.controllers.qp.stages import _saturated
 from wmm_qp.limits import joint_motion_bounds
+from wmm_qp.limits.ee_box import EeBox
+from wmm_qp.limits.rows import Rows
+from wmm_qp.solvers import INF
 
 
 def test_a_state_whose_arrays_were_replaced_with_wrong_shapes_is_a_safe_stop() -> None:
@@ -78,3 +84,81 @@ def test_without_a_writable_cache_the_kernels_compile_in_memory(monkeypatch: pyt
     monkeypatch.setattr(_jit, "njit", fake_njit)
     f = _jit.jit(lambda x: x + 1)
     assert f(1) == 2 and calls == [True, False]
+
+
+def test_the_rows_read_pinocchios_joint_placements_and_jacobians_of_this_tick() -> None:
+    """The pair search keeps references to the arm data's joint placements and the rows the array of
+    its joint Jacobians, fetched once: each must hold the values of the last kinematics (a
+    Pinocchio that handed out copies would leave the rows on the first tick's)."""
+    ctl = w.QpController(model(), w.load_controller_config())
+    assert ctl.collision is not None
+    arm, search = model().arm, ctl.collision.search
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        q = random_arm_q(rng)
+        ctl.step(w.RobotState(np.zeros(3), q), w.Reference("hold"))
+        assert np.array_equal(ctl.collision._Jw, np.asarray(arm.data.J))
+        fresh = arm.model.createData()
+        pin.computeJointJacobians(arm.model, fresh, arm.pin_q(q))
+        assert np.allclose(ctl.collision._Jw, fresh.J, atol=1e-12)
+        for M, j in zip(search._placements, search._joint_ids, strict=True):
+            assert np.allclose(M.homogeneous, fresh.oMi[j].homogeneous, atol=1e-12)
+
+
+def _for_the_arm_reference(C: np.ndarray, damper: np.ndarray, u: np.ndarray, n_w: int, held: np.ndarray,
+                           lb: np.ndarray, ub: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """StageRows.for_the_arm as numpy wrote it before it was compiled."""
+    u = np.minimum(u, INF)
+    Ca, share = C[:, n_w:], C[:, :n_w] @ held
+    best = np.sum(np.where(Ca > 0.0, Ca * ub, Ca * lb), axis=1)
+    return Ca, np.minimum(damper, best + share) - share, np.where(u >= INF, INF, u - share)
+
+
+def test_the_arms_rows_compiled_equal_their_numpy_formula() -> None:
+    rng = np.random.default_rng(5)
+    for groups in (1, 2, 3):
+        n_w, n_a = 4, 7
+        parts = []
+        for g in range(groups):
+            k = int(rng.integers(1, 6))
+            r = Rows(rng.normal(size=(k, n_w + n_a)), rng.normal(size=k), damper=rng.normal(size=k))
+            if g == 1:  # one source with upper bounds, some of them none (+inf)
+                r.u = np.where(rng.random(k) < 0.5, np.inf, rng.normal(size=k) + 2.0)
+            parts.append(r)
+        rows = object.__new__(StageRows)
+        rows.groups = [RowGroup(EeBox(np.zeros(3), np.ones(3), 0.002), r) for r in parts]
+        rows.n = sum(r.n for r in parts)
+        held, lb = rng.normal(size=n_w), -rng.random(n_a)
+        ub = rng.random(n_a)
+        C_out, l_out, u_out = np.zeros((rows.n, n_a + 6)), np.zeros(rows.n), np.zeros(rows.n)
+        rows.for_the_arm(n_w, held, lb, ub, C_out, l_out, u_out)
+        C = np.vstack([r.C for r in parts])
+        Ca, l, u = _for_the_arm_reference(C, np.concatenate([r.damper for r in parts]),
+                                          np.concatenate([r.upper() for r in parts]), n_w, held, lb, ub)
+        assert np.array_equal(C_out[:, :n_a], Ca) and not C_out[:, n_a:].any()
+        assert np.allclose(l_out, l, rtol=0, atol=1e-14) and np.allclose(u_out, u, rtol=0, atol=1e-14)
+        assert np.array_equal(u_out == INF, u == INF)
+        assert (u_out == INF).any() or groups == 1
+
+
+def test_the_track_velocity_compiled_equals_the_general_path() -> None:
+    """The position task's ẋ_ref with a target, in one compiled call, against the general path
+    (linear_velocity, its error saturated, the whole capped): plain tracking, a saturated error and a
+    capped feed-forward."""
+    ctl = w.QpController(model(), config())
+    state = w.RobotState(np.zeros(3), Q0)
+    ctx = ctl.context(state, w.Reference("track"), need_gradient=False)
+    x = ctx.kin.x
+    qp = ctl.config.qp
+    cases = [(x + 1e-3, np.array([0.01, 0.0, 0.0])), (x + np.array([2.0, 0.0, 0.5]), np.zeros(3)),
+             (x, np.array([0.0, 50.0, 0.0])), (x - 0.3, np.array([0.2, -0.1, 0.05]))]
+    for mode in ("track", "hold", "dm_nullspace"):
+        for x_d, xd_d in cases:
+            ref = w.Reference(mode, x_d=x_d, xd_d=xd_d)
+            got = ctl.reference_velocity(ctx, ref)
+            lin = _saturated(ctl.linear_velocity(ctx, ref), ref.xd_d, qp.recovery_speed)
+            n = float(np.linalg.norm(lin))
+            want = lin * (qp.task_speed_max / n) if n > qp.task_speed_max else lin
+            assert np.allclose(got, want, rtol=1e-15, atol=1e-15), (mode, got, want)
+    saturated = ctl.reference_velocity(ctx, w.Reference("track", x_d=x + np.array([2.0, 0.0, 0.5])))
+    assert np.linalg.norm(saturated) == pytest.approx(min(qp.recovery_speed, qp.task_speed_max))

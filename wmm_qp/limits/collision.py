@@ -70,6 +70,9 @@ class CollisionRows(DamperRows):
         self.search = PairSearch(geometry, params)
         self.inside = InsidePairs(geometry, self.M, dt)
         bodies = geometry.bodies
+        # the joints' Jacobians (Pinocchio's data.J), fetched once: the array shares the arm data's
+        # memory, so it holds the values of the last computeJointJacobians (~1.5 µs a tick saved)
+        self._Jw = np.asarray(geometry.arm.data.J)
         model = geometry.arm.model  # support[j, k]: joint j moves with the velocity column k
         self._support = np.zeros((model.njoints, model.nv))
         for j in range(1, model.njoints):
@@ -114,33 +117,33 @@ class CollisionRows(DamperRows):
         p, d_i = self.p, self.p.influence_distance
         n_v = self.n_w + self.n_a
         found = self.search.search(q_base)
-        out = Rows(np.zeros((0, n_v)), np.zeros(0))
         if not found.n:
-            return out
-        C, dist, safety, body, other, normal, keys, closest = _assemble(
+            return Rows(np.zeros((0, n_v)), np.zeros(0))
+        C, dist, safety, body, other, normal, keys, closest, n_inside = _assemble(
             found.d, found.p_a, found.p_b, found.normal, found.body, found.other, found.safety, found.n, d_i,
-            MAX_ROWS, n_v, np.asarray(self.geo.arm.data.J), self._support, self._body_joint, self.M, self.n_w,
+            MAX_ROWS, n_v, self._Jw, self._support, self._body_joint, self.M, self.n_w,
             self._body_link, self._n_links, len(self.search.obstacles))
+        min_distance, nearest = math.inf, ""
         if closest >= 0:
-            out.min_distance = float(found.d[closest])
-            out.closest = self.search.name(int(found.body[closest]), int(found.other[closest]))
+            min_distance = float(found.d[closest])
+            nearest = self.search.name(int(found.body[closest]), int(found.other[closest]))
         m = dist.shape[0]
         if not m:
-            return out
+            return Rows(np.zeros((0, n_v)), np.zeros(0), min_distance=min_distance, closest=nearest)
         shift = self._obstacle_shift(normal, other)
         l, l_brake, damper = damper_bounds(C, v_prev, lb, ub, dist, safety, d_i, p.gain, self.latency, shift,
                                            self._accel, p.braking, np.zeros(m))
         # two bodies of one pair of links: one row where they are parallel (the key: link a, and
         # link b, the floor or the obstacle)
         keep = _distinct_rows(C, l, keys)
-        if keep.shape[0] == C.shape[0]:  # nothing merged: keep is 0, 1, …
-            out.C, out.l, out.l_brake, out.damper, out.distances = C, l, l_brake, damper, dist
+        if keep.shape[0] == m:  # nothing merged: keep is 0, 1, …
+            out = Rows(C, l, l_brake, damper, PairNames(self.search.namer(), body, other), dist, min_distance,
+                       nearest)
         else:
-            out.C, out.l, out.l_brake, out.damper = C[keep], l[keep], l_brake[keep], damper[keep]
-            out.distances = dist[keep]
-        out.names = PairNames(self.search.namer(), body[keep], other[keep])
-        inside = np.flatnonzero(dist < safety)
-        if inside.shape[0]:
+            out = Rows(C[keep], l[keep], l_brake[keep], damper[keep],
+                       PairNames(self.search.namer(), body[keep], other[keep]), dist[keep], min_distance, nearest)
+        if n_inside:  # the pairs inside d_s (every one has a row, before the merge: _assemble)
+            inside = np.flatnonzero(dist < safety)
             self._add_inside(out, body[inside], other[inside], safety[inside], q_base, q_arm, v_prev, lb, ub)
         return out
 
@@ -200,11 +203,12 @@ def _assemble(
     d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, body: IntArray, other: IntArray, safety: FloatArray,
     n: int, d_i: float, max_rows: int, n_v: int, Jw: FloatArray, support: FloatArray, bj: IntArray,
     M: FloatArray, n_w: int, body_link: IntArray, n_links: int, n_obstacles: int,
-) -> tuple[FloatArray, FloatArray, FloatArray, IntArray, IntArray, FloatArray, IntArray, int]:
+) -> tuple[FloatArray, FloatArray, FloatArray, IntArray, IntArray, FloatArray, IntArray, int, int]:
     """Of the n candidates: the closest (its index, −1 if none), and the rows of those within d_i,
     the nearest to their safety distance first, at most ``max_rows`` of them but every one inside
     its safety distance (MAX_ROWS): (C, D, DS, IA, IB, n̂, the rows' keys for :func:`_distinct_rows`
-    (link a and the other side's link, the floor or the obstacle), the closest's index); the
+    (link a and the other side's link, the floor or the obstacle), the closest's index, how many
+    rows are inside their safety distance); the
     candidates as :mod:`._pair_passes` gives them (d, P, Q, N, body, other, safety)."""
     best_k, best = -1, math.inf
     for k in range(n):
@@ -237,7 +241,7 @@ def _assemble(
         keys[t] = body_link[IA[t]] * (n_links + 2 + n_obstacles) + side
     C = np.zeros((m, n_v))
     _point_rows(Jw, support, bj, IA, IB, PA, PB, NN, M, n_w, C)
-    return C, D, DSo, IA, IB, NN, keys, best_k
+    return C, D, DSo, IA, IB, NN, keys, best_k, inside
 
 
 @jit

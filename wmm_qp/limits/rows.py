@@ -14,6 +14,7 @@ again with them relaxed further (``l_brake``): the dampers together, to their jo
 
 from __future__ import annotations
 
+import copy
 import enum
 import math
 from abc import ABC, abstractmethod
@@ -78,11 +79,16 @@ class Rows:
     @staticmethod
     def stack(parts: list[Rows], n_v: int) -> Rows:
         """One Rows of several, in order; ``min_distance``, ``closest``: the nearest part's. A part
-        that is the only one with rows and the nearest is returned as it is."""
+        that is the only one with rows and the nearest is returned as it is; the only one with
+        rows but not the nearest, as a copy that shares its arrays and names."""
         nearest = min(parts, key=lambda r: r.min_distance) if parts else Rows(np.zeros((0, n_v)), np.zeros(0))
         full = [r for r in parts if r.l.shape[0]]
         if not full or (len(full) == 1 and full[0] is nearest):
             return nearest
+        if len(full) == 1:
+            out = copy.copy(full[0])
+            out.min_distance, out.closest = nearest.min_distance, nearest.closest
+            return out
         out = Rows(np.vstack([r.C for r in full]), np.concatenate([r.l for r in full]),
                    l_brake=np.concatenate([r.l_brake for r in full]), damper=np.concatenate([r.damper for r in full]),
                    names=[name for r in full for name in r.names],

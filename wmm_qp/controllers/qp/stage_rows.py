@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..._jit import jit
 from ..._typing import BoolArray, FloatArray
 from ...limits.rows import Retry, Rows, RowSource
 from ...solvers import INF
@@ -84,19 +85,21 @@ class StageRows:
             u = np.concatenate([g.rows.upper() for g in self.groups])
         return C, np.maximum(l, -INF), np.minimum(u, INF)
 
-    def for_the_arm(self, n_wheels: int, held: FloatArray, lb: FloatArray,
-                    ub: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    def for_the_arm(self, n_wheels: int, held: FloatArray, lb: FloatArray, ub: FloatArray, C_out: FloatArray,
+                    l_out: FloatArray, u_out: FloatArray) -> None:
         """(C_arm, l, u) of every row with the wheels held at ``held``, for the arm alone inside its
-        bounds lb ≤ v_m ≤ ub: each row's own bound (``damper``) relaxed to what the arm alone can
-        do, l ← min(damper, max C_arm v_m + C_w w) − C_w w, the upper bound moved by the wheels'
-        share, u ← u − C_w w (+INF stays)."""
-        C = self.groups[0].rows.C if len(self.groups) == 1 else np.vstack([g.rows.C for g in self.groups])
-        damper = np.concatenate([g.rows.damper for g in self.groups]) if len(self.groups) > 1 else \
-            self.groups[0].rows.damper
-        u = np.minimum(np.concatenate([g.rows.upper() for g in self.groups]), INF)
-        Ca, share = C[:, n_wheels:], C[:, :n_wheels] @ held
-        best = np.sum(np.where(Ca > 0.0, Ca * ub, Ca * lb), axis=1)
-        return Ca, np.minimum(damper, best + share) - share, np.where(u >= INF, INF, u - share)
+        bounds lb ≤ v_m ≤ ub, into ``C_out`` (its first n_arm columns), ``l_out``, ``u_out``: each
+        row's own bound (``damper``) relaxed to what the arm alone can do,
+        l ← min(damper, max C_arm v_m + C_w w) − C_w w, the upper bound moved by the wheels' share,
+        u ← u − C_w w (+INF stays). One compiled call (:func:`_rows_for_the_arm`)."""
+        if len(self.groups) == 1:  # the common case (the dampers' pool alone): its arrays as they are
+            r = self.groups[0].rows
+            C, damper, u = r.C, r.damper, r.u
+        else:
+            C = np.vstack([g.rows.C for g in self.groups])
+            damper = np.concatenate([g.rows.damper for g in self.groups])
+            u = np.concatenate([g.rows.upper() for g in self.groups])
+        _rows_for_the_arm(C, damper, NO_UPPER if u is None else u, n_wheels, held, lb, ub, C_out, l_out, u_out)
 
     # ------------------------------------------------------------------ when the rows exclude each other
     @property
@@ -157,3 +160,26 @@ class StageRows:
             if why:
                 return why
         return "the bounds cut the task (best effort)"
+
+
+NO_UPPER = np.zeros(0)  # _rows_for_the_arm's u of rows without an upper bound (read only)
+NO_UPPER.setflags(write=False)
+
+
+@jit
+def _rows_for_the_arm(C: FloatArray, damper: FloatArray, u: FloatArray, n_w: int, held: FloatArray, lb: FloatArray,
+                      ub: FloatArray, C_out: FloatArray, l_out: FloatArray, u_out: FloatArray) -> None:
+    """:meth:`StageRows.for_the_arm` compiled (u empty: no row has an upper bound)."""
+    m, n_v = C.shape
+    for k in range(m):
+        share = 0.0  # C_w w: the held wheels' share
+        for j in range(n_w):
+            share += C[k, j] * held[j]
+        best = 0.0  # max C_arm v_m over lb ≤ v_m ≤ ub
+        for i in range(n_v - n_w):
+            c = C[k, n_w + i]
+            C_out[k, i] = c
+            best += c * ub[i] if c > 0.0 else c * lb[i]
+        l_out[k] = min(damper[k], best + share) - share
+        hi = min(u[k], INF) if u.shape[0] else INF
+        u_out[k] = INF if hi >= INF else hi - share

@@ -41,6 +41,7 @@ import math
 
 import numpy as np
 
+from ..._jit import jit
 from ..._typing import FloatArray
 from ...config import ControllerConfig
 from ...manipulability.preference import dm_preference_gain
@@ -62,6 +63,26 @@ def _saturated(v: FloatArray, feedforward: FloatArray, limit: float) -> FloatArr
     fb = v - feedforward
     e = math.sqrt(float(fb @ fb))
     return feedforward + fb * (limit / e) if e > limit else v
+
+
+@jit
+def _track_velocity(xd_d: FloatArray, x_d: FloatArray, x: FloatArray, K_x: float, recovery: float,
+                    cap: float) -> FloatArray:
+    """:meth:`QpStages.reference_velocity` of the position task with a target x_d, compiled:
+    ẋ_d + K_x (x_d − x) (eq. (18)), its error term saturated at ``recovery``, then the whole scaled
+    down to the norm ``cap``."""
+    v = np.empty(3)
+    for i in range(3):
+        v[i] = xd_d[i] + K_x * (x_d[i] - x[i])  # eq. (18)
+    e = math.sqrt((v[0] - xd_d[0]) ** 2 + (v[1] - xd_d[1]) ** 2 + (v[2] - xd_d[2]) ** 2)
+    if e > recovery:  # _saturated
+        for i in range(3):
+            v[i] = xd_d[i] + (v[i] - xd_d[i]) * (recovery / e)
+    n = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    if n > cap:
+        for i in range(3):
+            v[i] = v[i] * (cap / n)
+    return v
 
 
 class QpStages(Controller):
@@ -105,10 +126,7 @@ class QpStages(Controller):
         p.g[: self.n_arm] = 0.0
         _add_return_term(ctx.kin.q_arm, arm.position_lower, arm.position_upper, self._return_gain, p.g)
         if rows.n:  # l ≤ C_arm v_m + C_w w_hold ≤ u
-            C, l, u = rows.for_the_arm(self.n_wheels, w_hold, p.lb[: self.n_arm], p.ub[: self.n_arm])
-            p.C[:, : self.n_arm] = C
-            p.l[:] = l
-            p.u[:] = u
+            rows.for_the_arm(self.n_wheels, w_hold, p.lb[: self.n_arm], p.ub[: self.n_arm], p.C, p.l, p.u)
         return p, w_hold
 
     def build(self, ctx: TickContext, xdot: FloatArray, mode: Mode, rows: StageRows, brake: bool = False) -> QPProblem:
@@ -207,6 +225,10 @@ class QpStages(Controller):
         instead of K_x·e (10 m/s per metre), with the base at full speed and the arm at its
         speed limits.
         """
+        if not self.pose and reference.x_d is not None and reference.mode != Mode.DM_CARTESIAN:
+            qp = self.config.qp  # the position task's every tick but the Cartesian DM's: one compiled call
+            return _track_velocity(reference.xd_d, reference.x_d, ctx.kin.x, self.config.K_x, qp.recovery_speed,
+                                   qp.task_speed_max)
         lin = self.linear_velocity(ctx, reference)
         if reference.x_d is not None and reference.mode != Mode.DM_CARTESIAN:
             lin = _saturated(lin, reference.xd_d, self.config.qp.recovery_speed)  # eq. (18)
