@@ -204,12 +204,17 @@ def test_every_robot_with_urdf_geometry_stops_at_the_floor(name: str, solver: st
     assert m.ee_position(sim.base_odom, sim.q_arm)[2] < start_x(name)[2] - 0.1  # it went down
 
 
-@pytest.mark.parametrize("name", ["gen3_mecanum.toml", "panda_diffdrive.toml", "ur5_omni.toml", "tiago.toml"])
+@pytest.mark.parametrize("name", ["gen3_mecanum.toml", "panda_diffdrive.toml", "ur5_omni.toml", "tiago.toml",
+                                  "fr3.toml"])
 def test_no_monitored_pair_starts_inside_the_safety_distance(name: str) -> None:
     """The rows keep the shapes they see (a cylinder: its capsule) d_s apart, so a monitored pair
     deep inside d_s at the start fights every task (it asks ξ (d_s − d)/(d_i − d_s) of separation
-    speed). The Panda's capsules of link1 and link3 were 4.4 cm inside each other (0.3 m/s asked)
-    while the pairs were chosen on the cylinders."""
+    speed), and one just inside it pays the rows' inside-d_s path every tick. The Panda's capsules
+    of link1 and link3 were 4.4 cm inside each other (0.3 m/s asked) while the pairs were chosen on
+    the cylinders; its link3/link5 capsules (2.98 cm) sat just inside d_s until its robot file
+    excluded the pair (links that never come near: benchmarks/collision/pair_reach.py). TIAGo's
+    arm_1/arm_3 hulls start 2.92 cm apart and stay monitored (docs/model.md "pairs": excluding
+    them cost its circle's tracking)."""
     from wmm_qp.model.collision import distance, robot_geometry, row_shape
 
     m = model(name)
@@ -219,9 +224,12 @@ def test_no_monitored_pair_starts_inside_the_safety_distance(name: str) -> None:
     gaps = [(distance(row_shape(b[i].shape), M[i], row_shape(b[j].shape), M[j])[0], b[i].name, b[j].name)
             for i, j in geo.self_pairs]
     assert gaps, "no self pair is monitored"
-    assert min(gaps)[0] > D_S / 2, min(gaps)  # the Panda's link3/link5: 2.8 cm; TIAGo's arm_1/arm_3 2.9
-    if name == "panda_diffdrive.toml":  # excluded, with its reason
+    floor = 0.029 if name == "tiago.toml" else D_S  # TIAGo's arm_1/arm_3: 2.92 cm, never under 2.85
+    assert min(gaps)[0] > floor, min(gaps)
+    if name == "panda_diffdrive.toml":  # excluded, with their reasons
         assert any({a, c} == {"panda_link1_0", "panda_link3_0"} and "random configurations" in why
+                   for a, c, why in geo.excluded), geo.excluded
+        assert any({a, c} == {"panda_link3_0", "panda_link5_0"} and "robot file" in why
                    for a, c, why in geo.excluded), geo.excluded
 
 
