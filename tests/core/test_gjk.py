@@ -69,6 +69,39 @@ def test_hull_distances_agree_with_coal_and_touching_cores_are_left_to_it() -> N
     assert seen["separated"] > 900 and seen["left"] > 20, seen  # both branches ran
 
 
+def test_a_warm_start_from_the_last_simplex_gives_the_cold_distance_as_the_shapes_move() -> None:
+    """Each pair's warm row holds the simplex its last call ended on (its points by their numbers on
+    the shapes): the next call starts there where the shapes are now. Along small random motions
+    (a tick's) and jumps (a reset, a teleport) of hulls, boxes, capsules and spheres, the warm call
+    gives the cold call's distance and coal's; the warm row's simplex is used (its size is set)."""
+    rng = np.random.default_rng(11)
+    p, q, n = np.empty(3), np.empty(3), np.empty(3)
+    p0, q0, n0 = np.empty(3), np.empty(3), np.empty(3)
+    used = compared = 0
+    for k in range(120):
+        A = (hull(rng), coal.Box(*rng.uniform(0.05, 0.3, 3)))[k % 2]
+        B = (hull(rng), coal.Box(*rng.uniform(0.05, 0.3, 3)), coal.Capsule(0.05, 0.2), coal.Sphere(0.05))[k % 4]
+        Ma = pin.SE3(pin.exp3(rng.normal(size=3)), np.zeros(3))
+        Mb = pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(size=3) * 0.3 + np.array([0.6, 0.0, 0.0]))
+        warm = np.zeros((1, G.WARM_WIDTH))
+        for step in range(40):
+            jump = step % 13 == 12
+            scale = 0.5 if jump else 0.01
+            Ma = Ma * pin.SE3(pin.exp3(rng.normal(scale=scale, size=3)), rng.normal(scale=scale * 0.2, size=3))
+            Mb = Mb * pin.SE3(pin.exp3(rng.normal(scale=scale, size=3)), rng.normal(scale=scale * 0.2, size=3))
+            t = table((A, Ma), (B, Mb))
+            used += warm[0, 3] > 0.0
+            d, ok = G.convex_pair(*t.shapes(), 0, *t.shapes(), 1, p, q, n, warm, 0)
+            d0, ok0 = G.convex_pair(*t.shapes(), 0, *t.shapes(), 1, p0, q0, n0, COLD, -1)
+            if not (ok and ok0):
+                continue
+            compared += 1
+            assert d == pytest.approx(d0, abs=2e-6), (k, step, d, d0)
+            assert d == pytest.approx(coal_d(A, Ma, B, Mb), abs=2e-6), (k, step)
+            np.testing.assert_allclose(p - q, d * n, atol=1e-9)
+    assert used > 3000 and compared > 3000, (used, compared)
+
+
 def test_box_distances_agree_with_coal_and_touching_boxes_are_left_to_it() -> None:
     """Two boxes (TIAGo's hand and column, the FR3's fingers): GJK on their corners, as coal's."""
     rng = np.random.default_rng(5)

@@ -47,15 +47,17 @@ point): ‖v‖ then exceeds the cores' distance by at most REL_TOL ‖v‖."""
 @jit
 def support(kind: IntArray, a0: FloatArray, a1: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
             verts: FloatArray, vs: IntArray, vc: IntArray, i: int, dx: float, dy: float, dz: float,
-            out: FloatArray) -> None:
-    """``out`` ← the point of shape i's core farthest along (dx, dy, dz)."""
+            out: FloatArray) -> int:
+    """``out`` ← the point of shape i's core farthest along (dx, dy, dz); returns which point of the
+    shape it is (:func:`point`: a segment's end 0 or 1, a box's corner as three sign bits, a vertex
+    set's vertex index)."""
     k = kind[i]
     if k == 0:
         e0 = a0[i, 0] * dx + a0[i, 1] * dy + a0[i, 2] * dz
         e1 = a1[i, 0] * dx + a1[i, 1] * dy + a1[i, 2] * dz
         src = a0 if e0 >= e1 else a1
         out[0], out[1], out[2] = src[i, 0], src[i, 1], src[i, 2]
-        return
+        return 0 if e0 >= e1 else 1
     # the direction in the shape's frame: Rᵀ d
     lx = R[i, 0, 0] * dx + R[i, 1, 0] * dy + R[i, 2, 0] * dz
     ly = R[i, 0, 1] * dx + R[i, 1, 1] * dy + R[i, 2, 1] * dz
@@ -64,6 +66,7 @@ def support(kind: IntArray, a0: FloatArray, a1: FloatArray, c: FloatArray, R: Fl
         px = h[i, 0] if lx >= 0.0 else -h[i, 0]
         py = h[i, 1] if ly >= 0.0 else -h[i, 1]
         pz = h[i, 2] if lz >= 0.0 else -h[i, 2]
+        which = (lx >= 0.0) + 2 * (ly >= 0.0) + 4 * (lz >= 0.0)
     else:
         best, m = -math.inf, vs[i]
         for t in range(vs[i], vs[i] + vc[i]):
@@ -71,6 +74,29 @@ def support(kind: IntArray, a0: FloatArray, a1: FloatArray, c: FloatArray, R: Fl
             if e > best:
                 best, m = e, t
         px, py, pz = verts[m, 0], verts[m, 1], verts[m, 2]
+        which = m - vs[i]
+    for r in range(3):
+        out[r] = c[i, r] + R[i, r, 0] * px + R[i, r, 1] * py + R[i, r, 2] * pz
+    return which
+
+
+@jit
+def point(kind: IntArray, a0: FloatArray, a1: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
+          verts: FloatArray, vs: IntArray, i: int, which: int, out: FloatArray) -> None:
+    """``out`` ← point ``which`` of shape i's core, as :func:`support` numbers them, where the shape
+    is now."""
+    k = kind[i]
+    if k == 0:
+        src = a0 if which == 0 else a1
+        out[0], out[1], out[2] = src[i, 0], src[i, 1], src[i, 2]
+        return
+    if k == 1:
+        px = h[i, 0] if which & 1 else -h[i, 0]
+        py = h[i, 1] if which & 2 else -h[i, 1]
+        pz = h[i, 2] if which & 4 else -h[i, 2]
+    else:
+        t = vs[i] + which
+        px, py, pz = verts[t, 0], verts[t, 1], verts[t, 2]
     for r in range(3):
         out[r] = c[i, r] + R[i, r, 0] * px + R[i, r, 1] * py + R[i, r, 2] * pz
 
@@ -157,6 +183,47 @@ def _project(W: FloatArray, idx: IntArray, m: int, lam: FloatArray) -> float:
 
 
 @jit
+def _nearest_face(W: FloatArray, n: int, first: int, idx: IntArray, lam: FloatArray,
+                  tl: FloatArray) -> tuple[float, int]:
+    """The face of the simplex W[:n] nearest the origin among those whose mask is ``first`` or more
+    (``first`` = 1 << (n − 1): the faces with the newest point; 1: every face): its squared
+    distance and mask (0: none projects into its hull), its barycentric coordinates into lam."""
+    best, best_mask = math.inf, 0
+    for mask in range(first, 1 << n):
+        m = 0
+        for t in range(n):
+            if mask & (1 << t):
+                idx[m] = t
+                m += 1
+        dd = _project(W, idx, m, tl)
+        if dd < best:
+            best, best_mask = dd, mask
+            for t in range(m):
+                lam[t] = tl[t]
+    return best, best_mask
+
+
+@jit
+def _keep_face(W: FloatArray, SA: FloatArray, SB: FloatArray, IA: IntArray, IB: IntArray, n: int,
+               mask: int) -> int:
+    """The simplex W[:n] (its support points and their numbers) cut down to the face ``mask``, in
+    order; returns its size."""
+    m = 0
+    for t in range(n):
+        if mask & (1 << t):  # t >= m: copying down never overwrites a vertex still to come
+            for r in range(3):
+                W[m, r], SA[m, r], SB[m, r] = W[t, r], SA[t, r], SB[t, r]
+            IA[m], IB[m] = IA[t], IB[t]
+            m += 1
+    return m
+
+
+WARM_WIDTH = 10
+"""A pair's warm start (``warm[w]``): the direction from A's closest point to B's [0:3], the size of
+the last simplex [3] and its points' numbers on A [4:7] and on B [7:10] (:func:`point`)."""
+
+
+@jit
 def gjk(kA: IntArray, a0A: FloatArray, a1A: FloatArray, cA: FloatArray, RA: FloatArray, hA: FloatArray,
         vA: FloatArray, vsA: IntArray, vcA: IntArray, i: int,
         kB: IntArray, a0B: FloatArray, a1B: FloatArray, cB: FloatArray, RB: FloatArray, hB: FloatArray,
@@ -165,11 +232,14 @@ def gjk(kA: IntArray, a0A: FloatArray, a1A: FloatArray, cA: FloatArray, RA: Floa
     """The distance of shape i of A's core to shape j of B's, its closest points into p and q;
     −1 where GJK gives none (cores within :data:`TOUCH` or overlapping, or no convergence).
 
-    ``warm[w]`` (w ≥ 0): the direction from A's closest point to B's found by the last call for
-    this pair, where GJK starts (a pair moves little in a tick: its supports along it are the
-    closest or nearly, and GJK ends in one or two iterations instead of several); updated here.
-    Zero, or w < 0: it starts on the line between the shapes' origins. Either start gives the
-    same distance within GJK's tolerance.
+    ``warm[w]`` (w ≥ 0, :data:`WARM_WIDTH` entries): where the last call for this pair ended, the
+    simplex it ended on (its points by their numbers on the shapes, :func:`point`) and the
+    direction between the closest points. GJK starts from that simplex where the shapes are now (a
+    pair moves little in a tick: it is the closest feature or next to it, and GJK ends after one
+    support step instead of several), else from the direction, else (zero, or w < 0) on the line
+    between the shapes' origins. Any start gives the same distance within GJK's tolerance: every
+    start is points of A − B, and GJK only stops where a support step finds nothing nearer.
+    Updated here.
 
     Three scratch allocations per call (views into them) and scalar arithmetic: an iteration is
     ~100 ns of arithmetic, and an allocation costs about as much."""
@@ -178,28 +248,56 @@ def gjk(kA: IntArray, a0A: FloatArray, a1A: FloatArray, cA: FloatArray, RA: Floa
     sa, sb = buf[12], buf[13]
     coords = np.empty(8)
     lam, tl = coords[:4], coords[4:]  # barycentric coordinates (the best face's, a trial face's)
-    idx = np.empty(4, dtype=np.int64)
-    # the first point: the supports facing each other along the line between the shapes' origins
-    if w >= 0 and (warm[w, 0] != 0.0 or warm[w, 1] != 0.0 or warm[w, 2] != 0.0):
-        dx, dy, dz = warm[w, 0], warm[w, 1], warm[w, 2]
-    else:
-        ax, ay, az = _origin(kA, a0A, a1A, cA, i)
-        bx, by, bz = _origin(kB, a0B, a1B, cB, j)
-        dx, dy, dz = bx - ax, by - ay, bz - az
-    support(kA, a0A, a1A, cA, RA, hA, vA, vsA, vcA, i, dx, dy, dz, sa)
-    support(kB, a0B, a1B, cB, RB, hB, vB, vsB, vcB, j, -dx, -dy, -dz, sb)
-    for r in range(3):
-        W[0, r], SA[0, r], SB[0, r] = sa[r] - sb[r], sa[r], sb[r]
-    vx, vy, vz = W[0, 0], W[0, 1], W[0, 2]
-    n = 1
-    lam[0] = 1.0
-    vv = vx * vx + vy * vy + vz * vz
+    ids = np.empty(12, dtype=np.int64)
+    idx, IA, IB = ids[0:4], ids[4:8], ids[8:12]  # a face's points; the simplex's numbers on A and B
+    n = 0
+    if w >= 0 and warm[w, 3] > 0.0:  # the last simplex, where the shapes are now
+        for t in range(int(warm[w, 3])):
+            a, b = int(warm[w, 4 + t]), int(warm[w, 7 + t])
+            point(kA, a0A, a1A, cA, RA, hA, vA, vsA, i, a, sa)
+            point(kB, a0B, a1B, cB, RB, hB, vB, vsB, j, b, sb)
+            dup = False
+            for u in range(n):
+                if IA[u] == a and IB[u] == b:
+                    dup = True
+            if dup:
+                continue
+            for r in range(3):
+                W[n, r], SA[n, r], SB[n, r] = sa[r] - sb[r], sa[r], sb[r]
+            IA[n], IB[n] = a, b
+            n += 1
+        best, mask = _nearest_face(W, n, 1, idx, lam, tl)
+        if mask == 0 or best < TOUCH * TOUCH:
+            n = 0  # degenerate where the shapes are now: start afresh
+        else:
+            n = _keep_face(W, SA, SB, IA, IB, n, mask)
+            vv = best
+    if n == 0:  # the first point: the supports facing each other along the last direction, or the
+        # line between the shapes' origins
+        if w >= 0 and (warm[w, 0] != 0.0 or warm[w, 1] != 0.0 or warm[w, 2] != 0.0):
+            dx, dy, dz = warm[w, 0], warm[w, 1], warm[w, 2]
+        else:
+            ax, ay, az = _origin(kA, a0A, a1A, cA, i)
+            bx, by, bz = _origin(kB, a0B, a1B, cB, j)
+            dx, dy, dz = bx - ax, by - ay, bz - az
+        IA[0] = support(kA, a0A, a1A, cA, RA, hA, vA, vsA, vcA, i, dx, dy, dz, sa)
+        IB[0] = support(kB, a0B, a1B, cB, RB, hB, vB, vsB, vcB, j, -dx, -dy, -dz, sb)
+        for r in range(3):
+            W[0, r], SA[0, r], SB[0, r] = sa[r] - sb[r], sa[r], sb[r]
+        n = 1
+        lam[0] = 1.0
+        vv = W[0, 0] * W[0, 0] + W[0, 1] * W[0, 1] + W[0, 2] * W[0, 2]
+    vx = vy = vz = 0.0
+    for r in range(n):
+        vx += lam[r] * W[r, 0]
+        vy += lam[r] * W[r, 1]
+        vz += lam[r] * W[r, 2]
     done = False
     for _ in range(MAX_ITERATIONS):
         if vv < TOUCH * TOUCH:
             return -1.0
-        support(kA, a0A, a1A, cA, RA, hA, vA, vsA, vcA, i, -vx, -vy, -vz, sa)
-        support(kB, a0B, a1B, cB, RB, hB, vB, vsB, vcB, j, vx, vy, vz, sb)
+        ia = support(kA, a0A, a1A, cA, RA, hA, vA, vsA, vcA, i, -vx, -vy, -vz, sa)
+        ib = support(kB, a0B, a1B, cB, RB, hB, vB, vsB, vcB, j, vx, vy, vz, sb)
         wx, wy, wz = sa[0] - sb[0], sa[1] - sb[1], sa[2] - sb[2]
         vw = vx * wx + vy * wy + vz * wz
         if vv - vw <= REL_TOL * vv + ABS_TOL:  # w no nearer than v: v is the closest
@@ -216,36 +314,19 @@ def gjk(kA: IntArray, a0A: FloatArray, a1A: FloatArray, cA: FloatArray, RA: Floa
         W[n, 0], W[n, 1], W[n, 2] = wx, wy, wz
         for r in range(3):
             SA[n, r], SB[n, r] = sa[r], sb[r]
+        IA[n], IB[n] = ia, ib
         n += 1
         # the nearest face of the simplex and the barycentric coordinates of v on it: first only
         # the faces with w (bit n − 1). v was the nearest point of the simplex without w and w lies
         # nearer along v (the test above), so moving from v towards w gets nearer: the nearest
         # point of the new simplex has a positive weight on w. Every face only where rounding
         # leaves none of those valid.
-        best, best_mask = math.inf, 0
-        for first in (1 << (n - 1), 1):
-            for mask in range(first, 1 << n):
-                m = 0
-                for t in range(n):
-                    if mask & (1 << t):
-                        idx[m] = t
-                        m += 1
-                dd = _project(W, idx, m, tl)
-                if dd < best:
-                    best, best_mask = dd, mask
-                    for t in range(m):
-                        lam[t] = tl[t]
-            if best_mask:
-                break
+        best, best_mask = _nearest_face(W, n, 1 << (n - 1), idx, lam, tl)
+        if best_mask == 0:
+            best, best_mask = _nearest_face(W, n, 1, idx, lam, tl)
         if best_mask == 0 or (n == 4 and best_mask == 15):
             return -1.0  # no face projects into its hull (degenerate), or the origin is inside
-        m = 0
-        for t in range(n):
-            if best_mask & (1 << t):  # t >= m: copying down never overwrites a vertex still to come
-                for r in range(3):
-                    W[m, r], SA[m, r], SB[m, r] = W[t, r], SA[t, r], SB[t, r]
-                m += 1
-        n = m
+        n = _keep_face(W, SA, SB, IA, IB, n, best_mask)
         new_vv = best
         if not new_vv < vv:  # no progress (rounding in a flat simplex: parallel faces)
             if math.sqrt(new_vv) - lower <= STALL_TOL:  # the face's point is that close to the distance
@@ -271,6 +352,9 @@ def gjk(kA: IntArray, a0A: FloatArray, a1A: FloatArray, cA: FloatArray, RA: Floa
     if w >= 0:
         for c in range(3):
             warm[w, c] = q[c] - p[c]
+        warm[w, 3] = float(n) if n < 4 else 0.0
+        for t in range(min(n, 3)):
+            warm[w, 4 + t], warm[w, 7 + t] = float(IA[t]), float(IB[t])
     return dist
 
 

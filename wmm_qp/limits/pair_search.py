@@ -24,6 +24,7 @@ import pinocchio as pin
 from .._typing import BoolArray, FloatArray, IntArray
 from ..config import CollisionParams, ShapeConfig
 from ..model.collision import RobotGeometry, bounding_sphere, coal_shape, exempt_mask, row_shape, shape_pose, transform
+from ._gjk import WARM_WIDTH
 from ._pair_passes import pairs_kernel, place_kernel, plane_pass, self_pass, solid_pass
 
 FLOOR = -1
@@ -271,8 +272,8 @@ class PairSearch:
             np.zeros(0, dtype=np.int64), Table(0), Table(0), np.zeros(0),
             np.zeros((0, len(bodies)), dtype=bool), [])
         self.candidates = Candidates.room(self._pairs.shape[0] + self._floor_idx.shape[0])
-        self._warm = np.zeros((self._pairs.shape[0], 3))  # GJK's start for each self pair (the last result)
-        self._warm_solid = np.zeros((0, 3))  # ... for each (solid obstacle, body)
+        self._warm = np.zeros((self._pairs.shape[0], WARM_WIDTH))  # GJK's start for each self pair (the last result)
+        self._warm_solid = np.zeros((0, WARM_WIDTH))  # ... for each (solid obstacle, body)
 
     def set_obstacles(self, obstacles: tuple[ShapeConfig, ...] | list[ShapeConfig]) -> None:
         """Replace the obstacle set (atomically: the next tick sees the new set only).
@@ -293,7 +294,7 @@ class PairSearch:
         self._solid = (np.array(solid, dtype=np.int64), world, placed, radii, checked,
                        [k for k, o in enumerate(obs) if o.plane])
         self._solid_joint = np.zeros(len(solid), dtype=np.int64)  # every obstacle placed by the one H
-        self._warm_solid = np.zeros((len(solid) * len(self.geo.bodies), 3))
+        self._warm_solid = np.zeros((len(solid) * len(self.geo.bodies), WARM_WIDTH))
         self.obstacles = obs
         n = self._pairs.shape[0] + self._floor_idx.shape[0] + len(obs) * len(self.geo.bodies)
         self.candidates = Candidates.room(n)
