@@ -160,6 +160,40 @@ def plane_pass(
 
 
 @jit
+def robot_passes(
+    Hj: FloatArray, joint: IntArray, l_a0: FloatArray, l_a1: FloatArray, l_c: FloatArray, l_R: FloatArray,
+    l_centre: FloatArray,
+    kind: IntArray, a0: FloatArray, a1: FloatArray, r: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
+    verts: FloatArray, vs: IntArray, vc: IntArray, centre: FloatArray, radii: FloatArray,
+    pairs: IntArray, pair_r: FloatArray, d_i: float, d_s: float,
+    floor_idx: IntArray, floor_n: FloatArray, floor_o: float, floor_margin: float,
+    d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray, body: IntArray, other: IntArray,
+    safety: FloatArray, warm: FloatArray,
+) -> tuple[int, int]:
+    """A tick's robot-side passes in one call: the bodies placed (:func:`place_kernel`, from the
+    ``l_`` arrays, their frames', into the placed table's), the robot's own pairs
+    (:func:`self_pass`) and the floor (:func:`plane_pass`, code −1) from entry 0. Returns the
+    number of candidates and how many of them the compiled distances left to coal (one dispatch
+    instead of three and a numpy reduction: ~70 arguments unboxed fewer a tick)."""
+    place_kernel(Hj, joint, kind, l_a0, l_a1, l_c, l_R, l_centre, a0, a1, c, R, centre)
+    n = self_pass(kind, a0, a1, r, c, R, h, verts, vs, vc, centre, pairs, pair_r, d_i, d_s,
+                  d, P, Q, N, ok, body, other, safety, 0, warm)
+    n = plane_pass(kind, a0, a1, r, c, R, h, verts, vs, vc, centre, radii, floor_idx, True, floor_n, floor_o,
+                   d_i, -1, floor_margin, d, P, Q, N, ok, body, other, safety, n)
+    return n, left_to_coal(ok, 0, n)
+
+
+@jit
+def left_to_coal(ok: BoolArray, start: int, n: int) -> int:
+    """How many of the candidates start..n−1 the compiled distances left to coal."""
+    left = 0
+    for k in range(start, n):
+        if not ok[k]:
+            left += 1
+    return left
+
+
+@jit
 def solid_pass(
     kind: IntArray, a0: FloatArray, a1: FloatArray, r: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
     verts: FloatArray, vs: IntArray, vc: IntArray, centre: FloatArray, radii: FloatArray,

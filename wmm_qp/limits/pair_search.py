@@ -25,7 +25,7 @@ from .._typing import BoolArray, FloatArray, IntArray
 from ..config import CollisionParams, ShapeConfig
 from ..model.collision import RobotGeometry, bounding_sphere, coal_shape, exempt_mask, row_shape, shape_pose, transform
 from ._gjk import WARM_WIDTH
-from ._pair_passes import pairs_kernel, place_kernel, plane_pass, self_pass, solid_pass
+from ._pair_passes import left_to_coal, pairs_kernel, place_kernel, plane_pass, robot_passes, solid_pass
 
 FLOOR = -1
 """The other side of a candidate against the floor (``Candidates.other``; a body's index ≥ 0,
@@ -313,17 +313,15 @@ class PairSearch:
         Hj = self._Hj
         for k, M in enumerate(self._placements):  # the joints that carry bodies: their placements
             Hj[k] = M.homogeneous
-        place(self._Hj, self._body_joint, self._shapes, self.placed)
-        pl, c = self.placed, self.candidates
+        pl, c, loc = self.placed, self.candidates, self._shapes
         buf = (c.d, c.p_a, c.p_b, c.normal, c.ok, c.body, c.other, c.safety)
-        n = 0
-        if self._pairs.shape[0]:  # robot vs robot (base frame; the base's motion cancels)
-            n = self_pass(*pl.shapes(), pl.centre, self._pairs, self._pair_r, d_i, p.safety_distance, *buf, n,
-                          self._warm)
-        if self._floor_idx.shape[0]:  # robot vs the floor z = floor_z (the same plane in the base frame)
-            n = plane_pass(*pl.shapes(), pl.centre, self._radii, self._floor_idx, True, self._floor_n, self._floor_o,
-                           d_i, FLOOR, p.floor_margin, *buf, n)
+        # the bodies placed, robot vs robot (base frame; the base's motion cancels) and robot vs the
+        # floor z = floor_z (the same plane in the base frame), in one compiled call
+        n, left = robot_passes(Hj, self._body_joint, loc.a0, loc.a1, loc.c, loc.R, loc.centre, *pl.shapes(),
+                               pl.centre, self._radii, self._pairs, self._pair_r, d_i, p.safety_distance,
+                               self._floor_idx, self._floor_n, self._floor_o, p.floor_margin, *buf, self._warm)
         Rb = tb = None
+        n_robot = n
         if self.obstacles:  # robot vs obstacles, in the base frame at this base pose
             cos, sin = math.cos(q_base[2]), math.sin(q_base[2])
             Rb = np.array([[cos, -sin, 0.0], [sin, cos, 0.0], [0.0, 0.0, 1.0]])
@@ -341,7 +339,9 @@ class PairSearch:
                 o.place(Rb, tb)
                 n = plane_pass(*pl.shapes(), pl.centre, self._radii, o.checked_idx, False, o.normal_b, o.offset_b, d_i,
                                -2 - index, p.safety_distance, *buf, n)
-        if n and not c.ok[:n].all():
+        if self.obstacles:
+            left += left_to_coal(c.ok, n_robot, n)
+        if left:
             self._coal_fill(n, Rb, tb)
         c.n = n
         return c
