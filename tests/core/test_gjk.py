@@ -262,3 +262,37 @@ def test_obstacle_pairs_keep_their_warm_starts_and_the_rows_their_names_until_re
     assert list(rows.names) == names
     ctl.reset()
     assert not search._warm_solid.any() and not search._warm.any()
+
+
+def test_the_placements_read_in_place_follow_every_forward_kinematics() -> None:
+    """The pair search reads the joints' placements in Pinocchio's own memory (``placement_table``):
+    along a random walk of TIAGo's arm its candidates equal, bit for bit, those of a search that
+    copies each placement off ``data.oMi`` as before; a view that stops following them (a copy
+    taken once) gives other candidates, and a memory laid out otherwise is refused, not misread."""
+    from wmm_qp.config import default_config_dir
+    from wmm_qp.limits.pair_search import PairSearch, placement_table
+
+    model = w.WmmModel(w.load_robot_config(default_config_dir() / "robots" / "tiago.toml"))
+    ctl = w.make_controller("qp", model, w.load_controller_config().with_(collision={"enabled": True}))
+    in_place = ctl.collision.search  # type: ignore[attr-defined]
+    copied, stale = PairSearch(in_place.geo, in_place.p), PairSearch(in_place.geo, in_place.p)
+    assert in_place._in_place and in_place._oMi.base is not None  # a view, not a copy
+    copied._in_place, copied._oMi = False, np.zeros((0, 12))
+    stale._oMi = np.array(stale._oMi)  # the mutation: the placements as they were once
+    arm, rng = model.arm, np.random.default_rng(5)
+    q = np.array(model.config.arm.start, dtype=float)
+    differs = 0
+    for _ in range(40):
+        q = q + rng.normal(scale=0.1, size=q.shape)
+        pin.computeJointJacobians(arm.model, arm.data, arm.pin_q(q))
+        a, b, s = (x.search(np.zeros(3)) for x in (in_place, copied, stale))
+        assert a.n == b.n and (a.body[:a.n] == b.body[:b.n]).all() and (a.other[:a.n] == b.other[:b.n]).all()
+        assert np.array_equal(a.d[:a.n], b.d[:b.n]) and np.array_equal(a.p_a[:a.n], b.p_a[:b.n])
+        differs += s.n != a.n or not np.array_equal(s.d[:s.n], a.d[:a.n])
+    assert differs > 30
+
+    class Moved:  # each placement but the first in memory of its own, not where a packed SE3 would be
+        def __init__(self, oMi: Any) -> None:
+            self.oMi = [oMi[0]] + [pin.SE3(M) for M in list(oMi)[1:]]
+
+    assert placement_table(Moved(arm.data.oMi)) is None

@@ -161,7 +161,8 @@ def plane_pass(
 
 @jit
 def robot_passes(
-    Hj: FloatArray, joint: IntArray, l_a0: FloatArray, l_a1: FloatArray, l_c: FloatArray, l_R: FloatArray,
+    oMi: FloatArray, joint_id: IntArray, Hj: FloatArray, joint: IntArray,
+    l_a0: FloatArray, l_a1: FloatArray, l_c: FloatArray, l_R: FloatArray,
     l_centre: FloatArray,
     kind: IntArray, a0: FloatArray, a1: FloatArray, r: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
     verts: FloatArray, vs: IntArray, vc: IntArray, centre: FloatArray, radii: FloatArray,
@@ -170,11 +171,20 @@ def robot_passes(
     d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray, body: IntArray, other: IntArray,
     safety: FloatArray, warm: FloatArray,
 ) -> tuple[int, int]:
-    """A tick's robot-side passes in one call: the bodies placed (:func:`place_kernel`, from the
-    ``l_`` arrays, their frames', into the placed table's), the robot's own pairs
+    """A tick's robot-side passes in one call: the joints' placements Hj read from Pinocchio's
+    ``oMi`` (row ``joint_id[k]``: rotation column-major, translation; empty: Hj is current), the
+    bodies placed (:func:`place_kernel`, from the ``l_`` arrays, their frames', into the placed
+    table's), the robot's own pairs
     (:func:`self_pass`) and the floor (:func:`plane_pass`, code −1) from entry 0. Returns the
     number of candidates and how many of them the compiled distances left to coal (one dispatch
     instead of three and a numpy reduction: ~70 arguments unboxed fewer a tick)."""
+    if oMi.shape[0]:
+        for k in range(joint_id.shape[0]):
+            row = oMi[joint_id[k]]
+            for a in range(3):  # (r and R are the shapes' radii and rotations here)
+                for b in range(3):
+                    Hj[k, a, b] = row[a + 3 * b]
+                Hj[k, a, 3] = row[9 + a]
     place_kernel(Hj, joint, kind, l_a0, l_a1, l_c, l_R, l_centre, a0, a1, c, R, centre)
     n = self_pass(kind, a0, a1, r, c, R, h, verts, vs, vc, centre, pairs, pair_r, d_i, d_s,
                   d, P, Q, N, ok, body, other, safety, 0, warm)

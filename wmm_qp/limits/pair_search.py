@@ -84,6 +84,39 @@ def place(Hj: FloatArray, joint: IntArray, local: Table, out: Table) -> None:
                  out.a0, out.a1, out.c, out.R, out.centre)
 
 
+SE3_DOUBLES = 12
+"""A Pinocchio SE3 in memory: its rotation (column-major, 9 doubles), then its translation."""
+
+
+def placement_table(data: Any) -> FloatArray | None:
+    """The joints' placements ``data.oMi`` as one read-only (njoints, 12) view of Pinocchio's own
+    memory, row j: joint j's rotation column by column, then its translation; it follows every
+    forward kinematics, so the compiled pass reads the placements in place instead of Python
+    copying each one a tick. None where the memory is not laid out so (checked here, address by
+    address: consecutive SE3s of 96 bytes, the rotation column-major, the translation after it):
+    the placements are then copied one by one."""
+    oMi = data.oMi
+    n, R0 = len(oMi), oMi[0].rotation
+    size = SE3_DOUBLES * R0.itemsize
+
+    def address(a: np.ndarray) -> int:
+        return int(a.__array_interface__["data"][0])
+
+    start = address(R0)
+    for j in range(n):
+        R, t = oMi[j].rotation, oMi[j].translation
+        if (R.dtype != np.float64 or t.dtype != np.float64 or R.strides != (8, 24) or t.strides != (8,)
+                or address(R) != start + j * size or address(t) != start + j * size + 72):
+            return None
+    table = np.lib.stride_tricks.as_strided(R0, shape=(n, SE3_DOUBLES), strides=(size, R0.itemsize), writeable=False)
+    for j in range(n):  # the values too, as they are now
+        H = oMi[j].homogeneous
+        R = table[j, :9].reshape(3, 3, order="F")
+        if not (np.array_equal(R, H[:3, :3]) and np.array_equal(table[j, 9:], H[:3, 3])):
+            return None
+    return table
+
+
 def _pair_distances(A: Table, first: IntArray, second: IntArray, B: Table, buf: tuple) -> tuple:
     """Distances of A[first[k]] to B[second[k]] into buf = (d, p, q, n, ok) (ok False where coal
     must compute it: touching cores, a capsule whose segment is inside a box)."""
@@ -266,6 +299,11 @@ class PairSearch:
         # arm's data (its values follow every forward kinematics; the data is never replaced), and
         # reading .homogeneous off it costs ~0.25 µs against ~0.65 µs through data.oMi[j] each tick
         self._placements = [geometry.arm.data.oMi[j] for j in self._joint_ids]
+        # or, where Pinocchio's memory allows it, all of them read in place by the compiled pass
+        table = placement_table(geometry.arm.data)
+        self._in_place = table is not None
+        self._oMi = table if table is not None else np.zeros((0, SE3_DOUBLES))
+        self._joint_id = np.array(self._joint_ids, dtype=np.int64)
         self._H_world = np.eye(4)[None].copy()  # world → base frame, refilled each tick
         self._solid_joint = np.zeros(0, dtype=np.int64)
         self._solid: tuple[IntArray, Table, Table, FloatArray, BoolArray, list[int]] = (
@@ -311,15 +349,17 @@ class PairSearch:
         closest points and normal in the candidates' first ``n`` entries."""
         p, d_i = self.p, self.p.influence_distance
         Hj = self._Hj
-        for k, M in enumerate(self._placements):  # the joints that carry bodies: their placements
-            Hj[k] = M.homogeneous
+        if not self._in_place:  # the joints that carry bodies: their placements, one by one
+            for k, M in enumerate(self._placements):
+                Hj[k] = M.homogeneous
         pl, c, loc = self.placed, self.candidates, self._shapes
         buf = (c.d, c.p_a, c.p_b, c.normal, c.ok, c.body, c.other, c.safety)
         # the bodies placed, robot vs robot (base frame; the base's motion cancels) and robot vs the
         # floor z = floor_z (the same plane in the base frame), in one compiled call
-        n, left = robot_passes(Hj, self._body_joint, loc.a0, loc.a1, loc.c, loc.R, loc.centre, *pl.shapes(),
-                               pl.centre, self._radii, self._pairs, self._pair_r, d_i, p.safety_distance,
-                               self._floor_idx, self._floor_n, self._floor_o, p.floor_margin, *buf, self._warm)
+        n, left = robot_passes(self._oMi, self._joint_id, Hj, self._body_joint, loc.a0, loc.a1, loc.c, loc.R,
+                               loc.centre, *pl.shapes(), pl.centre, self._radii, self._pairs, self._pair_r, d_i,
+                               p.safety_distance, self._floor_idx, self._floor_n, self._floor_o, p.floor_margin,
+                               *buf, self._warm)
         Rb = tb = None
         n_robot = n
         if self.obstacles:  # robot vs obstacles, in the base frame at this base pose
