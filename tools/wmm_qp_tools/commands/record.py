@@ -17,11 +17,13 @@ import sys
 import threading
 import time
 import uuid
+from collections import deque
 from pathlib import Path
 from typing import Any
 
 HELP = "record a robot's keys to MCAP (ROS 2 message types) as a client"
 KEYS = ("state", "cmd", "status", "telemetry", "setpoint", "mode", "obstacles")
+RING = 8192  # messages of one key held until written (the oldest dropped beyond)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -92,19 +94,24 @@ def run(args: argparse.Namespace) -> int:
     last_seq, lost = {"state": -1, "cmd": -1}, {"state": 0, "cmd": 0}
     mode = None
     nan4 = np.full(4, math.nan)
-    import zenoh
-
     with open_session(svc, ROLE_CLIENT) as session:
-        # rings (the oldest dropped when this process falls behind): a slow recorder never holds up
-        # a publisher; the lost states and commands show as gaps in their seq
-        subs = {k: session.declare_subscriber(getattr(keys, k), zenoh.handlers.RingChannel(8192)) for k in KEYS}
+        # each message stamped when it arrives (zenoh's thread), not when this loop writes it: a
+        # recorder that falls behind (a busy host) wrote seconds of statuses at one instant, and the
+        # timeline showed a mode for a few milliseconds; rings of 8192 (the oldest dropped when it
+        # falls further behind): a slow recorder never holds up a publisher, and the lost states and
+        # commands show as gaps in their seq
+        rings: dict[str, deque[tuple[int, bytes]]] = {k: deque(maxlen=RING) for k in KEYS}
+
+        def arrival(ring: deque[tuple[int, bytes]]) -> Any:
+            return lambda s: ring.append((time.time_ns(), s.payload.to_bytes()))
+
+        subs = {k: session.declare_subscriber(getattr(keys, k), arrival(rings[k])) for k in KEYS}
         print(f"wmm-qp record: recording {keys.root}/{{{','.join(KEYS)}}} to {path}"
               + (f" for {args.duration:g} s" if args.duration else " (Ctrl-C stops)"), file=sys.stderr, flush=True)
-        def handle(k: str, s: Any) -> None:
+        def handle(k: str, ns: int, payload: bytes) -> None:
             nonlocal bad, mode
-            ns = time.time_ns()
             try:
-                m = decoders[k].decode(s.payload.to_bytes())
+                m = decoders[k].decode(payload)
             except msgspec.DecodeError:
                 bad += 1
                 return
@@ -134,12 +141,10 @@ def run(args: argparse.Namespace) -> int:
         def drain(limit: int) -> bool:
             """At most ``limit`` messages of each key; whether any came."""
             got = False
-            for k, sub in subs.items():
-                for _ in range(limit):
-                    if (s := sub.try_recv()) is None:
-                        break
+            for k, ring in rings.items():
+                for _ in range(min(limit, len(ring))):
                     got = True
-                    handle(k, s)
+                    handle(k, *ring.popleft())
             return got
 
         last_say = time.monotonic()
