@@ -101,8 +101,41 @@ def test_the_rows_read_pinocchios_joint_placements_and_jacobians_of_this_tick() 
         fresh = arm.model.createData()
         pin.computeJointJacobians(arm.model, fresh, arm.pin_q(q))
         assert np.allclose(ctl.collision._Jw, fresh.J, atol=1e-12)
-        for M, j in zip(search._placements, search._joint_ids, strict=True):
+        for k, (M, j) in enumerate(zip(search._placements, search._joint_ids, strict=True)):
             assert np.allclose(M.homogeneous, fresh.oMi[j].homogeneous, atol=1e-12)
+            assert np.allclose(search._Hj[k], fresh.oMi[j].homogeneous, atol=1e-12)  # read in place
+
+
+def test_the_rows_approach_of_a_moving_obstacle_in_one_call_equals_its_numpy_formula() -> None:
+    """The rows' bounds from the candidates in one compiled call (``_rows``) equal those of the
+    calls it replaced, a moving obstacle's approach n̂ᵀ(Rbᵀ v_w) included (``_obstacle_shift``)."""
+    from wmm_qp.limits.collision import MAX_ROWS, _assemble, warm_up_obstacles
+    from wmm_qp.limits.dampers import damper_bounds
+
+    ctl = w.QpController(model(), w.load_controller_config())
+    col = ctl.collision
+    assert col is not None
+    q_base = np.array([0.3, -0.2, 0.7])
+    x0 = model().ee_position(q_base, Q0)
+    col.set_obstacles(warm_up_obstacles(x0))  # a moving sphere among them
+    assert col.search.moving
+    ctl.step(w.RobotState(q_base, Q0), w.Reference("hold"))  # the arm's data at Q0
+    v_prev = np.linspace(-0.1, 0.1, ctl.n_v)
+    lb, ub = v_prev - 0.05, v_prev + 0.05
+    out = col.rows(q_base, Q0, v_prev, lb, ub)
+    f, p = col.search.candidates, col.p
+    C, dist, safety, body, other, normal, keys, closest, n_inside = _assemble(
+        f.d, f.p_a, f.p_b, f.normal, f.body, f.other, f.safety, f.n, p.influence_distance, MAX_ROWS, ctl.n_v,
+        col._Jw, col._support, col._body_joint, col.M, col.n_w, col._body_link, col._n_links, len(col.obstacles))
+    shift = col._obstacle_shift(normal, other)
+    assert np.abs(shift).max() > 1e-3  # rows against the moving sphere
+    l, l_brake, damper = damper_bounds(C, v_prev, lb, ub, dist, safety, p.influence_distance, p.gain, col.latency,
+                                       shift, col._accel, p.braking, np.zeros(dist.shape[0]))
+    m = dist.shape[0]  # nothing merged here: the first m rows are these (then those inside d_s)
+    assert out.n == m + n_inside and np.array_equal(out.C[:m], C)
+    np.testing.assert_allclose(out.damper[:m], damper, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(out.l[:m], l, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(out.l_brake[:m], l_brake, rtol=0, atol=1e-15)
 
 
 def _for_the_arm_reference(C: np.ndarray, damper: np.ndarray, u: np.ndarray, n_w: int, held: np.ndarray,

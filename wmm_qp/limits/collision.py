@@ -33,6 +33,7 @@ from .inside_pairs import InsidePairs
 from .pair_search import Obstacle, PairNames, PairSearch
 from .rows import Rows, Tick
 
+_NO_VELOCITIES = np.zeros((0, 3))  # no obstacle moves (``CollisionRows._obstacle_velocities``)
 PARALLEL = 0.995  # two rows of one pair of links this parallel (cos) are one
 MAX_ROWS = 48
 """At most this many body pairs per tick, the nearest to their safety distance first (further pairs
@@ -119,10 +120,12 @@ class CollisionRows(DamperRows):
         found = self.search.search(q_base)
         if not found.n:
             return Rows(np.zeros((0, n_v)), np.zeros(0))
-        C, dist, safety, body, other, normal, keys, closest, n_inside = _assemble(
+        # the rows, their bounds and which of them to keep, in one compiled call (_rows)
+        C, l, l_brake, damper, dist, safety, body, other, keep, closest, n_inside = _rows(
             found.d, found.p_a, found.p_b, found.normal, found.body, found.other, found.safety, found.n, d_i,
             MAX_ROWS, n_v, self._Jw, self._support, self._body_joint, self.M, self.n_w,
-            self._body_link, self._n_links, len(self.search.obstacles))
+            self._body_link, self._n_links, len(self.search.obstacles), self._obstacle_velocities(),
+            v_prev, lb, ub, p.gain, self.latency, self._accel, p.braking)
         min_distance, nearest = math.inf, ""
         if closest >= 0:
             min_distance = float(found.d[closest])
@@ -130,12 +133,6 @@ class CollisionRows(DamperRows):
         m = dist.shape[0]
         if not m:
             return Rows(np.zeros((0, n_v)), np.zeros(0), min_distance=min_distance, closest=nearest)
-        shift = self._obstacle_shift(normal, other)
-        l, l_brake, damper = damper_bounds(C, v_prev, lb, ub, dist, safety, d_i, p.gain, self.latency, shift,
-                                           self._accel, p.braking, np.zeros(m))
-        # two bodies of one pair of links: one row where they are parallel (the key: link a, and
-        # link b, the floor or the obstacle)
-        keep = _distinct_rows(C, l, keys)
         if keep.shape[0] == m:  # nothing merged: keep is 0, 1, …
             out = Rows(C, l, l_brake, damper, PairNames(self.search.namer(), body, other), dist, min_distance,
                        nearest)
@@ -146,6 +143,14 @@ class CollisionRows(DamperRows):
             inside = np.flatnonzero(dist < safety)
             self._add_inside(out, body[inside], other[inside], safety[inside], q_base, q_arm, v_prev, lb, ub)
         return out
+
+    def _obstacle_velocities(self) -> FloatArray:
+        """[m/s] (n_obstacles, 3) each obstacle's velocity in the base frame of the last search,
+        Rbᵀ v_b; (0, 3) while none moves."""
+        if not self.search.moving:
+            return _NO_VELOCITIES
+        Rb = self.search.base_rotation
+        return np.array([Rb.T @ o.velocity_w for o in self.search.obstacles], dtype=float).reshape(-1, 3)
 
     def _obstacle_shift(self, normal: FloatArray, other: IntArray) -> FloatArray:
         """[m/s] n̂ᵀv_b of each row against a moving obstacle b (0 otherwise): ḋ = n̂ᵀJ_a v − n̂ᵀv_b,
@@ -242,6 +247,38 @@ def _assemble(
     C = np.zeros((m, n_v))
     _point_rows(Jw, support, bj, IA, IB, PA, PB, NN, M, n_w, C)
     return C, D, DSo, IA, IB, NN, keys, best_k, inside
+
+
+@jit
+def _rows(
+    d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, body: IntArray, other: IntArray, safety: FloatArray,
+    n: int, d_i: float, max_rows: int, n_v: int, Jw: FloatArray, support: FloatArray, bj: IntArray,
+    M: FloatArray, n_w: int, body_link: IntArray, n_links: int, n_obstacles: int, velocity_b: FloatArray,
+    v_prev: FloatArray, lb: FloatArray, ub: FloatArray, gain: float, latency: float, accel: FloatArray,
+    braking: float,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, IntArray, IntArray, IntArray,
+           int, int]:
+    """A tick's collision rows from the candidates, in one call: :func:`_assemble`'s rows, each
+    one's approach of a moving obstacle n̂ᵀv_b (``velocity_b``: each obstacle's, base frame; empty:
+    none moves), their bounds (:func:`~.dampers.damper_bounds`) and the rows to keep of each
+    pair of links (:func:`_distinct_rows`). Returns (C, l, l_brake, damper, D, DS, IA, IB, keep,
+    the closest candidate's index, how many rows are inside their safety distance), before the
+    merge but for ``keep``."""
+    C, D, DS, IA, IB, NN, keys, closest, inside = _assemble(d, P, Q, N, body, other, safety, n, d_i, max_rows, n_v,
+                                                            Jw, support, bj, M, n_w, body_link, n_links, n_obstacles)
+    m = D.shape[0]
+    shift = np.zeros(m)
+    if velocity_b.shape[0]:
+        for k in range(m):
+            if IB[k] <= -2:
+                v = velocity_b[-2 - IB[k]]
+                shift[k] = NN[k, 0] * v[0] + NN[k, 1] * v[1] + NN[k, 2] * v[2]
+    l, l_brake, damper = damper_bounds(C, v_prev, lb, ub, D, DS, d_i, gain, latency, shift, accel, braking,
+                                       np.zeros(m))
+    # two bodies of one pair of links: one row where they are parallel (the key: link a, and
+    # link b, the floor or the obstacle)
+    keep = _distinct_rows(C, l, keys)
+    return C, l, l_brake, damper, D, DS, IA, IB, keep, closest, inside
 
 
 @jit

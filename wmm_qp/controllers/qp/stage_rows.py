@@ -40,26 +40,30 @@ class StageRows:
 
     def __init__(self, parts: Sequence[tuple[RowSource, Rows | None]], n_v: int) -> None:
         self.n_v = n_v
-        groups: list[RowGroup | None] = []
+        groups: list[RowGroup] = []  # the sources with rows this tick, in order (one pass: every tick)
         dampers: list[Rows] = []
         first: RowSource | None = None
+        pool_at = 0
         for source, rows in parts:
             if rows is None:
                 continue
             if source.retry is Retry.TOGETHER:
                 if first is None:
-                    first = source
-                    groups.append(None)  # the pool's place
+                    first, pool_at = source, len(groups)  # the pool's place
                 dampers.append(rows)
-            else:
+            elif rows.l.shape[0]:
                 groups.append(RowGroup(source, rows))
         self.dampers: Rows | None = None
         """The dampers' rows this tick, pooled (None: no damper source)."""
         if first is not None:
-            self.dampers = Rows.stack(dampers, n_v)
-            groups = [RowGroup(first, self.dampers) if g is None else g for g in groups]
-        self.groups = [g for g in groups if g is not None and g.rows.n]
-        self.n = sum(g.rows.n for g in self.groups)
+            self.dampers = dampers[0] if len(dampers) == 1 else Rows.stack(dampers, n_v)
+            if self.dampers.l.shape[0]:
+                groups.insert(pool_at, RowGroup(first, self.dampers))
+        self.groups = groups
+        n = 0
+        for g in groups:
+            n += g.rows.l.shape[0]
+        self.n = n
 
     def without_yielding(self, mode: Mode) -> StageRows | None:
         """These rows without the sources that yield to the task in ``mode``; None: none does."""
