@@ -124,7 +124,7 @@ def test_the_rows_approach_of_a_moving_obstacle_in_one_call_equals_its_numpy_for
     lb, ub = v_prev - 0.05, v_prev + 0.05
     out = col.rows(q_base, Q0, v_prev, lb, ub)
     f, p = col.search.candidates, col.p
-    C, dist, safety, body, other, normal, keys, closest, n_inside = _assemble(
+    C, dist, safety, _body, other, normal, _keys, _closest, n_inside = _assemble(
         f.d, f.p_a, f.p_b, f.normal, f.body, f.other, f.safety, f.n, p.influence_distance, MAX_ROWS, ctl.n_v,
         col._Jw, col._support, col._body_joint, col.M, col.n_w, col._body_link, col._n_links, len(col.obstacles))
     shift = col._obstacle_shift(normal, other)
