@@ -10,12 +10,11 @@ bit for bit). Prints, per robot, both searches' p50 and both ticks' p50 and thei
 
 from __future__ import annotations
 
-import argparse
 import time
 from typing import Any
 
 import numpy as np
-from wmm_qp_tools.bench.collision import load_scene
+from wmm_qp_tools.bench.collision import for_each_robot, load_scene
 from wmm_qp_tools.bench.trajectory import IdealRobot, circle
 
 import wmm_qp as w
@@ -66,14 +65,5 @@ def one(name: str, ticks: int) -> str:
             f"({t['copied'] / t['in place']:.2f}x)")
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("robots", nargs="+", help="names of configs/robots/<name>.toml")
-    ap.add_argument("--ticks", type=int, default=3000)
-    a = ap.parse_args()
-    for name in a.robots:
-        print(one(name, a.ticks), flush=True)
-
-
 if __name__ == "__main__":
-    main()
+    for_each_robot(__doc__, one)

@@ -11,14 +11,13 @@ its buffers' alignment, docs/model.md). Prints, per robot, both track ticks' p50
 
 from __future__ import annotations
 
-import argparse
 import math
 import time
 import types
 from typing import Any
 
 import numpy as np
-from wmm_qp_tools.bench.collision import load_scene
+from wmm_qp_tools.bench.collision import for_each_robot, load_scene
 from wmm_qp_tools.bench.trajectory import IdealRobot, circle
 
 import wmm_qp as w
@@ -92,14 +91,5 @@ def one(name: str, ticks: int) -> str:
             f"({t['three calls'] / t['one call']:.2f}x), rows equal bit for bit ({ticks} ticks)")
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("robots", nargs="+", help="names of configs/robots/<name>.toml")
-    ap.add_argument("--ticks", type=int, default=3000)
-    a = ap.parse_args()
-    for name in a.robots:
-        print(one(name, a.ticks), flush=True)
-
-
 if __name__ == "__main__":
-    main()
+    for_each_robot(__doc__, one)

@@ -171,20 +171,28 @@ class RateLoop(LoopTiming):
     tick's work overran) is a deadline miss; when the loop has fallen more than a whole
     period behind, the missed deadlines are skipped (counted, never run in a burst).
 
+    With ``rephase`` a late tick starts a new schedule instead (the next deadline a whole period
+    after it): ticks are then never closer than a period, as a loop that steps a command by a
+    fixed period's worth each tick needs (the ROS 2 driver's shaper: a·Δt a tick at most; on the
+    absolute grid the tick after a late one could come a fraction of a period later, and the
+    commanded rate changed faster than its acceleration limit in real time).
+
     Args:
         rate_hz: [Hz] loop rate.
         spin_s: [s] spin this long before each deadline instead of sleeping.
         clock: monotonic clock [s].
         sleep: sleep function [s].
         window: number of recent tick times kept for the percentiles.
+        rephase: a late tick moves the schedule (see above) instead of keeping the absolute grid.
     """
 
     def __init__(self, rate_hz: float, spin_s: float = 200e-6,
                  clock: Callable[[], float] = time.perf_counter,
-                 sleep: Callable[[float], None] = time.sleep, window: int = 2048) -> None:
+                 sleep: Callable[[float], None] = time.sleep, window: int = 2048, rephase: bool = False) -> None:
         super().__init__(rate_hz, clock, window)
         self.spin_s = spin_s
         self._sleep = sleep
+        self.rephase = rephase
         self.deadline = self.t0
 
     def start(self) -> float:
@@ -210,6 +218,8 @@ class RateLoop(LoopTiming):
             if behind > 0:  # more than a whole period late: skip, do not burst
                 self.skipped += behind
                 self.deadline += behind * self.period
+            if self.rephase:  # the next tick a whole period after this one
+                self.deadline = now
             self.tick_start = now
             return now
         remaining = self.deadline - now

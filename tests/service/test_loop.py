@@ -68,6 +68,27 @@ def test_small_overrun_is_one_miss_and_keeps_grid() -> None:
     assert start == pytest.approx(loop.t0 + 2e-3, abs=5e-6)
 
 
+def test_a_rephased_loop_never_starts_two_ticks_closer_than_a_period() -> None:
+    """After late ticks (a fraction of a period late, and periods late), a ``rephase`` loop's next
+    tick comes a whole period after the late one; the absolute grid's came sooner (0.5 ms and
+    0.2 ms after it here), and a command stepped by a period's worth each tick changed faster."""
+    for rephase in (True, False):
+        c = FakeClock()
+        loop = RateLoop(1000.0, 200e-6, clock=c, sleep=c.sleep, rephase=rephase)
+        start = loop.start()
+        gaps = []
+        for work in (300e-6, 1.5e-3, 100e-6, 3.8e-3, 100e-6, 100e-6, 1.05e-3, 100e-6):
+            c.t += work
+            nxt = loop.wait()
+            gaps.append(nxt - start)
+            start = nxt
+        if rephase:
+            assert min(gaps) >= 1e-3 - 5e-6, gaps
+            assert loop.deadline_misses == 3 and loop.skipped == 2
+        else:
+            assert min(gaps) < 0.6e-3, gaps  # the attack: on the grid, ticks bunch after a late one
+
+
 def test_stats_percentiles_and_max() -> None:
     loop, c = make(rate=100.0)
     for k in range(100):

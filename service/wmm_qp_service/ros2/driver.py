@@ -295,7 +295,9 @@ class Ros2Driver(LeaseGate):
 
     def _loop(self, hw: Ros2Hardware, sub: Any, lease_sub: Any, pub: Any, pub_truth: Any, stop: threading.Event,
               max_cycles: int | None) -> int:
-        loop = RateLoop(self.rate_hz, 0.0, clock=time.monotonic)
+        # ticks never closer than a period: the shaper steps the command by a period's worth of
+        # acceleration each tick (after a late tick, the absolute grid's next one came early)
+        loop = RateLoop(self.rate_hz, 0.0, clock=time.monotonic, rephase=True)
         now = t0 = loop.start()
         finishing = False
         n = 0

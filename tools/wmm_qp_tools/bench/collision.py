@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -50,6 +51,17 @@ def robot_and_ticks(doc: str) -> argparse.Namespace:
     ap.add_argument("robot_config")
     ap.add_argument("--ticks", type=int, default=3000)
     return ap.parse_args()
+
+
+def for_each_robot(doc: str, one: Callable[[str, int], str]) -> None:
+    """The A/B benchmarks' command line: robots by name (``configs/robots/<name>.toml``) and
+    ``--ticks`` (3000); prints ``one(name, ticks)`` for each, as it comes."""
+    ap = argparse.ArgumentParser(description=doc.split("\n\n")[0])
+    ap.add_argument("robots", nargs="+", help="names of configs/robots/<name>.toml")
+    ap.add_argument("--ticks", type=int, default=3000)
+    a = ap.parse_args()
+    for name in a.robots:
+        print(one(name, a.ticks), flush=True)
 
 
 def leave_to_coal(search: Any, kinds: tuple[int, ...] = (3,)) -> None:
