@@ -210,8 +210,10 @@ def test_serve_tracks_through_the_driver_and_resumes_after_the_robot_braked_in_i
             time.sleep(0.3)
             os.kill(procs["serve"].pid, signal.SIGCONT)
             time.sleep(0.5)
-            mid = c.info()
-            assert mid is not None and mid.status.faults, mid  # the daemon saw its stream broken
+            # the daemon saw its stream broken (asked until it answers: just thawed on a loaded host,
+            # its first answer can come after the query's timeout, and info() is then None)
+            mid = _wait("the thawed daemon's info", lambda: c.info(), 20.0, tmp_path)
+            assert mid.status.faults, mid
             assert c.resume("track", timeout=20), "the daemon did not resume after the robot's stale stop"
             _follow(c, x0, 1.5, k)
             if c.resume_needed():  # a loaded host stalled a command past the timeout again: resume
