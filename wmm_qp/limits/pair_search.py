@@ -105,8 +105,9 @@ def placement_table(data: Any) -> FloatArray | None:
     start = address(R0)
     for j in range(n):
         R, t = oMi[j].rotation, oMi[j].translation
-        if (R.dtype != np.float64 or t.dtype != np.float64 or R.strides != (8, 24) or t.strides != (8,)
-                or address(R) != start + j * size or address(t) != start + j * size + 72):
+        b = R0.itemsize  # column-major rotation (strides b, 3b), the translation 9 doubles after it
+        if (R.dtype != np.float64 or t.dtype != np.float64 or R.strides != (b, 3 * b) or t.strides != (b,)
+                or address(R) != start + j * size or address(t) != start + j * size + 9 * b):
             return None
     table = np.lib.stride_tricks.as_strided(R0, shape=(n, SE3_DOUBLES), strides=(size, R0.itemsize), writeable=False)
     for j in range(n):  # the values too, as they are now
