@@ -275,6 +275,13 @@ def test_the_compiled_distances_agree_with_coal() -> None:
         assert d == pytest.approx(coal_d(coal.Capsule(r1, l1), Ma, coal.Sphere(r2), Mb), abs=1e-7)
         if d > 0:
             np.testing.assert_allclose(p - q, d * n, atol=1e-9)
+        b0, b1 = Mb.act(np.array([0, 0, -l1])), Mb.act(np.array([0, 0, l1]))  # capsule-capsule, by index
+        seg0, seg1, radius = np.array([a0, b0]), np.array([a1, b1]), np.array([r1, r2])
+        at = [np.zeros(2), np.zeros((2, 3)), np.zeros((2, 3)), np.zeros((2, 3))]
+        D.swept_swept_at(seg0, seg1, radius, 0, 1, *at, 1)
+        d = D.swept_swept(a0, a1, r1, b0, b1, r2, p, q, n)
+        assert d == at[0][1] and all(np.array_equal(x, at[k + 1][1]) for k, x in enumerate((p, q, n)))
+        assert d == pytest.approx(coal_d(coal.Capsule(r1, l1), Ma, coal.Capsule(r2, 2 * l1), Mb), abs=1e-7)
         d = D.swept_box(a0, a1, r1, Mb.translation, Mb.rotation, h / 2, p, q, n)  # capsule-box
         ref = coal_d(coal.Capsule(r1, l1), Ma, coal.Box(*h), Mb)
         if ref > 0:  # coal's penetration depths are GJK/EPA's; the separated case is exact

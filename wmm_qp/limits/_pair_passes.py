@@ -20,7 +20,7 @@ import numpy as np
 
 from .._jit import jit
 from .._typing import BoolArray, FloatArray, IntArray
-from ._distance import box_plane, swept_box, swept_plane, swept_swept
+from ._distance import box_plane, swept_box, swept_plane, swept_swept, swept_swept_at
 from ._gjk import convex_pair, convex_plane
 
 
@@ -129,8 +129,12 @@ def self_pass(
         x, y, z = centre[i, 0] - centre[j, 0], centre[i, 1] - centre[j, 1], centre[i, 2] - centre[j, 2]
         if not math.sqrt(x * x + y * y + z * z) - pair_r[k] <= d_i:
             continue
-        pair_one(kind, a0, a1, r, c, R, h, verts, vs, vc, i, kind, a0, a1, r, c, R, h, verts, vs, vc, j,
-                 d, P, Q, N, ok, n, warm, k)
+        if kind[i] == 0 and kind[j] == 0:  # two capsules or spheres (most pairs): by index
+            swept_swept_at(a0, a1, r, i, j, d, P, Q, N, n)
+            ok[n] = True
+        else:
+            pair_one(kind, a0, a1, r, c, R, h, verts, vs, vc, i, kind, a0, a1, r, c, R, h, verts, vs, vc, j,
+                     d, P, Q, N, ok, n, warm, k)
         body[n], other[n], safety[n] = i, j, d_s
         n += 1
     return n
