@@ -91,3 +91,47 @@ def test_the_row_at_the_braking_configuration_predicts_the_bodies_distance_after
         v = rng.uniform(lb, ub)
         after = judge._after(ctl.dt, state, v[:n_w], v[n_w:])[pair]
         assert d_b + ctl.dt * (C @ (v - v0)) == pytest.approx(after, abs=1e-8)
+
+
+@pytest.mark.parametrize("case", [*CASES, "start"])
+def test_the_packed_rows_equal_the_rows_assembled_bounded_and_merged_one_by_one(case: str) -> None:
+    """``CollisionRows.rows`` takes its rows packed in two arrays from one compiled call (``_rows``:
+    the kept rows, then the pairs inside d_s before the merge); they equal, bit for bit, the rows
+    of its parts called one by one (``_assemble``, ``damper_bounds``, ``_distinct_rows``) indexed
+    by the rows kept, and the inside rows appended are those of the same pairs. The Panda's several
+    capsules a link merge (at its start 42 rows become 10), and both cases have pairs inside d_s."""
+    from wmm_qp.limits.collision import MAX_ROWS, _assemble, _distinct_rows
+    from wmm_qp.limits.dampers import damper_bounds
+    from wmm_qp.limits.pair_search import PairNames
+    from wmm_qp.limits.rows import Rows
+
+    m, ctl, _ = panda()
+    if case == "start":
+        state, ref = w.RobotState(np.zeros(3), m.config.arm.start), w.Reference("hold")
+    else:
+        state, ref, _pair = CASES[case]
+    ctl.step(state, ref)  # the arm's data at the state
+    col = ctl.collision  # type: ignore[attr-defined]
+    ctx = ctl.context(state, ref, need_gradient=False)
+    out = col.rows(ctx.kin.q_base, ctx.kin.q_arm, ctx.v_prev, ctx.lo, ctx.hi)
+    f, p = col.search.candidates, col.p
+    C, dist, safety, body, other, _normal, keys, _closest, n_inside = _assemble(
+        f.d, f.p_a, f.p_b, f.normal, f.body, f.other, f.safety, f.n, p.influence_distance, MAX_ROWS, ctl.n_v,
+        col._Jw, col._support, col._body_joint, col.M, col.n_w, col._body_link, col._n_links, len(col.obstacles))
+    l, l_brake, damper = damper_bounds(C, ctx.v_prev, ctx.lo, ctx.hi, dist, safety, p.influence_distance, p.gain,
+                                       col.latency, np.zeros(dist.shape[0]), col._accel, p.braking,
+                                       np.zeros(dist.shape[0]))
+    keep = _distinct_rows(C, l, keys)
+    assert keep.shape[0] < dist.shape[0]  # rows merged
+    names = PairNames(col.search.namer(), body[keep], other[keep])
+    ref_rows = Rows(C[keep], l[keep], l_brake[keep], damper[keep], names, dist[keep])
+    inside = np.flatnonzero(dist < safety)
+    assert inside.shape[0] == n_inside and (n_inside > 0) == (case != "start")
+    if n_inside:
+        col._add_inside(ref_rows, body[inside], other[inside], safety[inside], ctx.kin.q_base, ctx.kin.q_arm,
+                        ctx.v_prev, ctx.lo, ctx.hi)
+    for field in ("C", "l", "l_brake", "damper", "distances"):
+        assert np.array_equal(getattr(out, field), getattr(ref_rows, field)), field
+    expected = [col.search.name(int(a), int(b)) for a, b in zip(body[keep], other[keep], strict=True)]
+    expected += [col.search.name(int(a), int(b)) for a, b in zip(body[inside], other[inside], strict=True)]
+    assert list(out.names) == expected

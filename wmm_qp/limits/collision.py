@@ -120,8 +120,9 @@ class CollisionRows(DamperRows):
         found = self.search.search(q_base)
         if not found.n:
             return Rows(np.zeros((0, n_v)), np.zeros(0))
-        # the rows, their bounds and which of them to keep, in one compiled call (_rows)
-        C, l, l_brake, damper, dist, safety, body, other, keep, closest, n_inside = _rows(
+        # the rows, their bounds and which of them to keep, in one compiled call (_rows), packed
+        # into one float and one int array (each array a compiled call returns costs ~0.35 µs)
+        F, I, m, closest, n_inside = _rows(
             found.d, found.p_a, found.p_b, found.normal, found.body, found.other, found.safety, found.n, d_i,
             MAX_ROWS, n_v, self._Jw, self._support, self._body_joint, self.M, self.n_w,
             self._body_link, self._n_links, len(self.search.obstacles), self._obstacle_velocities(),
@@ -130,18 +131,15 @@ class CollisionRows(DamperRows):
         if closest >= 0:
             min_distance = float(found.d[closest])
             nearest = self.search.name(int(found.body[closest]), int(found.other[closest]))
-        m = dist.shape[0]
         if not m:
             return Rows(np.zeros((0, n_v)), np.zeros(0), min_distance=min_distance, closest=nearest)
-        if keep.shape[0] == m:  # nothing merged: keep is 0, 1, …
-            out = Rows(C, l, l_brake, damper, PairNames(self.search.namer(), body, other), dist, min_distance,
-                       nearest)
-        else:
-            out = Rows(C[keep], l[keep], l_brake[keep], damper[keep],
-                       PairNames(self.search.namer(), body[keep], other[keep]), dist[keep], min_distance, nearest)
+        e = m * n_v
+        out = Rows(F[:e].reshape(m, n_v), F[e : e + m], F[e + m : e + 2 * m], F[e + 2 * m : e + 3 * m],
+                   PairNames(self.search.namer(), I[:m], I[m : 2 * m]), F[e + 3 * m : e + 4 * m], min_distance,
+                   nearest)
         if n_inside:  # the pairs inside d_s (every one has a row, before the merge: _assemble)
-            inside = np.flatnonzero(dist < safety)
-            self._add_inside(out, body[inside], other[inside], safety[inside], q_base, q_arm, v_prev, lb, ub)
+            self._add_inside(out, I[2 * m : 2 * m + n_inside], I[2 * m + n_inside :], F[e + 4 * m :], q_base, q_arm,
+                             v_prev, lb, ub)
         return out
 
     def _obstacle_velocities(self) -> FloatArray:
@@ -256,14 +254,14 @@ def _rows(
     M: FloatArray, n_w: int, body_link: IntArray, n_links: int, n_obstacles: int, velocity_b: FloatArray,
     v_prev: FloatArray, lb: FloatArray, ub: FloatArray, gain: float, latency: float, accel: FloatArray,
     braking: float,
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, IntArray, IntArray, IntArray,
-           int, int]:
+) -> tuple[FloatArray, IntArray, int, int, int]:
     """A tick's collision rows from the candidates, in one call: :func:`_assemble`'s rows, each
     one's approach of a moving obstacle n̂ᵀv_b (``velocity_b``: each obstacle's, base frame; empty:
-    none moves), their bounds (:func:`~.dampers.damper_bounds`) and the rows to keep of each
-    pair of links (:func:`_distinct_rows`). Returns (C, l, l_brake, damper, D, DS, IA, IB, keep,
-    the closest candidate's index, how many rows are inside their safety distance), before the
-    merge but for ``keep``."""
+    none moves), their bounds (:func:`~.dampers.damper_bounds`), and of each pair of links only the
+    rows to keep (:func:`_distinct_rows`). Returns (F, I, m, the closest candidate's index, s),
+    the m kept rows and the s rows inside their safety distance (before the merge) packed in
+    one float array F = [C (m × n_v, row by row), l, l_brake, damper, D (m each), DS of the s]
+    and one int array I = [IA, IB (m each), IA, IB of the s]."""
     C, D, DS, IA, IB, NN, keys, closest, inside = _assemble(d, P, Q, N, body, other, safety, n, d_i, max_rows, n_v,
                                                             Jw, support, bj, M, n_w, body_link, n_links, n_obstacles)
     m = D.shape[0]
@@ -278,7 +276,22 @@ def _rows(
     # two bodies of one pair of links: one row where they are parallel (the key: link a, and
     # link b, the floor or the obstacle)
     keep = _distinct_rows(C, l, keys)
-    return C, l, l_brake, damper, D, DS, IA, IB, keep, closest, inside
+    mk = keep.shape[0]
+    e = mk * n_v
+    F = np.empty(e + 4 * mk + inside)
+    I = np.empty(2 * mk + 2 * inside, dtype=np.int64)
+    for t in range(mk):
+        k = keep[t]
+        for c in range(n_v):
+            F[t * n_v + c] = C[k, c]
+        F[e + t], F[e + mk + t], F[e + 2 * mk + t], F[e + 3 * mk + t] = l[k], l_brake[k], damper[k], D[k]
+        I[t], I[mk + t] = IA[k], IB[k]
+    s = 0
+    for k in range(m):
+        if D[k] < DS[k]:
+            F[e + 4 * mk + s], I[2 * mk + s], I[2 * mk + inside + s] = DS[k], IA[k], IB[k]
+            s += 1
+    return F, I, mk, closest, inside
 
 
 @jit
