@@ -296,3 +296,60 @@ def test_the_placements_read_in_place_follow_every_forward_kinematics() -> None:
             self.oMi = [oMi[0]] + [pin.SE3(M) for M in list(oMi)[1:]]
 
     assert placement_table(Moved(arm.data.oMi)) is None
+
+
+@pytest.mark.parametrize("robot", ["fr3", "tiago", "ur5_omni"])
+def test_the_bounding_capsules_contain_their_shapes_and_cull_only_pairs_beyond_the_influence_distance(
+        robot: str) -> None:
+    """Each body's bounding capsule (``bounding_capsule``) holds every vertex of its hull and every
+    corner of its box; along a random walk of the arm, the search that leaves out the pairs whose
+    capsules are further apart than d_i gives, bit for bit, the candidates within d_i of one
+    that computes every pair the spheres let through (both started cold each tick), and leaves some
+    pair out. A capsule one vertex short (its radius shrunk) is caught."""
+    from wmm_qp.config import default_config_dir
+    from wmm_qp.limits.pair_search import PairSearch
+    from wmm_qp.model.collision import bounding_capsule
+
+    model = w.WmmModel(w.load_robot_config(default_config_dir() / "robots" / f"{robot}.toml"))
+    ctl = w.make_controller("qp", model, w.load_controller_config().with_(collision={"enabled": True}))
+    culled = ctl.collision.search  # type: ignore[attr-defined]
+    every = PairSearch(culled.geo, culled.p)
+    every._cap_r[:] = np.inf  # the capsules never cull
+
+    def outside(shape: Any, a: np.ndarray, b: np.ndarray, r: float) -> float:
+        """How far the shape's farthest point is outside the capsule (≤ 0: inside)."""
+        if isinstance(shape, coal.Box):
+            h = np.asarray(shape.halfSide)
+            pts = np.array([[sx * h[0], sy * h[1], sz * h[2]] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+        elif isinstance(shape, coal.ConvexBase):
+            pts = np.array([np.asarray(shape.point(i)) for i in range(shape.num_points)])
+        else:
+            return -1.0
+        u = b - a
+        t = np.clip((pts - a) @ u / max(float(u @ u), 1e-300), 0.0, 1.0)
+        return float(np.max(np.linalg.norm(pts - (a + np.outer(t, u)), axis=1)) - r)
+
+    kinds = set()
+    for body in culled.geo.bodies:
+        a, b, r = bounding_capsule(body.row)
+        kinds.add(type(body.row).__name__)
+        assert outside(body.row, a, b, r) <= 0.0, body.name
+        if not isinstance(body.row, coal.Capsule | coal.Sphere):
+            assert outside(body.row, a, b, r - 1e-3) > 0.0, body.name  # the mutation: 1 mm short
+    assert "Box" in kinds or robot != "tiago"
+    d_i = culled.p.influence_distance
+    arm, rng = model.arm, np.random.default_rng(7)
+    q = np.array(model.config.arm.start, dtype=float)
+    left_out = 0
+    for _ in range(60):
+        q = q + rng.normal(scale=0.15, size=q.shape)
+        pin.computeJointJacobians(arm.model, arm.data, arm.pin_q(q))
+        culled.reset()
+        every.reset()
+        a, b = culled.search(np.zeros(3)), every.search(np.zeros(3))
+        near_a, near_b = np.flatnonzero(a.d[: a.n] < d_i), np.flatnonzero(b.d[: b.n] < d_i)
+        assert near_a.shape == near_b.shape
+        for f in ("d", "p_a", "p_b", "normal", "body", "other"):
+            assert np.array_equal(getattr(a, f)[near_a], getattr(b, f)[near_b]), f
+        left_out += b.n - a.n
+    assert left_out > 0

@@ -20,7 +20,7 @@ import numpy as np
 
 from .._jit import jit
 from .._typing import BoolArray, FloatArray, IntArray
-from ._distance import box_plane, swept_box, swept_plane, swept_swept, swept_swept_at
+from ._distance import _swept_scalars, box_plane, swept_box, swept_plane, swept_swept, swept_swept_at
 from ._gjk import convex_pair, convex_plane
 
 
@@ -119,11 +119,14 @@ def self_pass(
     verts: FloatArray, vs: IntArray, vc: IntArray,
     centre: FloatArray, pairs: IntArray, pair_r: FloatArray, d_i: float, d_s: float,
     d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray, body: IntArray, other: IntArray,
-    safety: FloatArray, n: int, warm: FloatArray,
+    safety: FloatArray, n: int, warm: FloatArray, cap: FloatArray, cap_r: FloatArray,
 ) -> int:
     """The robot's own pairs whose bounding spheres are within d_i (the broad phase), their
     distances appended to the candidates from entry n; returns the new count. ``warm[k]``: GJK's
-    start for pair k (:func:`._gjk.gjk`)."""
+    start for pair k (:func:`._gjk.gjk`). A pair that is not two swept segments (whose distance
+    is as cheap) is left out, too, where the bounding capsules of its shapes (``cap[i]``: the
+    segment's ends, placed; ``cap_r[i]``: the radius) are further apart than d_i: its distance is
+    no less than theirs (~1 µs of GJK saved, for a capsule distance of ~50 ns)."""
     for k in range(pairs.shape[0]):
         i, j = pairs[k, 0], pairs[k, 1]
         x, y, z = centre[i, 0] - centre[j, 0], centre[i, 1] - centre[j, 1], centre[i, 2] - centre[j, 2]
@@ -133,6 +136,11 @@ def self_pass(
             swept_swept_at(a0, a1, r, i, j, d, P, Q, N, n)
             ok[n] = True
         else:
+            lower = _swept_scalars(cap[i, 0, 0], cap[i, 0, 1], cap[i, 0, 2], cap[i, 1, 0], cap[i, 1, 1], cap[i, 1, 2],
+                                   cap[j, 0, 0], cap[j, 0, 1], cap[j, 0, 2], cap[j, 1, 0], cap[j, 1, 1],
+                                   cap[j, 1, 2])[0] - cap_r[i] - cap_r[j]
+            if lower > d_i:
+                continue
             pair_one(kind, a0, a1, r, c, R, h, verts, vs, vc, i, kind, a0, a1, r, c, R, h, verts, vs, vc, j,
                      d, P, Q, N, ok, n, warm, k)
         body[n], other[n], safety[n] = i, j, d_s
@@ -173,7 +181,7 @@ def robot_passes(
     pairs: IntArray, pair_r: FloatArray, d_i: float, d_s: float,
     floor_idx: IntArray, floor_n: FloatArray, floor_o: float, floor_margin: float,
     d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray, body: IntArray, other: IntArray,
-    safety: FloatArray, warm: FloatArray,
+    safety: FloatArray, warm: FloatArray, cap_local: FloatArray, cap_r: FloatArray, cap: FloatArray,
 ) -> tuple[int, int]:
     """A tick's robot-side passes in one call: the joints' placements Hj read from Pinocchio's
     ``oMi`` (row ``joint_id[k]``: rotation column-major, translation; empty: Hj is current), the
@@ -181,7 +189,8 @@ def robot_passes(
     table's), the robot's own pairs
     (:func:`self_pass`) and the floor (:func:`plane_pass`, code −1) from entry 0. Returns the
     number of candidates and how many of them the compiled distances left to coal (one dispatch
-    instead of three and a numpy reduction: ~70 arguments unboxed fewer a tick)."""
+    instead of three and a numpy reduction: ~70 arguments unboxed fewer a tick). ``cap_local``:
+    each body's bounding capsule's ends in its joint's frame, placed into ``cap`` (:func:`self_pass`)."""
     if oMi.shape[0]:
         for k in range(joint_id.shape[0]):
             row = oMi[joint_id[k]]
@@ -190,8 +199,14 @@ def robot_passes(
                     Hj[k, a, b] = row[a + 3 * b]
                 Hj[k, a, 3] = row[9 + a]
     place_kernel(Hj, joint, kind, l_a0, l_a1, l_c, l_R, l_centre, a0, a1, c, R, centre)
+    for k in range(joint.shape[0]):  # the bounding capsules (cap_local: their ends, joint frames)
+        H = Hj[joint[k]]
+        for e in range(2):
+            for a in range(3):
+                cap[k, e, a] = (H[a, 3] + H[a, 0] * cap_local[k, e, 0] + H[a, 1] * cap_local[k, e, 1]
+                                + H[a, 2] * cap_local[k, e, 2])
     n = self_pass(kind, a0, a1, r, c, R, h, verts, vs, vc, centre, pairs, pair_r, d_i, d_s,
-                  d, P, Q, N, ok, body, other, safety, 0, warm)
+                  d, P, Q, N, ok, body, other, safety, 0, warm, cap, cap_r)
     n = plane_pass(kind, a0, a1, r, c, R, h, verts, vs, vc, centre, radii, floor_idx, True, floor_n, floor_o,
                    d_i, -1, floor_margin, d, P, Q, N, ok, body, other, safety, n)
     return n, left_to_coal(ok, 0, n)

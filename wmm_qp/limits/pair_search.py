@@ -23,7 +23,16 @@ import pinocchio as pin
 
 from .._typing import BoolArray, FloatArray, IntArray
 from ..config import CollisionParams, ShapeConfig
-from ..model.collision import RobotGeometry, bounding_sphere, coal_shape, exempt_mask, row_shape, shape_pose, transform
+from ..model.collision import (
+    RobotGeometry,
+    bounding_capsule,
+    bounding_sphere,
+    coal_shape,
+    exempt_mask,
+    row_shape,
+    shape_pose,
+    transform,
+)
 from ._gjk import WARM_WIDTH
 from ._pair_passes import left_to_coal, pairs_kernel, place_kernel, plane_pass, robot_passes, solid_pass
 
@@ -293,6 +302,14 @@ class PairSearch:
             self._shapes.set(k, b.row, b.placement, b.row_center)
         self.placed = Table(len(bodies))  # the bodies in the base frame, this tick
         self.placed.same_shapes(self._shapes)
+        # the narrower broad phase of the self pairs GJK computes: each row shape's bounding capsule
+        # (model/collision.py: bounding_capsule), in its joint's frame, placed each tick
+        caps = [bounding_capsule(b.row) for b in bodies]
+        self._cap_local = np.array([[b.placement.act(a), b.placement.act(e)] for b, (a, e, _) in zip(bodies, caps,
+                                                                                                      strict=True)],
+                                   dtype=float).reshape(len(bodies), 2, 3)
+        self._cap_r = np.array([r for _, _, r in caps], dtype=float)
+        self._cap = np.zeros((len(bodies), 2, 3))  # placed: the base frame, this tick
         self._Hj = np.tile(np.eye(4), (len(joints), 1, 1))
         self._body_H = [b.placement.homogeneous for b in bodies]  # each body in its joint's frame
         self._joint_ids = [int(j) for j in joints]
@@ -360,7 +377,7 @@ class PairSearch:
         n, left = robot_passes(self._oMi, self._joint_id, Hj, self._body_joint, loc.a0, loc.a1, loc.c, loc.R,
                                loc.centre, *pl.shapes(), pl.centre, self._radii, self._pairs, self._pair_r, d_i,
                                p.safety_distance, self._floor_idx, self._floor_n, self._floor_o, p.floor_margin,
-                               *buf, self._warm)
+                               *buf, self._warm, self._cap_local, self._cap_r, self._cap)
         Rb = tb = None
         n_robot = n
         if self.obstacles:  # robot vs obstacles, in the base frame at this base pose

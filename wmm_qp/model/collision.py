@@ -22,6 +22,7 @@ Pairs, decided here once and never per tick:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -87,6 +88,40 @@ def bounding_sphere(shape: coal.CollisionGeometry) -> tuple[FloatArray, float]:
     """(centre, radius) of a sphere that contains ``shape``, in its own frame."""
     shape.computeLocalAABB()
     return np.asarray(shape.aabb_center, dtype=float).copy(), float(shape.aabb_radius)
+
+
+CAPSULE_ROUNDING = 1e-9
+"""[m] added to a box's and a vertex set's bounding capsule's radius: their corners and vertices,
+placed, stay inside it whatever the rounding."""
+
+
+def bounding_capsule(shape: coal.CollisionGeometry) -> tuple[FloatArray, FloatArray, float]:
+    """(a, b, r): a capsule, the segment [a, b] swept by the radius r, that contains ``shape``, in
+    its own frame; tighter than its bounding sphere for a long link. A sphere and a capsule are
+    their own; a box's runs along its longest side, r its cross-section's half diagonal; a vertex
+    set's (a mesh's hull) along its principal axis from its lowest to its highest vertex there, r
+    the farthest vertex's distance from that axis. Any other shape: its bounding sphere."""
+    if isinstance(shape, coal.Capsule):
+        h = np.array([0.0, 0.0, shape.halfLength])
+        return -h, h, float(shape.radius)
+    if isinstance(shape, coal.Sphere):
+        return np.zeros(3), np.zeros(3), float(shape.radius)
+    if isinstance(shape, coal.Box):
+        half = np.asarray(shape.halfSide, dtype=float)
+        ax = int(np.argmax(half))
+        e = np.zeros(3)
+        e[ax] = half[ax]
+        return -e, e, float(math.sqrt(float(np.sum(half**2)) - half[ax] ** 2)) + CAPSULE_ROUNDING
+    if isinstance(shape, coal.ConvexBase) and shape.num_points > 0 and shape.getSweptSphereRadius() == 0.0:
+        pts = np.array([np.asarray(shape.point(i), dtype=float) for i in range(shape.num_points)])
+        mean = pts.mean(axis=0)
+        axis = np.linalg.svd(pts - mean, full_matrices=False)[2][0] if pts.shape[0] > 1 else np.array([0.0, 0.0, 1.0])
+        s = (pts - mean) @ axis
+        off = (pts - mean) - np.outer(s, axis)
+        r = float(np.sqrt(np.max(np.sum(off**2, axis=1)))) + CAPSULE_ROUNDING
+        return mean + s.min() * axis, mean + s.max() * axis, r
+    c, r = bounding_sphere(shape)
+    return c, c.copy(), r
 
 
 @dataclass
