@@ -303,28 +303,30 @@ def _point_rows(
     from the joints' world-frame (here: base-frame) Jacobian Jw (6 × nv, Pinocchio's data.J: a
     point p of joint j moves at J_v + J_ω × p over the columns the joint moves with; ``bj``: each
     body's joint); for pairs with the world, the base's motion of p_a on the wheels (eq. (5))."""
-    for k in range(IA.shape[0]):
-        nk = n[k]
+    for k in range(IA.shape[0]):  # (by index: a view of a row costs a reference count)
+        n0, n1, n2 = n[k, 0], n[k, 1], n[k, 2]
         for side in range(2):
             j = bj[IA[k]] if side == 0 else bj[IB[k]] if IB[k] >= 0 else 0
             if j == 0:
                 continue
-            p = pa[k] if side == 0 else pb[k]
+            if side == 0:
+                p0, p1, p2 = pa[k, 0], pa[k, 1], pa[k, 2]
+            else:
+                p0, p1, p2 = pb[k, 0], pb[k, 1], pb[k, 2]
             sign = 1.0 if side == 0 else -1.0
-            c0 = p[1] * nk[2] - p[2] * nk[1]  # p × n̂
-            c1 = p[2] * nk[0] - p[0] * nk[2]
-            c2 = p[0] * nk[1] - p[1] * nk[0]
+            c0 = p1 * n2 - p2 * n1  # p × n̂
+            c1 = p2 * n0 - p0 * n2
+            c2 = p0 * n1 - p1 * n0
             for i in range(Jw.shape[1]):
                 if support[j, i] != 0.0:
                     C[k, n_w + i] += sign * (
-                        nk[0] * Jw[0, i] + nk[1] * Jw[1, i] + nk[2] * Jw[2, i]
+                        n0 * Jw[0, i] + n1 * Jw[1, i] + n2 * Jw[2, i]
                         + c0 * Jw[3, i] + c1 * Jw[4, i] + c2 * Jw[5, i]
                     )
         if IB[k] < 0:
-            p = pa[k]
-            a2 = -nk[0] * p[1] + nk[1] * p[0]
+            a2 = -n0 * pa[k, 1] + n1 * pa[k, 0]
             for j in range(n_w):
-                C[k, j] += nk[0] * M[0, j] + nk[1] * M[1, j] + a2 * M[2, j]
+                C[k, j] += n0 * M[0, j] + n1 * M[1, j] + a2 * M[2, j]
 
 
 @jit

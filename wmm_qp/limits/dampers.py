@@ -34,12 +34,12 @@ import math
 
 import numpy as np
 
-from .._jit import jit
+from .._jit import jit, jit_inline
 from .._typing import FloatArray
 from .rows import RELAX_MARGIN, Retry, Rows, RowSource
 
 
-@jit
+@jit_inline
 def _row_bounds(
     row: FloatArray, v_prev: FloatArray, v0: FloatArray, lb: FloatArray, ub: FloatArray,
     d: float, d_s: float, d_i: float, gain: float, latency: float, shift: float, accel: FloatArray,
