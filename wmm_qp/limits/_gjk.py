@@ -26,7 +26,7 @@ import math
 
 import numpy as np
 
-from .._jit import jit
+from .._jit import jit, jit_inline
 from .._typing import FloatArray, IntArray
 
 TOUCH = 1e-6
@@ -369,10 +369,23 @@ def convex_pair(kA: IntArray, a0A: FloatArray, a1A: FloatArray, rA: FloatArray, 
     from B to A into n; and whether GJK gave it (False: leave the pair to coal). ``warm``, ``w``:
     GJK's start for this pair (:func:`gjk`)."""
     dist = gjk(kA, a0A, a1A, cA, RA, hA, vA, vsA, vcA, i, kB, a0B, a1B, cB, RB, hB, vB, vsB, vcB, j, p, q, warm, w)
+    return on_the_shapes(dist, rA[i] if kA[i] == 0 else 0.0, rB[j] if kB[j] == 0 else 0.0, p, q, n)
+
+
+@jit_inline
+def uses_gjk(ka: int, kb: int) -> bool:
+    """Whether :func:`convex_pair` computes a pair of these kinds: a hull and anything but kind 2,
+    or two boxes."""
+    return (ka == 3 and kb != 2) or (kb == 3 and ka != 2) or (ka == 1 and kb == 1)
+
+
+@jit_inline
+def on_the_shapes(dist: float, ra: float, rb: float, p: FloatArray, q: FloatArray, n: FloatArray) -> tuple[float, bool]:
+    """:func:`gjk`'s core distance and closest points (p, q) moved onto the shapes of radii ra and
+    rb (a swept segment's; 0 otherwise): (the signed distance, whether GJK gave one), the unit
+    normal from B to A into n."""
     if dist < 0.0:
         return 0.0, False
-    ra = rA[i] if kA[i] == 0 else 0.0
-    rb = rB[j] if kB[j] == 0 else 0.0
     for r in range(3):
         n[r] = (p[r] - q[r]) / dist
         p[r] -= ra * n[r]

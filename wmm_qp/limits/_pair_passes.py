@@ -21,7 +21,7 @@ import numpy as np
 from .._jit import jit
 from .._typing import BoolArray, FloatArray, IntArray
 from ._distance import _swept_scalars, box_plane, swept_box, swept_plane, swept_swept, swept_swept_at
-from ._gjk import convex_pair, convex_plane, gjk
+from ._gjk import convex_pair, convex_plane, gjk, on_the_shapes, uses_gjk
 
 
 @jit
@@ -61,7 +61,7 @@ def pair_one(
     """Entry k ← the distance of A[i] to B[j] (ok False where coal must compute it); ``warm[w]``:
     GJK's start for the pair (w < 0: none; :func:`._gjk.gjk`)."""
     ok[k] = True
-    if (ka[i] == 3 and kb[j] != 2) or (kb[j] == 3 and ka[i] != 2) or (ka[i] == 1 and kb[j] == 1):
+    if uses_gjk(ka[i], kb[j]):
         # a hull, or two boxes: GJK (touching cores: coal)
         dd, got = convex_pair(ka, a0, a1, ra, ca, Ra, ha, va, vsa, vca, i, kb, b0, b1, rb, cb, Rb, hb, vb, vsb, vcb,
                               j, P[k], Q[k], N[k], warm, w)
@@ -141,16 +141,13 @@ def self_pass(
                                    cap[j, 1, 2])[0] - cap_r[i] - cap_r[j]
             if lower > d_i:
                 continue
-            if kind[i] == 3 and kind[j] == 3:  # two hulls: GJK called directly (each call between
-                # compiled functions passes two dozen arrays, ~0.15 µs: pair_one's and convex_pair's
-                # are saved); no radius, so convex_pair's result: the normal, the distance as is
+            if uses_gjk(kind[i], kind[j]):  # GJK called directly, convex_pair's work inline (each
+                # call between compiled functions passes two dozen arrays, ~0.15 µs: pair_one's and
+                # convex_pair's are saved)
                 dist = gjk(kind, a0, a1, c, R, h, verts, vs, vc, i, kind, a0, a1, c, R, h, verts, vs, vc, j, P[n], Q[n],
                            warm, k)
-                ok[n] = dist >= 0.0
-                d[n] = dist if dist >= 0.0 else 0.0
-                if dist >= 0.0:
-                    for e in range(3):
-                        N[n, e] = (P[n, e] - Q[n, e]) / dist
+                d[n], ok[n] = on_the_shapes(dist, r[i] if kind[i] == 0 else 0.0, r[j] if kind[j] == 0 else 0.0, P[n],
+                                            Q[n], N[n])
             else:
                 pair_one(kind, a0, a1, r, c, R, h, verts, vs, vc, i, kind, a0, a1, r, c, R, h, verts, vs, vc, j,
                          d, P, Q, N, ok, n, warm, k)
