@@ -96,8 +96,9 @@ def swept_swept_at(
     d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, k: int,
 ) -> None:
     """:func:`swept_swept` of rows i and j of one table of segments into entry k of the
-    candidates, by index: no array view made (each costs a reference count), ~4× faster a pair
-    on the Panda's 100 capsule pairs a tick; inlined into its caller (60 → 38 ns a pair)."""
+    candidates, by index: no array view made (each costs a reference count), and inlined into its
+    caller (no call passing arrays); the Panda's ~105 capsule pairs a tick
+    (``benchmarks/collision/passes_tick.py``, docs/benchmarks.md §12)."""
     dist, nx, ny, nz, cax, cay, caz, cbx, cby, cbz = _swept_scalars(
         a0[i, 0], a0[i, 1], a0[i, 2], a1[i, 0], a1[i, 1], a1[i, 2],
         a0[j, 0], a0[j, 1], a0[j, 2], a1[j, 0], a1[j, 1], a1[j, 2])

@@ -126,7 +126,7 @@ def self_pass(
     start for pair k (:func:`._gjk.gjk`). A pair that is not two swept segments (whose distance
     is as cheap) is left out, too, where the bounding capsules of its shapes (``cap[i]``: the
     segment's ends, placed; ``cap_r[i]``: the radius) are further apart than d_i: its distance is
-    no less than theirs (~1 µs of GJK saved, for a capsule distance of ~50 ns)."""
+    no less than theirs (a capsule distance instead of GJK's iterations)."""
     for k in range(pairs.shape[0]):
         i, j = pairs[k, 0], pairs[k, 1]
         x, y, z = centre[i, 0] - centre[j, 0], centre[i, 1] - centre[j, 1], centre[i, 2] - centre[j, 2]
@@ -142,7 +142,7 @@ def self_pass(
             if lower > d_i:
                 continue
             if uses_gjk(kind[i], kind[j]):  # GJK called directly, convex_pair's work inline (each
-                # call between compiled functions passes two dozen arrays, ~0.15 µs: pair_one's and
+                # call between compiled functions passes two dozen arrays: pair_one's and
                 # convex_pair's are saved)
                 dist = gjk(kind, a0, a1, c, R, h, verts, vs, vc, i, kind, a0, a1, c, R, h, verts, vs, vc, j, P[n], Q[n],
                            warm, k)

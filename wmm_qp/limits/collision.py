@@ -121,7 +121,7 @@ class CollisionRows(DamperRows):
         if not found.n:
             return Rows(np.zeros((0, n_v)), np.zeros(0))
         # the rows, their bounds and which of them to keep, in one compiled call (_rows), packed
-        # into one float and one int array (each array a compiled call returns costs ~0.35 µs)
+        # into one float and one int array (each array a compiled call returns is allocated and boxed)
         F, I, m, closest, n_inside = _rows(
             found.d, found.p_a, found.p_b, found.normal, found.body, found.other, found.safety, found.n, d_i,
             MAX_ROWS, n_v, self._Jw, self._support, self._body_joint, self.M, self.n_w,

@@ -73,7 +73,7 @@ class FenceRows(DamperRows):
 
     def compute_rows(self, tick: Tick) -> Rows | None:
         """The fence's rows at the tick's state; None while it has none (the usual tick: the
-        stages then pool no empty part with the collision rows, ~3 µs)."""
+        stages then pool no empty part with the collision rows)."""
         kin = tick.kin
         rows = self.rows(kin.q_base, kin.x, kin.J[:3], tick.v_prev, tick.lb, tick.ub)
         return None if rows is self._none else rows
