@@ -4,6 +4,7 @@ are left to coal; and the pair search with GJK gives the candidates coal gives, 
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from typing import Any
 
 import coal
@@ -30,6 +31,17 @@ def hull(rng: np.random.Generator, n: int = 40, scale: float = 0.1) -> coal.Conv
         m.addVertex(p)
     m.endModel()
     return convex_hull(m)
+
+
+def arm_walk(model: w.WmmModel, seed: int, steps: int, scale: float) -> Iterator[None]:
+    """The arm's data (forward kinematics, joint Jacobians) at each step of a random walk of its
+    joints from its start (normal steps of ``scale`` rad)."""
+    arm, rng = model.arm, np.random.default_rng(seed)
+    q = np.array(model.config.arm.start, dtype=float)
+    for _ in range(steps):
+        q = q + rng.normal(scale=scale, size=q.shape)
+        pin.computeJointJacobians(arm.model, arm.data, arm.pin_q(q))
+        yield
 
 
 def table(*shapes: tuple[Any, pin.SE3]) -> Table:
@@ -279,12 +291,9 @@ def test_the_placements_read_in_place_follow_every_forward_kinematics() -> None:
     assert in_place._in_place and in_place._oMi.base is not None  # a view, not a copy
     copied._in_place, copied._oMi = False, np.zeros((0, 12))
     stale._oMi = np.array(stale._oMi)  # the mutation: the placements as they were once
-    arm, rng = model.arm, np.random.default_rng(5)
-    q = np.array(model.config.arm.start, dtype=float)
+    arm = model.arm
     differs = 0
-    for _ in range(40):
-        q = q + rng.normal(scale=0.1, size=q.shape)
-        pin.computeJointJacobians(arm.model, arm.data, arm.pin_q(q))
+    for _ in arm_walk(model, 5, 40, 0.1):
         a, b, s = (x.search(np.zeros(3)) for x in (in_place, copied, stale))
         assert a.n == b.n and (a.body[:a.n] == b.body[:b.n]).all() and (a.other[:a.n] == b.other[:b.n]).all()
         assert np.array_equal(a.d[:a.n], b.d[:b.n]) and np.array_equal(a.p_a[:a.n], b.p_a[:b.n])
@@ -338,12 +347,8 @@ def test_the_bounding_capsules_contain_their_shapes_and_cull_only_pairs_beyond_t
             assert outside(body.row, a, b, r - 1e-3) > 0.0, body.name  # the mutation: 1 mm short
     assert "Box" in kinds or robot != "tiago"
     d_i = culled.p.influence_distance
-    arm, rng = model.arm, np.random.default_rng(7)
-    q = np.array(model.config.arm.start, dtype=float)
     left_out = 0
-    for _ in range(60):
-        q = q + rng.normal(scale=0.15, size=q.shape)
-        pin.computeJointJacobians(arm.model, arm.data, arm.pin_q(q))
+    for _ in arm_walk(model, 7, 60, 0.15):
         culled.reset()
         every.reset()
         a, b = culled.search(np.zeros(3)), every.search(np.zeros(3))
