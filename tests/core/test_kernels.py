@@ -195,3 +195,52 @@ def test_the_track_velocity_compiled_equals_the_general_path() -> None:
             assert np.allclose(got, want, rtol=1e-15, atol=1e-15), (mode, got, want)
     saturated = ctl.reference_velocity(ctx, w.Reference("track", x_d=x + np.array([2.0, 0.0, 0.5])))
     assert np.linalg.norm(saturated) == pytest.approx(min(qp.recovery_speed, qp.task_speed_max))
+
+
+_NO_COMPILE_AFTER_WARM_UP = """
+import gc, json, sys
+import numpy as np
+from numba.core.dispatcher import Dispatcher
+import wmm_qp as w
+from wmm_qp.scene import load_scene
+
+def kernels():
+    return {f"{d.py_func.__module__}.{d.py_func.__qualname__}": len(d.overloads) for d in gc.get_objects()
+            if isinstance(d, Dispatcher) and d.py_func.__module__.startswith("wmm_qp")}
+
+model = w.WmmModel(w.load_robot_config(sys.argv[1]))
+ctl = w.make_controller("qp", model, w.load_controller_config())
+ctl.set_scene(load_scene(None))
+ctl.warm_up()
+before = kernels()
+q_base, q_arm = np.zeros(3), np.array(model.config.arm.start, dtype=float)
+x = model.ee_position(q_base, q_arm)
+v_arm = np.full(q_arm.shape, 0.05)
+refs = [w.Reference("hold", x_d=x), w.Reference("track", x_d=x + 0.01, xd_d=np.array([0.05, 0.0, 0.0])),
+        w.Reference("dm_cartesian"), w.Reference("dm_nullspace", x_d=x), w.Reference("track", x_d=x - 0.2)]
+for ref in refs:
+    for _ in range(3):
+        ctl.step(w.RobotState(q_base, q_arm, v_arm=v_arm), ref)
+after = kernels()
+print(json.dumps({k: (before.get(k, 0), n) for k, n in after.items() if n != before.get(k, 0)}))
+"""
+
+
+@pytest.mark.parametrize("robot", ["gen3_mecanum", "fr3"])
+def test_after_its_warm_up_no_tick_compiles_a_kernel(robot: str) -> None:
+    """``warm_up`` loads every kernel a tick runs: in a fresh process, after it, ticks of every
+    mode with and without a target, moving, with the default rows, add no compiled signature to
+    any of the package's kernels. (A kernel first compiled in the loop costs ~0.25 s on a
+    machine's first run: the position task's reference velocity did, at a daemon's first
+    setpoint, before the warm-up ticked the modes with a target too.)"""
+    import json
+    import subprocess
+    import sys
+
+    from wmm_qp.config import default_config_dir
+
+    out = subprocess.run([sys.executable, "-c", _NO_COMPILE_AFTER_WARM_UP,
+                          str(default_config_dir() / "robots" / f"{robot}.toml")],
+                         capture_output=True, text=True, timeout=600, check=True)
+    compiled = json.loads(out.stdout.strip().splitlines()[-1])
+    assert compiled == {}, f"compiled after the warm-up (overloads before, after): {compiled}"

@@ -151,18 +151,24 @@ class Controller(ABC):
             return self.safe_stop(state, f"{self.name}: {type(e).__name__}: {e}")
 
     def warm_up(self, q_arm: FloatArray | None = None) -> None:
-        """One tick of every mode, then :meth:`reset`: compiles, or loads from numba's cache,
-        every kernel of the hot path (~0.1–0.5 s once per process, seconds on a machine's first
-        run). Call it before a real-time loop starts, so the first real tick does not pay it.
+        """One tick of every mode, without a target and with one (the EE where it is), then
+        :meth:`reset`: compiles, or loads from numba's cache, every kernel of the hot path
+        (~0.1–0.5 s once per process, seconds on a machine's first run). Call it before a
+        real-time loop starts, so the first real tick does not pay it
+        (``test_after_its_warm_up_no_tick_compiles_a_kernel``).
 
         Args:
             q_arm: [rad] arm configuration to tick at (default: mid-range of every joint).
         """
         state = RobotState(q_base=np.zeros(3), q_arm=self.warm_up_configuration(q_arm))
-        for mode in Mode:
-            cmd = self.step(state, Reference(mode))
+        x = self.model.ee_position(state.q_base, state.q_arm)
+        # every mode, and each with a target where it takes one (a target's kernels are others: the
+        # first setpoint of a daemon had compiled the position task's reference velocity, ~0.25 s)
+        refs = [Reference(mode) for mode in Mode] + [Reference(mode, x_d=x) for mode in Mode]
+        for ref in refs:
+            cmd = self.step(state, ref)
             if cmd.status == Status.SAFE_STOP:  # at rest, mid-range: only a broken kernel stops here
-                raise RuntimeError(f"{self.name} controller failed its warm-up tick in {mode}: {cmd.reason}")
+                raise RuntimeError(f"{self.name} controller failed its warm-up tick in {ref.mode}: {cmd.reason}")
         self.reset()
         self.clear_statistics()
 
