@@ -52,14 +52,7 @@ def _closest_params(
 
 
 @jit
-def segment_segment(a0: FloatArray, a1: FloatArray, b0: FloatArray, b1: FloatArray) -> tuple[float, float]:
-    """Parameters (s, t) ∈ [0, 1]² of the closest points a0 + s(a1 − a0), b0 + t(b1 − b0)."""
-    return _closest_params(a0[0], a0[1], a0[2], a1[0] - a0[0], a1[1] - a0[1], a1[2] - a0[2],
-                           b0[0], b0[1], b0[2], b1[0] - b0[0], b1[1] - b0[1], b1[2] - b0[2])
-
-
-@jit
-def _swept_scalars(
+def segment_distance(
     a0x: float, a0y: float, a0z: float, a1x: float, a1y: float, a1z: float,
     b0x: float, b0y: float, b0z: float, b1x: float, b1y: float, b1z: float,
 ) -> tuple[float, float, float, float, float, float, float, float, float, float]:
@@ -82,7 +75,7 @@ def swept_swept(
     p: FloatArray, q: FloatArray, n: FloatArray,
 ) -> float:
     """Two swept segments (spheres, capsules)."""
-    dist, n[0], n[1], n[2], cax, cay, caz, cbx, cby, cbz = _swept_scalars(
+    dist, n[0], n[1], n[2], cax, cay, caz, cbx, cby, cbz = segment_distance(
         a0[0], a0[1], a0[2], a1[0], a1[1], a1[2], b0[0], b0[1], b0[2], b1[0], b1[1], b1[2])
     for i, (ca, cb) in enumerate(((cax, cbx), (cay, cby), (caz, cbz))):
         p[i] = ca - ra * n[i]
@@ -99,7 +92,7 @@ def swept_swept_at(
     candidates, by index: no array view made (each costs a reference count), and inlined into its
     caller (no call passing arrays); the Panda's ~105 capsule pairs a tick
     (``benchmarks/collision/passes_tick.py``, docs/benchmarks.md §12)."""
-    dist, nx, ny, nz, cax, cay, caz, cbx, cby, cbz = _swept_scalars(
+    dist, nx, ny, nz, cax, cay, caz, cbx, cby, cbz = segment_distance(
         a0[i, 0], a0[i, 1], a0[i, 2], a1[i, 0], a1[i, 1], a1[i, 2],
         a0[j, 0], a0[j, 1], a0[j, 2], a1[j, 0], a1[j, 1], a1[j, 2])
     ra, rb = r[i], r[j]

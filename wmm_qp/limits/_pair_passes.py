@@ -20,7 +20,7 @@ import numpy as np
 
 from .._jit import jit
 from .._typing import BoolArray, FloatArray, IntArray
-from ._distance import _swept_scalars, box_plane, swept_box, swept_plane, swept_swept, swept_swept_at
+from ._distance import box_plane, segment_distance, swept_box, swept_plane, swept_swept, swept_swept_at
 from ._gjk import convex_pair, convex_plane, gjk, on_the_shapes, uses_gjk
 
 
@@ -136,9 +136,9 @@ def self_pass(
             swept_swept_at(a0, a1, r, i, j, d, P, Q, N, n)
             ok[n] = True
         else:
-            lower = _swept_scalars(cap[i, 0, 0], cap[i, 0, 1], cap[i, 0, 2], cap[i, 1, 0], cap[i, 1, 1], cap[i, 1, 2],
-                                   cap[j, 0, 0], cap[j, 0, 1], cap[j, 0, 2], cap[j, 1, 0], cap[j, 1, 1],
-                                   cap[j, 1, 2])[0] - cap_r[i] - cap_r[j]
+            lower = segment_distance(cap[i, 0, 0], cap[i, 0, 1], cap[i, 0, 2], cap[i, 1, 0], cap[i, 1, 1], cap[i, 1, 2],
+                                     cap[j, 0, 0], cap[j, 0, 1], cap[j, 0, 2], cap[j, 1, 0], cap[j, 1, 1],
+                                     cap[j, 1, 2])[0] - cap_r[i] - cap_r[j]
             if lower > d_i:
                 continue
             if uses_gjk(kind[i], kind[j]):  # GJK called directly, convex_pair's work inline (each

@@ -28,6 +28,7 @@ from ..model.collision import (
     bounding_capsule,
     bounding_sphere,
     coal_shape,
+    convex_vertices,
     exempt_mask,
     row_shape,
     shape_pose,
@@ -69,8 +70,7 @@ class Table:
             self.a0[k] = self.a1[k] = M.translation
         elif isinstance(shape, coal.Box):
             self.kind[k], self.h[k] = 1, shape.halfSide
-        elif isinstance(shape, coal.ConvexBase) and shape.num_points > 0 and shape.getSweptSphereRadius() == 0.0:
-            pts = np.array([np.asarray(shape.point(i), dtype=float) for i in range(shape.num_points)])
+        elif (pts := convex_vertices(shape)) is not None:
             self.kind[k], self.vs[k], self.vc[k] = 3, self.verts.shape[0], pts.shape[0]
             self.verts = np.ascontiguousarray(np.vstack([self.verts, pts]))
         else:

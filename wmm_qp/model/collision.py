@@ -90,6 +90,14 @@ def bounding_sphere(shape: coal.CollisionGeometry) -> tuple[FloatArray, float]:
     return np.asarray(shape.aabb_center, dtype=float).copy(), float(shape.aabb_radius)
 
 
+def convex_vertices(shape: coal.CollisionGeometry) -> FloatArray | None:
+    """(n, 3) the vertices of a plain convex vertex set (a mesh's hull: no swept radius), in its
+    own frame; None for any other shape."""
+    if isinstance(shape, coal.ConvexBase) and shape.num_points > 0 and shape.getSweptSphereRadius() == 0.0:
+        return np.array([np.asarray(shape.point(i), dtype=float) for i in range(shape.num_points)])
+    return None
+
+
 CAPSULE_ROUNDING = 1e-9
 """[m] added to a box's and a vertex set's bounding capsule's radius: their corners and vertices,
 placed, stay inside it whatever the rounding."""
@@ -112,8 +120,8 @@ def bounding_capsule(shape: coal.CollisionGeometry) -> tuple[FloatArray, FloatAr
         e = np.zeros(3)
         e[ax] = half[ax]
         return -e, e, float(math.sqrt(float(np.sum(half**2)) - half[ax] ** 2)) + CAPSULE_ROUNDING
-    if isinstance(shape, coal.ConvexBase) and shape.num_points > 0 and shape.getSweptSphereRadius() == 0.0:
-        pts = np.array([np.asarray(shape.point(i), dtype=float) for i in range(shape.num_points)])
+    pts = convex_vertices(shape)
+    if pts is not None:
         mean = pts.mean(axis=0)
         axis = np.linalg.svd(pts - mean, full_matrices=False)[2][0] if pts.shape[0] > 1 else np.array([0.0, 0.0, 1.0])
         s = (pts - mean) @ axis
