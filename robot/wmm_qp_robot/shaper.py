@@ -9,6 +9,13 @@ acceleration change and ``acceleration_max·dt`` of velocity change per cycle (a
 velocity tracker, below). Pure: no libfranka, no clock, no transport — the driver
 (``wmm_qp_service.drivers.franka``) feeds it commands and the robot's cycles.
 
+A cycle's change is bounded by the robot time elapsed since the previous cycle, not by the
+nominal period: a cycle ``h < dt`` after the last one (a driver's loop whose cycles bunched under
+load, the first cycle of a libfranka motion at duration 0) moves the output by ``h``'s worth of
+acceleration and jerk only, so the output's rate of change stays within the limits in the robot's
+time whatever the spacing of its cycles. A late cycle (``h > dt``) still moves it by one period's
+worth at most.
+
 Firmware duties: the stream rules every robot keeps (:class:`~.stream_rules.StreamRules`, the
 simulated robot's too): an illegal command (past a velocity limit, non-finite) is refused with a
 protective stop; a stop ends its stream; after a protective stop only a new stream, the arm at
@@ -84,9 +91,10 @@ class CommandShaper(StreamRules):
         self.rtol, self.atol = rtol, atol
         n = len(limits.v_max)
         self.v = np.zeros(n)  # [rad/s] the last output
-        self.a = np.zeros(n)  # [rad/s²] (v_k − v_{k−1})/dt of the last output
+        self.a = np.zeros(n)  # [rad/s²] (v_k − v_{k−1})/h of the last output (h: its cycle's time step)
         self.target = np.zeros(n)  # [rad/s] the latest accepted command (0: none, stale, stopped)
         self.t_cmd = -np.inf  # [s] receipt time of the latest accepted command
+        self.t_step: float | None = None  # [s] the robot's time of the last cycle (None: none yet)
         self.reset_rules()
         self.halted = False  # halt(): braking to rest for good, every command refused
 
@@ -180,21 +188,34 @@ class CommandShaper(StreamRules):
         self.t_cmd = t
         return True
 
-    def _track(self, target: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """One cycle of the jerk-limited tracker towards ``target``: the next (v, a)."""
-        lim, dt = self.lim, self.dt
-        jdt = lim.j_max * dt
+    def _track(self, target: FloatArray, h: float) -> tuple[FloatArray, FloatArray]:
+        """One cycle of the jerk-limited tracker towards ``target``, ``h`` [s] of robot time after
+        the previous one (0 < h ≤ dt; h = 0: no time passed, the output unchanged): the next (v, a)."""
+        if h <= 0.0:
+            return self.v.copy(), self.a.copy()
+        lim = self.lim
+        jdt = lim.j_max * h
         e = target - self.v
-        a_prog = np.sign(e) * lim.j_max * (np.sqrt(dt * dt + 2.0 * np.abs(e) / lim.j_max) - dt)
+        a_prog = np.sign(e) * lim.j_max * (np.sqrt(h * h + 2.0 * np.abs(e) / lim.j_max) - h)
         a_prog = np.clip(a_prog, -lim.a_max, lim.a_max)
-        land = e / dt  # land on the target this cycle when the next cycle may then stop accelerating
+        land = e / h  # land on the target this cycle when the next cycle may then stop accelerating
         a_prog = np.where((np.abs(land - self.a) <= jdt) & (np.abs(land) <= np.minimum(jdt, lim.a_max)), land, a_prog)
         a_new = np.clip(a_prog, self.a - jdt, self.a + jdt)
         a_new = np.clip(a_new, -lim.a_max, lim.a_max)
-        v_new = self.v + a_new * dt
+        v_new = self.v + a_new * h
         v_clip = np.clip(v_new, -lim.v_max, lim.v_max)
-        a_new = np.where(v_clip != v_new, (v_clip - self.v) / dt, a_new)
-        return self.v + a_new * dt, a_new
+        a_new = np.where(v_clip != v_new, (v_clip - self.v) / h, a_new)
+        return self.v + a_new * h, a_new
+
+    def time_step(self, t: float) -> float:
+        """[s] the robot time this cycle may move the output by: the time since the previous
+        cycle, at most ``dt`` (the first cycle: ``dt``; within a millionth of ``dt``: ``dt``, so
+        that a clock that adds periods in floating point steps whole periods)."""
+        last, self.t_step = self.t_step, t
+        if last is None:
+            return self.dt
+        h = t - last
+        return self.dt if h >= self.dt * (1.0 - 1e-6) else max(h, 0.0)
 
     def step(self, t: float, q: FloatArray) -> FloatArray:
         """The joint velocities to send this cycle.
@@ -210,11 +231,12 @@ class CommandShaper(StreamRules):
         late = np.isfinite(self.t_cmd) and t - self.t_cmd > self.stale_timeout
         if late and not self.protective and self.go_stale():
             self.target = np.zeros_like(self.target)
-        v, a = self._track(self.target)
+        h = self.time_step(t)
+        v, a = self._track(self.target, h)
         if not self.protective and (i := self._cannot_stop(q + v * self.dt, v, a)) >= 0:
             self.protect(FaultCode.CANNOT_STOP_BEFORE_LIMIT, f"joint {i + 1} at {q[i]:.4g} rad moving at "
                          f"{v[i]:.4g} rad/s could no longer stop before its limit "
                          f"[{self.lim.q_lo[i]:.4g}, {self.lim.q_hi[i]:.4g}]")
-            v, a = self._track(self.target)
+            v, a = self._track(self.target, h)
         self.v, self.a = v, a
         return v.copy()

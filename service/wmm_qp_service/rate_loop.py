@@ -172,10 +172,9 @@ class RateLoop(LoopTiming):
     period behind, the missed deadlines are skipped (counted, never run in a burst).
 
     With ``rephase`` a late tick starts a new schedule instead (the next deadline a whole period
-    after it): ticks are then never closer than a period, as a loop that steps a command by a
-    fixed period's worth each tick needs (the ROS 2 driver's shaper: a·Δt a tick at most; on the
-    absolute grid the tick after a late one could come a fraction of a period later, and the
-    commanded rate changed faster than its acceleration limit in real time).
+    after it): a late tick is not followed by an early one (on the absolute grid the tick after a
+    late one could come a fraction of a period later). The ROS 2 driver's shaper, which changes its
+    rates by the time elapsed, then keeps its full rate of change after a busy moment.
 
     Args:
         rate_hz: [Hz] loop rate.

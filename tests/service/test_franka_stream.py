@@ -62,6 +62,36 @@ def test_every_output_step_is_within_velocity_acceleration_and_jerk_limits_and_b
     assert sh.stale and sh.at_rest, (sh.v, sh.a)
 
 
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.lists(st.sampled_from([0.0, 0.05, 0.3, 0.7, 1.0, 1.0, 1.0, 2.5]), min_size=1, max_size=30),
+                          st.lists(st.floats(-1.0, 1.0), min_size=7, max_size=7)), min_size=1, max_size=30))
+def test_cycles_bunched_in_robot_time_change_the_output_by_the_time_elapsed_only(
+        commands: list[tuple[list[float], list[float]]]) -> None:
+    """A driver's cycles need not come a period apart in the robot's time (a loop that bunched
+    under load; libfranka's first cycle, at duration 0): each cycle changes the output by at most
+    the acceleration limit times the robot time since the previous one (a period at most), and
+    its acceleration by the jerk limit times it. The old shaper stepped a whole period's worth
+    every cycle: a cycle 0.3 periods after the last changed the rate at 3.3 x the limit."""
+    sh = CommandShaper(LIM, DT, stale_timeout=1.0)
+    q = 0.5 * (LIM.q_lo + LIM.q_hi)
+    v_prev, a_prev, t = np.zeros(7), np.zeros(7), 0.0
+    sh.step(t, q)
+    for gaps, frac in commands:
+        sh.command(t, 0.3 * np.array(frac) * LIM.v_max, stream=1, q=q)
+        for g in gaps:
+            t += g * DT
+            v = sh.step(t, q)
+            h = min(g, 1.0) * DT
+            dv = v - v_prev
+            assert np.all(np.abs(v) <= LIM.v_max + TOL)
+            assert np.all(np.abs(dv) <= LIM.a_max * h + 1e-9), f"{np.abs(dv).max()} in {h} s of robot time"
+            if h > 0:
+                a = dv / h
+                assert np.all(np.abs(a - a_prev) <= LIM.j_max * h + 1e-6), f"jerk {(a - a_prev) / h}"
+                a_prev = a
+            v_prev = v
+
+
 @settings(max_examples=25, deadline=None)
 @given(st.lists(st.tuples(st.integers(1, 5), st.lists(st.floats(-1.0, 1.0), min_size=7, max_size=7)),
                 min_size=1, max_size=30), st.integers(0, 6), st.sampled_from([-1.0, 1.0]))

@@ -295,8 +295,8 @@ class Ros2Driver(LeaseGate):
 
     def _loop(self, hw: Ros2Hardware, sub: Any, lease_sub: Any, pub: Any, pub_truth: Any, stop: threading.Event,
               max_cycles: int | None) -> int:
-        # ticks never closer than a period: the shaper steps the command by a period's worth of
-        # acceleration each tick (after a late tick, the absolute grid's next one came early)
+        # after a late tick the next one a whole period later (the absolute grid's next comes early,
+        # and the shaper, which moves by the time elapsed, would move by less)
         loop = RateLoop(self.rate_hz, 0.0, clock=time.monotonic, rephase=True)
         now = t0 = loop.start()
         finishing = False
