@@ -241,7 +241,7 @@ def test_the_damper_bound_is_the_braking_profile_where_the_linear_damper_asks_to
     zero, lo, hi = np.zeros(3), -np.ones(3), np.ones(3)
 
     def bound(d: float) -> float:
-        return _row_bounds(row, zero, zero, lo, hi, d, 0.03, 0.3, 0.5, 0.0, 0.0, accel, 0.25, 0.0)[0]
+        return _row_bounds(row[None, :], 0, zero, zero, lo, hi, d, 0.03, 0.3, 0.5, 0.0, 0.0, accel, 0.25, 0.0)[0]
 
     assert bound(0.25) == pytest.approx(-math.sqrt(2 * 0.25 * 0.4 * 0.22))  # far: the profile (−0.21, not −0.41)
     assert bound(0.031) == pytest.approx(-0.5 * 0.001 / 0.27)  # near d_s: the linear damper
@@ -470,3 +470,37 @@ def test_rows_relaxed_together_admit_their_command_and_come_nearer_than_braking(
         else:
             short = lambda x: float(np.sum(np.maximum(0.0, np.minimum(damper, 0.0) - C @ x) ** 2))  # noqa: E731
             assert short(v) <= short(v0) + 1e-12
+
+
+def test_the_row_merge_keeps_the_most_restrictive_of_parallel_rows_of_one_pair_of_links() -> None:
+    """``_distinct_rows`` (compiled, by index) against the rule written with numpy: of rows of the
+    same key (pair of links) whose directions agree within cos > PARALLEL, only the one with the
+    largest l/|C| stays, in the order the rows came; rows of other keys, or apart in direction,
+    all stay. Random rows with near-copies (parallel, scaled, anti-parallel) under shared keys."""
+    from wmm_qp.limits.collision import PARALLEL, _distinct_rows
+
+    def reference(C: np.ndarray, l: np.ndarray, keys: np.ndarray) -> list[int]:
+        keep: list[int] = []
+        for k in range(C.shape[0]):
+            for i, j in enumerate(keep):
+                nj, nk = np.linalg.norm(C[j]) + 1e-300, np.linalg.norm(C[k]) + 1e-300
+                if keys[j] == keys[k] and float(C[j] @ C[k]) > PARALLEL * nj * nk:
+                    if l[k] / nk > l[j] / nj:
+                        keep[i] = k
+                    break
+            else:
+                keep.append(k)
+        return keep
+
+    rng = np.random.default_rng(7)
+    merged = 0
+    for _ in range(200):
+        base = rng.normal(size=(6, 9))
+        C = np.vstack([base, base[rng.integers(0, 6, 10)] * rng.choice([0.5, 2.0, -1.0], size=(10, 1))
+                       + 1e-9 * rng.normal(size=(10, 9))])
+        l = rng.normal(size=16)
+        keys = rng.integers(0, 3, 16)
+        got = _distinct_rows(C, l, keys).tolist()
+        assert got == reference(C, l, keys)
+        merged += 16 - len(got)
+    assert merged > 200  # the parallel copies did merge

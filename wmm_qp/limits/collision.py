@@ -333,17 +333,25 @@ def _point_rows(
 def _distinct_rows(C: FloatArray, l: FloatArray, keys: IntArray) -> IntArray:
     """The rows to keep: of two rows of the same pair of links whose directions agree to within
     cos > PARALLEL (one link's several shapes against one obstacle), only the more restrictive."""
-    m = C.shape[0]
+    m, n_v = C.shape
     norms = np.empty(m)
-    for k in range(m):
-        norms[k] = math.sqrt(np.dot(C[k], C[k])) + 1e-300
+    for k in range(m):  # (by index, not np.dot: a BLAS call on two row views costs a row's work many times)
+        s = 0.0
+        for c in range(n_v):
+            s += C[k, c] * C[k, c]
+        norms[k] = math.sqrt(s) + 1e-300
     keep = np.empty(m, dtype=np.int64)
     n = 0
     for k in range(m):
         merged = False
         for i in range(n):
             j = keep[i]
-            if keys[j] == keys[k] and np.dot(C[j], C[k]) > PARALLEL * norms[j] * norms[k]:
+            if keys[j] != keys[k]:
+                continue
+            s = 0.0
+            for c in range(n_v):
+                s += C[j, c] * C[k, c]
+            if s > PARALLEL * norms[j] * norms[k]:
                 if l[k] / norms[k] > l[j] / norms[j]:
                     keep[i] = k
                 merged = True

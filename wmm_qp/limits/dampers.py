@@ -41,18 +41,19 @@ from .rows import RELAX_MARGIN, Retry, Rows, RowSource
 
 @jit_inline
 def _row_bounds(
-    row: FloatArray, v_prev: FloatArray, v0: FloatArray, lb: FloatArray, ub: FloatArray,
+    C: FloatArray, k: int, v_prev: FloatArray, v0: FloatArray, lb: FloatArray, ub: FloatArray,
     d: float, d_s: float, d_i: float, gain: float, latency: float, shift: float, accel: FloatArray,
     braking: float, offset: float,
 ) -> tuple[float, float, float]:
-    """(the damper's bound, the most separating rate in lb ≤ v ≤ ub, the braking command's rate).
+    """Of row ``k`` of C (read by index: a row view costs a reference count): (the damper's
+    bound, the most separating rate in lb ≤ v ≤ ub, the braking command's rate).
 
     The damper's bound is the larger of the linear damper and the braking profile
     −√(2 β a_n (d' − d_s)), a_n = Σ_j |C_j| A_j the fastest the pair's approach can be slowed
     (every joint braking for it at its A)."""
     prev = best = brake = a_n = 0.0
-    for i in range(row.shape[0]):
-        c = row[i]
+    for i in range(C.shape[1]):
+        c = C[k, i]
         prev += c * v_prev[i]
         brake += c * v0[i]
         best += c * ub[i] if c > 0.0 else c * lb[i]
@@ -91,7 +92,7 @@ def damper_bounds(
     l, l_brake, damper = np.empty(m), np.empty(m), np.empty(m)
     v0 = np.minimum(np.maximum(0.0, lb), ub)
     for k in range(m):
-        dk, best, brake = _row_bounds(C[k], v_prev, v0, lb, ub, d[k], d_s[k], d_i, gain, latency, shift[k],
+        dk, best, brake = _row_bounds(C, k, v_prev, v0, lb, ub, d[k], d_s[k], d_i, gain, latency, shift[k],
                                       accel, braking, offset[k])
         damper[k] = dk
         # a relaxed row would pass through a vertex of the box exactly: 1e-9 m/s below it, so that
