@@ -10,11 +10,14 @@ velocity tracker, below). Pure: no libfranka, no clock, no transport — the dri
 (``wmm_qp_service.drivers.franka``) feeds it commands and the robot's cycles.
 
 A cycle's change is bounded by the robot time elapsed since the previous cycle, not by the
-nominal period: a cycle ``h < dt`` after the last one (a driver's loop whose cycles bunched under
-load, the first cycle of a libfranka motion at duration 0) moves the output by ``h``'s worth of
-acceleration and jerk only, so the output's rate of change stays within the limits in the robot's
-time whatever the spacing of its cycles. A late cycle (``h > dt``) still moves it by one period's
-worth at most.
+nominal period: the tracker below runs with ``h``, that time (a period at most), in place of
+``dt``. However close a driver's cycles come (a loop whose cycles bunched under load) the output
+changes by at most ``acceleration_max·h`` and stays within the velocity limits; its acceleration
+changes by at most ``jerk_max·max(h, h_prev)``, ``h_prev`` the cycle before's (a cycle shorter
+than the one that landed the output on its target stops accelerating as fast as that one started:
+the landing's acceleration is at most ``jerk_max·h_prev``). A cycle at the same robot time as the
+last changes nothing; a late one (h > dt) moves the output by one period's worth at most. A robot
+whose every cycle is a whole period of its time (Franka's: 1 ms) gets the fixed-period tracker.
 
 Firmware duties: the stream rules every robot keeps (:class:`~.stream_rules.StreamRules`, the
 simulated robot's too): an illegal command (past a velocity limit, non-finite) is refused with a

@@ -62,34 +62,84 @@ def test_every_output_step_is_within_velocity_acceleration_and_jerk_limits_and_b
     assert sh.stale and sh.at_rest, (sh.v, sh.a)
 
 
-@settings(max_examples=60, deadline=None)
-@given(st.lists(st.tuples(st.lists(st.sampled_from([0.0, 0.05, 0.3, 0.7, 1.0, 1.0, 1.0, 2.5]), min_size=1, max_size=30),
+def _check_bunched(v: np.ndarray, v_prev: np.ndarray, a_prev: np.ndarray, h: float, h_prev: float) -> np.ndarray:
+    """Assert one cycle's limits, ``h`` [s] of robot time after the last (which came ``h_prev``
+    after the one before): within the velocity limits, the change within A·h, the acceleration's
+    within J·max(h, h_prev); return the acceleration (a_prev where h = 0, which changes nothing)."""
+    dv = v - v_prev
+    assert np.all(np.abs(v) <= LIM.v_max + TOL), f"velocity {v} beyond {LIM.v_max}"
+    assert np.all(np.abs(dv) <= LIM.a_max * h + 1e-9), f"{np.abs(dv).max()} rad/s in {h} s of robot time"
+    if h == 0.0:
+        assert not dv.any()
+        return a_prev
+    a = dv / h
+    assert np.all(np.abs(a - a_prev) <= LIM.j_max * max(h, h_prev) + 1e-6), f"jerk {(a - a_prev) / max(h, h_prev)}"
+    return a
+
+
+GAPS = [0.0, 0.05, 0.2, 0.3, 0.7, 1.0, 1.0, 1.0, 2.5]  # [periods] of robot time between two cycles
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.lists(st.tuples(st.lists(st.sampled_from(GAPS), min_size=1, max_size=60),
                           st.lists(st.floats(-1.0, 1.0), min_size=7, max_size=7)), min_size=1, max_size=30))
 def test_cycles_bunched_in_robot_time_change_the_output_by_the_time_elapsed_only(
         commands: list[tuple[list[float], list[float]]]) -> None:
-    """A driver's cycles need not come a period apart in the robot's time (a loop that bunched
-    under load; libfranka's first cycle, at duration 0): each cycle changes the output by at most
-    the acceleration limit times the robot time since the previous one (a period at most), and
-    its acceleration by the jerk limit times it. The old shaper stepped a whole period's worth
-    every cycle: a cycle 0.3 periods after the last changed the rate at 3.3 x the limit."""
-    sh = CommandShaper(LIM, DT, stale_timeout=1.0)
+    """A driver's cycles need not come a period apart in the robot's time (a loop whose cycles
+    bunched under load): each cycle changes the output by at most the acceleration limit times the
+    robot time since the previous one (a period at most), its acceleration by at most the jerk
+    limit times the longer of that time and the previous cycle's, never past a velocity limit
+    (commands up to the limits); the silence after the last command still brakes it to rest. The
+    fixed-period shaper changed the rate by a period's worth every cycle, however close: 3.3 x the
+    acceleration limit for a cycle 0.3 periods after the last."""
+    sh = CommandShaper(LIM, DT, stale_timeout=0.02)
     q = 0.5 * (LIM.q_lo + LIM.q_hi)
-    v_prev, a_prev, t = np.zeros(7), np.zeros(7), 0.0
+    v_prev, a_prev, t, h_prev = np.zeros(7), np.zeros(7), 0.0, DT
     sh.step(t, q)
     for gaps, frac in commands:
-        sh.command(t, 0.3 * np.array(frac) * LIM.v_max, stream=1, q=q)
+        sh.command(t, np.array(frac) * LIM.v_max, stream=1, q=q)
+        for g in gaps:
+            t += g * DT
+            h = min(g, 1.0) * DT
+            v = sh.step(t, q)
+            a_prev, v_prev = _check_bunched(v, v_prev, a_prev, h, h_prev), v
+            h_prev = h or h_prev
+    rest_by = 0.02 + float(np.max(LIM.v_max / LIM.a_max + 2 * LIM.a_max / LIM.j_max)) + 0.01
+    for k in range(2 * int(rest_by / DT) + 1):  # silent: stale, then at rest (cycles 0.3 and 1.7 periods apart)
+        g = 0.3 if k % 2 else 1.7
+        t += g * DT
+        h = min(g, 1.0) * DT
+        v = sh.step(t, q)
+        a_prev, v_prev = _check_bunched(v, v_prev, a_prev, h, h_prev), v
+        h_prev = h
+    assert sh.stale and sh.at_rest, (sh.v, sh.a)
+
+
+@pytest.mark.parametrize("fraction", [1.0, 0.5])
+def test_a_short_cycle_after_landing_on_the_target_stops_accelerating_within_the_last_cycles_jerk(
+        fraction: float) -> None:
+    """The output lands on its target (joint 1's velocity limit, or half of it) in a whole period,
+    accelerating by J·dt at most; the next cycle comes 0.2 periods later and can only stop
+    accelerating as fast as the last started: the acceleration's change within J·dt, never past
+    the velocity limit, and back on the target within a few cycles."""
+    sh = CommandShaper(LIM, DT, stale_timeout=1.0)
+    q = 0.5 * (LIM.q_lo + LIM.q_hi)
+    target = np.zeros(7)
+    v_prev, a_prev, t, h_prev = np.zeros(7), np.zeros(7), 0.0, DT
+    for value, gaps in ((fraction * LIM.v_max[0] - 0.004, [1.0] * 400), (fraction * LIM.v_max[0], [1.0, 0.2, 0.2])):
+        target[0] = value
+        sh.command(t, target, stream=1, q=q)
         for g in gaps:
             t += g * DT
             v = sh.step(t, q)
-            h = min(g, 1.0) * DT
-            dv = v - v_prev
-            assert np.all(np.abs(v) <= LIM.v_max + TOL)
-            assert np.all(np.abs(dv) <= LIM.a_max * h + 1e-9), f"{np.abs(dv).max()} in {h} s of robot time"
-            if h > 0:
-                a = dv / h
-                assert np.all(np.abs(a - a_prev) <= LIM.j_max * h + 1e-6), f"jerk {(a - a_prev) / h}"
-                a_prev = a
-            v_prev = v
+            a_prev, v_prev = _check_bunched(v, v_prev, a_prev, g * DT, h_prev), v
+            h_prev = g * DT
+    for _ in range(10):
+        t += DT
+        v = sh.step(t, q)
+        a_prev, v_prev = _check_bunched(v, v_prev, a_prev, DT, h_prev), v
+        h_prev = DT
+    assert v[0] == target[0], (v[0], target[0])
 
 
 @settings(max_examples=25, deadline=None)
