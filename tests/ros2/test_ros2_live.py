@@ -211,7 +211,7 @@ def test_live_the_contract_kit_passes_and_the_robots_topics_refuse_garbage(tmp_p
     # the robot given 0.5 s before its joint states count as lost: the stand-in robot, a Python
     # process on a loaded 2-core host, stalled its joint states for 0.10 s once in the middle of a
     # check (the driver rightly stopped: state lost, a verdict on the host, not on the driver; the
-    # lost robot is test_live_lost_joint_states_...'s)
+    # shipped 0.1 s is the lost joint states' live test's, below)
     robot_file = tmp_path / "gen3_mecanum.toml"
     robot_file.write_text(gen3_text() + "\n[ros2]\nstate_timeout = 0.5\n")
     robot = w.load_robot_config(robot_file)
@@ -234,7 +234,7 @@ def test_live_the_contract_kit_passes_and_the_robots_topics_refuse_garbage(tmp_p
                 cases = [(["other_joint_1", "other_joint_2"], [0.1, 0.2]),  # another robot
                          (list(robot.arm.joints), [math.nan] * robot.n_arm),  # garbage values
                          (list(robot.arm.joints[:3]), [0.0] * 3)]  # a partial state
-                for names, pos in cases * 5:
+                for names, pos in cases * 15:  # 0.9 s: longer than the state timeout (0.5 s here)
                     m = JointState()
                     m.name, m.position = names, pos
                     pub.publish(m)
@@ -253,15 +253,8 @@ def test_live_lost_joint_states_are_a_protective_stop_and_the_robot_gets_zero_ra
     coded robot_state_lost naming the topic, and what it writes to the arm brakes to 0."""
     from wmm_qp_tools import contract
 
-    # the robot given 0.5 s before its joint states count as lost: the stand-in robot, a Python
-    # process on a loaded 2-core host, stalled its joint states for 0.10 s once in the middle of a
-    # check (the driver rightly stopped: state lost, a verdict on the host, not on the driver; the
-    # lost robot is test_live_lost_joint_states_...'s)
-    robot_file = tmp_path / "gen3_mecanum.toml"
-    robot_file.write_text(gen3_text() + "\n[ros2]\nstate_timeout = 0.5\n")
-    robot = w.load_robot_config(robot_file)
-    assert robot.ros2.state_timeout == 0.5
-    with stack(tmp_path, robot_file) as s:
+    robot = w.load_robot_config(ROBOTS / "gen3_mecanum.toml")
+    with stack(tmp_path, ROBOTS / "gen3_mecanum.toml") as s:
         rec = Recorder(robot)
         try:
             with contract.Controller(s.svc, robot) as c:
