@@ -1,6 +1,7 @@
 """What the work between two ticks costs the next one: the default robot's ``ctl.step`` (rows off,
-track mode) timed back to back and after 0.8 ms of five other things, the cases taking turns in
-rounds of 500 ticks (docs/benchmarks.md §12, "What the idle costs the next step"):
+track mode) timed back to back and after each of four other things (0.8 ms of each, the sweep as
+long as it takes), the cases taking turns in rounds of 500 ticks (docs/benchmarks.md §12, "What the
+idle costs the next step"):
 
 - ``none``: nothing (the isolated step);
 - ``sleep``: ``time.sleep`` (the core idles: what a loop that sleeps to its deadline does);
