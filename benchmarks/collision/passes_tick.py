@@ -12,38 +12,17 @@ from a ``git worktree``, with ``PYTHONPATH`` set to that tree and its ``sim``, `
 from __future__ import annotations
 
 import time
-from typing import Any
 
 import numpy as np
-from wmm_qp_tools.bench.collision import for_each_robot, rows_on_the_default_scene
-from wmm_qp_tools.bench.trajectory import IdealRobot, circle
+from wmm_qp_tools.bench.collision import arguments_at_tick, for_each_robot
 
-import wmm_qp as w
 from wmm_qp.limits import pair_search
 
 CALLS = 5000
 
 
 def one(name: str, ticks: int) -> str:
-    model, ctl, _search = rows_on_the_default_scene(f"configs/robots/{name}.toml")
-    passes = pair_search.robot_passes
-    kept: list[tuple[Any, ...]] = []
-
-    def keep(*args: Any) -> Any:
-        kept[:] = [args]
-        return passes(*args)
-
-    pair_search.robot_passes = keep  # type: ignore[assignment]
-    try:
-        bot = IdealRobot.at_start(model)
-        x0 = model.ee_position(bot.q_base, bot.q_arm)
-        for k in range(ticks):
-            x_d, xd_d = circle(x0, k * ctl.dt)
-            cmd = ctl.step(bot.state(), w.Reference(w.Mode.TRACK, x_d=x_d, xd_d=xd_d))
-            bot.apply(cmd, ctl.dt)
-    finally:
-        pair_search.robot_passes = passes
-    args = kept[0]
+    passes, args = arguments_at_tick(f"configs/robots/{name}.toml", pair_search, "robot_passes", ticks)
     n, _left = passes(*args)
     t = np.empty(CALLS)
     for k in range(CALLS):

@@ -16,10 +16,8 @@ from typing import Any
 
 import numpy as np
 from numba import njit
-from wmm_qp_tools.bench.collision import for_each_robot, rows_on_the_default_scene
-from wmm_qp_tools.bench.trajectory import IdealRobot, circle
+from wmm_qp_tools.bench.collision import arguments_at_tick, for_each_robot
 
-import wmm_qp as w
 from wmm_qp.limits import collision
 from wmm_qp.limits.dampers import damper_bounds
 
@@ -37,25 +35,7 @@ def _p50_us(fn: Callable[..., Any], *args: Any) -> float:
 
 
 def one(name: str, ticks: int) -> str:
-    model, ctl, _ = rows_on_the_default_scene(f"configs/robots/{name}.toml")
-    rows = collision._rows
-    kept: list[tuple[Any, ...]] = []
-
-    def keep(*args: Any) -> Any:
-        kept[:] = [args]
-        return rows(*args)
-
-    collision._rows = keep  # type: ignore[assignment]
-    try:
-        bot = IdealRobot.at_start(model)
-        x0 = model.ee_position(bot.q_base, bot.q_arm)
-        for k in range(ticks):
-            x_d, xd_d = circle(x0, k * ctl.dt)
-            cmd = ctl.step(bot.state(), w.Reference(w.Mode.TRACK, x_d=x_d, xd_d=xd_d))
-            bot.apply(cmd, ctl.dt)
-    finally:
-        collision._rows = rows
-    a = kept[0]
+    rows, a = arguments_at_tick(f"configs/robots/{name}.toml", collision, "_rows", ticks)
     (d, P, Q, N, body, other, safety, n, d_i, max_rows, n_v, Jw, support, bj, M, n_w, body_link, n_links,
      n_obstacles, _velocity_b, v_prev, lb, ub, gain, latency, accel, braking) = a
     parts = (d, P, Q, N, body, other, safety, n, d_i, max_rows, n_v, Jw, support, bj, M, n_w, body_link, n_links,

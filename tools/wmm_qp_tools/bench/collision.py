@@ -45,6 +45,33 @@ def rows_on_the_default_scene(robot_config: str | Path) -> tuple[w.WmmModel, Any
     return model, on, search
 
 
+def arguments_at_tick(robot_config: str | Path, module: Any, kernel: str, ticks: int) -> tuple[Callable[..., Any],
+                                                                                             tuple[Any, ...]]:
+    """``module.kernel`` (a compiled function the rows call each tick, e.g. ``pair_search``'s
+    ``robot_passes``) and its arguments at the last of ``ticks`` ticks of the paper's circle with
+    the default rows and scene (:func:`rows_on_the_default_scene`), the robot ideal: what the
+    kernel benchmarks time it on."""
+    model, ctl, _ = rows_on_the_default_scene(robot_config)
+    fn = getattr(module, kernel)
+    kept: list[tuple[Any, ...]] = []
+
+    def keep(*args: Any) -> Any:
+        kept[:] = [args]
+        return fn(*args)
+
+    setattr(module, kernel, keep)
+    try:
+        bot = IdealRobot.at_start(model)
+        x0 = model.ee_position(bot.q_base, bot.q_arm)
+        for k in range(ticks):
+            x_d, xd_d = circle(x0, k * ctl.dt)
+            cmd = ctl.step(bot.state(), w.Reference(w.Mode.TRACK, x_d=x_d, xd_d=xd_d))
+            bot.apply(cmd, ctl.dt)
+    finally:
+        setattr(module, kernel, fn)
+    return fn, kept[0]
+
+
 def robot_and_ticks(doc: str) -> argparse.Namespace:
     """The collision benchmarks' arguments: ``robot_config`` and ``--ticks`` (3000)."""
     ap = argparse.ArgumentParser(description=doc.split("\n\n")[0])
