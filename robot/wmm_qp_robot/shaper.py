@@ -197,23 +197,23 @@ class CommandShaper(StreamRules):
         if h <= 0.0:
             return self.v.copy(), self.a.copy()
         lim = self.lim
-        jdt = lim.j_max * h
+        jh = lim.j_max * h
         e = target - self.v
         a_prog = np.sign(e) * lim.j_max * (np.sqrt(h * h + 2.0 * np.abs(e) / lim.j_max) - h)
         a_prog = np.clip(a_prog, -lim.a_max, lim.a_max)
         land = e / h  # land on the target this cycle when the next cycle may then stop accelerating
-        a_prog = np.where((np.abs(land - self.a) <= jdt) & (np.abs(land) <= np.minimum(jdt, lim.a_max)), land, a_prog)
-        a_new = np.clip(a_prog, self.a - jdt, self.a + jdt)
+        a_prog = np.where((np.abs(land - self.a) <= jh) & (np.abs(land) <= np.minimum(jh, lim.a_max)), land, a_prog)
+        a_new = np.clip(a_prog, self.a - jh, self.a + jh)
         a_new = np.clip(a_new, -lim.a_max, lim.a_max)
         v_new = self.v + a_new * h
         v_clip = np.clip(v_new, -lim.v_max, lim.v_max)
         a_new = np.where(v_clip != v_new, (v_clip - self.v) / h, a_new)
         return self.v + a_new * h, a_new
 
-    def time_step(self, t: float) -> float:
-        """[s] the robot time this cycle may move the output by: the time since the previous
-        cycle, at most ``dt`` (the first cycle: ``dt``; within a millionth of ``dt``: ``dt``, so
-        that a clock that adds periods in floating point steps whole periods)."""
+    def _elapsed(self, t: float) -> float:
+        """Mark this cycle's robot time ``t``; [s] the time the cycle may move the output by: the
+        time since the previous cycle, at most ``dt`` (the first cycle: ``dt``; within a millionth
+        of ``dt``: ``dt``, so that a clock that adds periods in floating point steps whole periods)."""
         last, self.t_step = self.t_step, t
         if last is None:
             return self.dt
@@ -234,7 +234,7 @@ class CommandShaper(StreamRules):
         late = np.isfinite(self.t_cmd) and t - self.t_cmd > self.stale_timeout
         if late and not self.protective and self.go_stale():
             self.target = np.zeros_like(self.target)
-        h = self.time_step(t)
+        h = self._elapsed(t)
         v, a = self._track(self.target, h)
         if not self.protective and (i := self._cannot_stop(q + v * self.dt, v, a)) >= 0:
             self.protect(FaultCode.CANNOT_STOP_BEFORE_LIMIT, f"joint {i + 1} at {q[i]:.4g} rad moving at "
