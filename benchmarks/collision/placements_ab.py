@@ -24,6 +24,7 @@ from wmm_qp.limits.pair_search import SE3_DOUBLES, PairSearch
 def copying(search: PairSearch) -> None:
     """``search`` copies each placement off ``data.oMi`` a tick, as where the table is refused."""
     search._in_place, search._oMi = False, np.zeros((0, SE3_DOUBLES))
+    search._bind()
 
 
 def one(name: str, ticks: int) -> str:

@@ -36,8 +36,8 @@ def _p50_us(fn: Callable[..., Any], *args: Any) -> float:
 
 def one(name: str, ticks: int) -> str:
     rows, a = arguments_at_tick(f"configs/robots/{name}.toml", collision, "_rows", ticks)
-    (d, P, Q, N, body, other, safety, n, d_i, max_rows, n_v, Jw, support, bj, M, n_w, body_link, n_links,
-     n_obstacles, _velocity_b, v_prev, lb, ub, gain, latency, accel, braking) = a
+    (d, P, Q, N, body, other, safety, d_i, max_rows, n_v, Jw, support, bj, M, n_w, body_link, n_links,
+     n_obstacles, gain, accel, braking, n, _velocity_b, v_prev, lb, ub, latency) = a
     parts = (d, P, Q, N, body, other, safety, n, d_i, max_rows, n_v, Jw, support, bj, M, n_w, body_link, n_links,
              n_obstacles)
     C, D, DS, _, _, _, keys, _, _ = collision._assemble(*parts)

@@ -291,6 +291,7 @@ def test_the_placements_read_in_place_follow_every_forward_kinematics() -> None:
     assert in_place._in_place and in_place._oMi.base is not None  # a view, not a copy
     copied._in_place, copied._oMi = False, np.zeros((0, 12))
     stale._oMi = np.array(stale._oMi)  # the mutation: the placements as they were once
+    copied._bind(), stale._bind()
     arm = model.arm
     differs = 0
     for _ in arm_walk(model, 5, 40, 0.1):
@@ -358,3 +359,38 @@ def test_the_bounding_capsules_contain_their_shapes_and_cull_only_pairs_beyond_t
             assert np.array_equal(getattr(a, f)[near_a], getattr(b, f)[near_b]), f
         left_out += b.n - a.n
     assert left_out > 0
+
+
+@pytest.mark.parametrize(("robot", "scale"), [("panda_diffdrive", 0.01), ("panda_diffdrive", 0.04),
+                                              ("gen3_mecanum", 0.03)])
+def test_a_pair_left_out_by_its_last_distance_has_not_come_within_the_influence_distance(
+        robot: str, scale: float) -> None:
+    """The search leaves out a pair of capsules while its last distance, less how far either body
+    can have moved since (``body_travel``), keeps it beyond d_i. Along random walks of the arm (steps
+    of 0.01–0.04 rad a joint: a few ticks at full speed each), its candidates within d_i equal, bit
+    for bit, those of a search that computes every pair each step (reset before each), and it
+    leaves pairs out. The
+    mutations caught (in ``_pair_passes``): the travel without the bodies' rotation (its centre's
+    only), the travel of the last step only, and none (a pair beyond d_i once is left out while it
+    passes the bounding spheres)."""
+    from wmm_qp.config import default_config_dir
+    from wmm_qp.limits.pair_search import PairSearch
+
+    model = w.WmmModel(w.load_robot_config(default_config_dir() / "robots" / f"{robot}.toml"))
+    ctl = w.make_controller("qp", model, w.load_controller_config().with_(collision={"enabled": True}))
+    coherent = ctl.collision.search  # type: ignore[attr-defined]
+    every = PairSearch(coherent.geo, coherent.p)
+    d_i = coherent.p.influence_distance
+    left_out = near_pairs = 0
+    for seed in range(4):
+        coherent.reset()
+        for _ in arm_walk(model, seed, 150, scale):
+            every.reset()
+            a, b = coherent.search(np.zeros(3)), every.search(np.zeros(3))
+            near_a, near_b = np.flatnonzero(a.d[: a.n] < d_i), np.flatnonzero(b.d[: b.n] < d_i)
+            assert near_a.shape == near_b.shape
+            for f in ("d", "p_a", "p_b", "normal", "body", "other"):
+                assert np.array_equal(getattr(a, f)[near_a], getattr(b, f)[near_b]), f
+            left_out += b.n - a.n
+            near_pairs += near_b.shape[0]
+    assert left_out > 0 and near_pairs > 0

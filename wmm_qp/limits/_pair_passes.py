@@ -18,10 +18,14 @@ import math
 
 import numpy as np
 
-from .._jit import jit
+from .._jit import jit, jit_inline
 from .._typing import BoolArray, FloatArray, IntArray
 from ._distance import box_plane, segment_distance, swept_box, swept_plane, swept_swept, swept_swept_at
 from ._gjk import convex_pair, convex_plane, gjk, on_the_shapes, uses_gjk
+
+COHERENCE_MARGIN = 1e-9
+"""[m] what :func:`self_pass` keeps in hand when it leaves out a pair by its last distance (that
+distance's rounding, the travel's sum's)."""
 
 
 @jit
@@ -119,22 +123,32 @@ def self_pass(
     verts: FloatArray, vs: IntArray, vc: IntArray,
     centre: FloatArray, pairs: IntArray, pair_r: FloatArray, d_i: float, d_s: float,
     d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray, body: IntArray, other: IntArray,
-    safety: FloatArray, n: int, warm: FloatArray, cap: FloatArray, cap_r: FloatArray,
+    safety: FloatArray, n: int, warm: FloatArray, cap: FloatArray, cap_r: FloatArray, moved: FloatArray,
+    slack: FloatArray,
 ) -> int:
     """The robot's own pairs whose bounding spheres are within d_i (the broad phase), their
     distances appended to the candidates from entry n; returns the new count. ``warm[k]``: GJK's
     start for pair k (:func:`._gjk.gjk`). A pair that is not two swept segments (whose distance
     is as cheap) is left out, too, where the bounding capsules of its shapes (``cap[i]``: the
     segment's ends, placed; ``cap_r[i]``: the radius) are further apart than d_i: its distance is
-    no less than theirs (a capsule distance instead of GJK's iterations)."""
+    no less than theirs (a capsule distance instead of GJK's iterations).
+
+    Two swept segments are left out, too, while their last distance d₀ still keeps them beyond
+    d_i: no point of body i has moved further than ``moved[i, 3]`` − (its value then) since
+    (:func:`body_travel`), so d ≥ d₀ − (how far both moved) > d_i (``slack[k]``: d₀ − d_i − 1e-9 m,
+    −inf where the pair has no such distance, and both bodies' travel then)."""
     for k in range(pairs.shape[0]):
         i, j = pairs[k, 0], pairs[k, 1]
         x, y, z = centre[i, 0] - centre[j, 0], centre[i, 1] - centre[j, 1], centre[i, 2] - centre[j, 2]
         if not math.sqrt(x * x + y * y + z * z) - pair_r[k] <= d_i:
             continue
         if kind[i] == 0 and kind[j] == 0:  # two capsules or spheres (most pairs): by index
+            travel = moved[i, 3] + moved[j, 3]
+            if travel - slack[k, 1] < slack[k, 0]:  # still beyond d_i (the last distance, less the travel)
+                continue
             swept_swept_at(a0, a1, r, i, j, d, P, Q, N, n)
             ok[n] = True
+            slack[k, 0], slack[k, 1] = d[n] - d_i - COHERENCE_MARGIN, travel
         else:
             lower = segment_distance(cap[i, 0, 0], cap[i, 0, 1], cap[i, 0, 2], cap[i, 1, 0], cap[i, 1, 1], cap[i, 1, 2],
                                      cap[j, 0, 0], cap[j, 0, 1], cap[j, 0, 2], cap[j, 1, 0], cap[j, 1, 1],
@@ -179,26 +193,62 @@ def plane_pass(
     return n
 
 
+@jit_inline
+def _f(F: FloatArray, L: IntArray, k: int) -> FloatArray:
+    """Array k of the float arena F (:func:`robot_passes`): ``L[k]`` = (offset, size), 1-D."""
+    return F[L[k, 0] : L[k, 0] + L[k, 1]]
+
+
+@jit_inline
+def _f2(F: FloatArray, L: IntArray, k: int) -> FloatArray:
+    """Array k of F, 2-D: ``L[k]`` = (offset, size, rows, columns)."""
+    return F[L[k, 0] : L[k, 0] + L[k, 1]].reshape((L[k, 2], L[k, 3]))
+
+
+@jit_inline
+def _f3(F: FloatArray, L: IntArray, k: int) -> FloatArray:
+    """Array k of F, 3-D: ``L[k]`` = (offset, size, d0, d1, d2)."""
+    return F[L[k, 0] : L[k, 0] + L[k, 1]].reshape((L[k, 2], L[k, 3], L[k, 4]))
+
+
+@jit_inline
+def _i(I: IntArray, L: IntArray, k: int) -> IntArray:
+    return I[L[k, 0] : L[k, 0] + L[k, 1]]
+
+
+@jit_inline
+def _i2(I: IntArray, L: IntArray, k: int) -> IntArray:
+    return I[L[k, 0] : L[k, 0] + L[k, 1]].reshape((L[k, 2], L[k, 3]))
+
+
 @jit
 def robot_passes(
-    oMi: FloatArray, joint_id: IntArray, Hj: FloatArray, joint: IntArray,
-    l_a0: FloatArray, l_a1: FloatArray, l_c: FloatArray, l_R: FloatArray,
-    l_centre: FloatArray,
-    kind: IntArray, a0: FloatArray, a1: FloatArray, r: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
-    verts: FloatArray, vs: IntArray, vc: IntArray, centre: FloatArray, radii: FloatArray,
-    pairs: IntArray, pair_r: FloatArray, d_i: float, d_s: float,
-    floor_idx: IntArray, floor_n: FloatArray, floor_o: float, floor_margin: float,
-    d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray, body: IntArray, other: IntArray,
-    safety: FloatArray, warm: FloatArray, cap_local: FloatArray, cap_r: FloatArray, cap: FloatArray,
+    oMi: FloatArray, F: FloatArray, Lf: IntArray, I: IntArray, Li: IntArray, ok: BoolArray, d_i: float, d_s: float,
+    floor_o: float, floor_margin: float,
 ) -> tuple[int, int]:
     """A tick's robot-side passes in one call: the joints' placements Hj read from Pinocchio's
     ``oMi`` (row ``joint_id[k]``: rotation column-major, translation; empty: Hj is current), the
     bodies placed (:func:`place_kernel`, from the ``l_`` arrays, their frames', into the placed
-    table's), the robot's own pairs
+    table's), how far each has moved (:func:`body_travel`), the robot's own pairs
     (:func:`self_pass`) and the floor (:func:`plane_pass`, code −1) from entry 0. Returns the
-    number of candidates and how many of them the compiled distances left to coal (one dispatch
-    instead of three and a numpy reduction: ~70 arguments unboxed fewer a tick). ``cap_local``:
-    each body's bounding capsule's ends in its joint's frame, placed into ``cap`` (:func:`self_pass`)."""
+    number of candidates and how many of them the compiled distances left to coal.
+
+    Its arrays come packed into two arenas, F and I (in the orders of ``ROBOT_FLOATS`` and
+    ``ROBOT_INTS``; ``Lf``, ``Li``: each one's offset, size and shape, as
+    :func:`~wmm_qp.limits.pair_search.pack` lays them out), unpacked here into views: a compiled
+    call unboxes each array it is passed (~50 ns each), and one compiled function passing them on
+    to another takes and releases each one's reference (~25 ns each). ``cap_local``: each body's
+    bounding capsule's ends in its joint's frame, placed into ``cap`` (:func:`self_pass`);
+    ``last_H``, ``moved``, ``slack``: :func:`body_travel`'s and :func:`self_pass`'s."""
+    Hj, l_a0, l_a1, l_c, l_R = _f3(F, Lf, 0), _f2(F, Lf, 1), _f2(F, Lf, 2), _f2(F, Lf, 3), _f3(F, Lf, 4)
+    l_centre = _f2(F, Lf, 5)
+    a0, a1, r, c, R, h = _f2(F, Lf, 6), _f2(F, Lf, 7), _f(F, Lf, 8), _f2(F, Lf, 9), _f3(F, Lf, 10), _f2(F, Lf, 11)
+    verts, centre, radii, pair_r, floor_n = _f2(F, Lf, 12), _f2(F, Lf, 13), _f(F, Lf, 14), _f(F, Lf, 15), _f(F, Lf, 16)
+    d, P, Q, N, safety = _f(F, Lf, 17), _f2(F, Lf, 18), _f2(F, Lf, 19), _f2(F, Lf, 20), _f(F, Lf, 21)
+    warm, cap_local, cap_r, cap = _f2(F, Lf, 22), _f3(F, Lf, 23), _f(F, Lf, 24), _f3(F, Lf, 25)
+    last_H, moved, slack = _f3(F, Lf, 26), _f2(F, Lf, 27), _f2(F, Lf, 28)
+    joint_id, joint, kind, vs, vc = _i(I, Li, 0), _i(I, Li, 1), _i(I, Li, 2), _i(I, Li, 3), _i(I, Li, 4)
+    pairs, floor_idx, body, other = _i2(I, Li, 5), _i(I, Li, 6), _i(I, Li, 7), _i(I, Li, 8)
     if oMi.shape[0]:
         for k in range(joint_id.shape[0]):
             row = oMi[joint_id[k]]
@@ -213,11 +263,55 @@ def robot_passes(
             for a in range(3):
                 cap[k, e, a] = (H[a, 3] + H[a, 0] * cap_local[k, e, 0] + H[a, 1] * cap_local[k, e, 1]
                                 + H[a, 2] * cap_local[k, e, 2])
+    body_travel(Hj, joint, centre, radii, last_H, moved, slack)
     n = self_pass(kind, a0, a1, r, c, R, h, verts, vs, vc, centre, pairs, pair_r, d_i, d_s,
-                  d, P, Q, N, ok, body, other, safety, 0, warm, cap, cap_r)
+                  d, P, Q, N, ok, body, other, safety, 0, warm, cap, cap_r, moved, slack)
     n = plane_pass(kind, a0, a1, r, c, R, h, verts, vs, vc, centre, radii, floor_idx, True, floor_n, floor_o,
                    d_i, -1, floor_margin, d, P, Q, N, ok, body, other, safety, n)
     return n, left_to_coal(ok, 0, n)
+
+
+ROBOT_FLOATS = ("Hj", "l_a0", "l_a1", "l_c", "l_R", "l_centre", "a0", "a1", "r", "c", "R", "h", "verts", "centre",
+                "radii", "pair_r", "floor_n", "d", "P", "Q", "N", "safety", "warm", "cap_local", "cap_r", "cap",
+                "last_H", "moved", "slack")
+"""The float arrays of :func:`robot_passes`, in the order it unpacks them from its arena F."""
+ROBOT_INTS = ("joint_id", "joint", "kind", "vs", "vc", "pairs", "floor_idx", "body", "other")
+"""Its int arrays, likewise (from I)."""
+
+
+@jit
+def body_travel(Hj: FloatArray, joint: IntArray, centre: FloatArray, radii: FloatArray, last_H: FloatArray,
+                moved: FloatArray, slack: FloatArray) -> None:
+    """How far each body has moved, at most, since the search began: ``moved[k, 3]`` += the
+    largest displacement of any point of its bounding sphere (centre c, radius ρ) since the last
+    call, |Δc| + ‖ΔR‖_F ρ (a point c + u, |u| ≤ ρ, moves by Δc + ΔR u, and ‖ΔR‖₂ ≤ ‖ΔR‖_F), from
+    its joint's placement ``Hj`` against the last one (``last_H``) and its centre against the last
+    one (``moved[k, :3]``); both then take this call's. Where a displacement is not finite (a state
+    that never should reach here) every body's travel starts again from 0 and every pair's slack is
+    forgotten: :func:`self_pass` then computes every pair."""
+    spin = np.empty(Hj.shape[0])
+    for j in range(Hj.shape[0]):
+        s = 0.0
+        for a in range(3):
+            for b in range(3):
+                e = Hj[j, a, b] - last_H[j, a, b]
+                s += e * e
+                last_H[j, a, b] = Hj[j, a, b]
+        spin[j] = math.sqrt(s)
+    fresh = False
+    for k in range(joint.shape[0]):
+        x, y, z = centre[k, 0] - moved[k, 0], centre[k, 1] - moved[k, 1], centre[k, 2] - moved[k, 2]
+        step = math.sqrt(x * x + y * y + z * z) + spin[joint[k]] * radii[k]
+        moved[k, 0], moved[k, 1], moved[k, 2] = centre[k, 0], centre[k, 1], centre[k, 2]
+        if math.isfinite(step):
+            moved[k, 3] += step
+        else:
+            fresh = True
+    if fresh:
+        for k in range(joint.shape[0]):
+            moved[k, 3] = 0.0
+        for k in range(slack.shape[0]):
+            slack[k, 0] = -math.inf
 
 
 @jit

@@ -26,12 +26,13 @@ from .rows import Rows, Tick
 
 
 @jit
-def _fence_near(A: FloatArray, c: FloatArray, qx: float, qy: float, n_w: int, lower: FloatArray,
+def _fence_near(A: FloatArray, c: FloatArray, q_base: FloatArray, n_w: int, lower: FloatArray,
                 upper: FloatArray, x: FloatArray, d_i: float) -> bool:
-    """Whether the base's origin is within d_i of a fence edge or the EE within d_i of its fence."""
+    """Whether the base's origin (``q_base[:2]``) is within d_i of a fence edge or the EE within
+    d_i of its fence."""
     if n_w:
         for k in range(A.shape[0]):
-            if c[k] - (A[k, 0] * qx + A[k, 1] * qy) < d_i:
+            if c[k] - (A[k, 0] * q_base[0] + A[k, 1] * q_base[1]) < d_i:
                 return True
     for a in range(3):  # noqa: SIM110 (a loop numba compiles)
         if upper[a] - x[a] < d_i or x[a] - lower[a] < d_i:
@@ -74,7 +75,10 @@ class FenceRows(DamperRows):
     def compute_rows(self, tick: Tick) -> Rows | None:
         """The fence's rows at the tick's state; None while it has none (the usual tick: the
         stages then pool no empty part with the collision rows)."""
-        kin = tick.kin
+        kin, f = tick.kin, self.fence
+        if not _fence_near(self._A, self._c, kin.q_base, self.n_w, f.ee_lower, f.ee_upper, kin.x,
+                           self.p.influence_distance):
+            return None  # the usual tick: one compiled call
         rows = self.rows(kin.q_base, kin.x, kin.J[:3], tick.v_prev, tick.lb, tick.ub)
         return None if rows is self._none else rows
 
@@ -90,8 +94,8 @@ class FenceRows(DamperRows):
         """
         f, d_i = self.fence, self.p.influence_distance
         A, c = self._A, self._c
-        if not _fence_near(A, c, float(q_base[0]), float(q_base[1]), self.n_w, f.ee_lower, f.ee_upper, x_ee, d_i):
-            return self._none  # the usual tick: one compiled call
+        if not _fence_near(A, c, q_base, self.n_w, f.ee_lower, f.ee_upper, x_ee, d_i):
+            return self._none
         rows: list[FloatArray] = []
         dist: list[float] = []
         names: list[str] = []

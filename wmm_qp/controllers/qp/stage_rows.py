@@ -11,7 +11,7 @@ at the first damper source's place: relaxed together, reported together.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -22,9 +22,9 @@ from ...solvers import INF
 from ...types import Mode
 
 
-@dataclass(frozen=True, slots=True)
-class RowGroup:
-    """One source's rows this tick (the dampers': all damper sources' rows, pooled)."""
+class RowGroup(NamedTuple):
+    """One source's rows this tick (the dampers': all damper sources' rows, pooled). (A named
+    tuple: built several times a tick, ~0.4 µs cheaper than a frozen dataclass.)"""
 
     source: RowSource
     rows: Rows
