@@ -16,9 +16,10 @@ from typing import Any
 
 import numpy as np
 from numba import njit
-from wmm_qp_tools.bench.collision import arguments_at_tick, for_each_robot
+from wmm_qp_tools.bench.collision import for_each_robot, kernel_arguments_at_tick
 
 from wmm_qp.limits import collision
+from wmm_qp.limits._pair_passes import candidates_of
 from wmm_qp.limits.dampers import damper_bounds
 
 CALLS = 3000
@@ -35,9 +36,11 @@ def _p50_us(fn: Callable[..., Any], *args: Any) -> float:
 
 
 def one(name: str, ticks: int) -> str:
-    rows, a = arguments_at_tick(f"configs/robots/{name}.toml", collision, "_rows", ticks)
-    (d, P, Q, N, body, other, safety, d_i, max_rows, n_v, Jw, support, bj, M, n_w, body_link, n_links,
-     n_obstacles, gain, accel, braking, n, _velocity_b, v_prev, lb, ub, latency) = a
+    _, a = kernel_arguments_at_tick(f"configs/robots/{name}.toml", ticks)
+    rows = collision._rows
+    (F, Lf, I, Li, d_i, max_rows, n_v, Jw, support, bj, M, n_w, body_link, n_links, n_obstacles, gain, accel, braking,
+     n, _velocity_b, v_prev, lb, ub, latency) = a
+    d, P, Q, N, body, other, safety = candidates_of(F, Lf, I, Li)
     parts = (d, P, Q, N, body, other, safety, n, d_i, max_rows, n_v, Jw, support, bj, M, n_w, body_link, n_links,
              n_obstacles)
     C, D, DS, _, _, _, keys, _, _ = collision._assemble(*parts)

@@ -11,7 +11,7 @@ import coal
 import numpy as np
 import pinocchio as pin
 import pytest
-from wmm_qp_tools.bench.collision import coal_search
+from wmm_qp_tools.bench.collision import coal_search, leave_to_coal
 
 import wmm_qp as w
 from wmm_qp.limits import _gjk as G  # noqa: N812
@@ -394,3 +394,31 @@ def test_a_pair_left_out_by_its_last_distance_has_not_come_within_the_influence_
             left_out += b.n - a.n
             near_pairs += near_b.shape[0]
     assert left_out > 0 and near_pairs > 0
+
+
+def test_the_rows_wait_for_the_candidates_left_to_coal() -> None:
+    """Without obstacles the search and the rows run in one compiled call (``_robot_rows``), which
+    returns no rows where it left candidates to coal: the rows are made once coal has filled them.
+    The FR3's rows with its hulls left to coal (every tick has such candidates) are its rows with
+    GJK's distances (the same pairs; C and l within 1e-6), at every step of random walks of the
+    arm; rows made before coal's distances (or none) would not be."""
+    from wmm_qp.config import default_config_dir
+    from wmm_qp.limits.collision import CollisionRows
+
+    model = w.WmmModel(w.load_robot_config(default_config_dir() / "robots" / "fr3.toml"))
+    ctl = w.make_controller("qp", model, w.load_controller_config().with_(collision={"enabled": True}))
+    a = ctl.collision  # type: ignore[attr-defined]
+    b = CollisionRows(a.geo, a.M, a.p, a.latency, a._accel, a.inside.dt)
+    leave_to_coal(b.search, kinds=(3, 1))
+    b.search._req.gjk_tolerance = 1e-12
+    n_v = a.n_w + a.n_a
+    v0, lb, ub = np.zeros(n_v), -np.ones(n_v), np.ones(n_v)
+    compared = 0
+    for seed in range(3):
+        for _ in arm_walk(model, seed, 40, 0.08):
+            ra, rb = (x.rows(np.zeros(3), np.zeros(a.n_a), v0, lb, ub) for x in (a, b))
+            assert list(rb.names) == list(ra.names)
+            np.testing.assert_allclose(rb.C, ra.C, atol=1e-6)
+            np.testing.assert_allclose(rb.l, ra.l, atol=1e-6)
+            compared += ra.n
+    assert compared > 0

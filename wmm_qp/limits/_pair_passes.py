@@ -279,6 +279,14 @@ ROBOT_INTS = ("joint_id", "joint", "kind", "vs", "vc", "pairs", "floor_idx", "bo
 """Its int arrays, likewise (from I)."""
 
 
+@jit_inline
+def candidates_of(F: FloatArray, Lf: IntArray, I: IntArray, Li: IntArray) -> tuple[
+        FloatArray, FloatArray, FloatArray, FloatArray, IntArray, IntArray, FloatArray]:
+    """The candidate buffer's arrays in :func:`robot_passes`'s arenas: (d, P, Q, N, body, other,
+    safety) (the obstacles' passes append to the same arrays)."""
+    return _f(F, Lf, 17), _f2(F, Lf, 18), _f2(F, Lf, 19), _f2(F, Lf, 20), _i(I, Li, 7), _i(I, Li, 8), _f(F, Lf, 21)
+
+
 @jit
 def body_travel(Hj: FloatArray, joint: IntArray, centre: FloatArray, radii: FloatArray, last_H: FloatArray,
                 moved: FloatArray, slack: FloatArray) -> None:

@@ -20,17 +20,19 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
 from .._jit import jit
-from .._typing import FloatArray, IntArray
+from .._typing import BoolArray, FloatArray, IntArray
 from ..config import CollisionParams, ShapeConfig
 from ..model.collision import RobotGeometry
 from ..scene import obstacles_from_tables
+from ._pair_passes import candidates_of, robot_passes
 from .dampers import DamperRows, damper_bounds
 from .inside_pairs import InsidePairs
-from .pair_search import Candidates, Obstacle, PairNames, PairSearch
+from .pair_search import Obstacle, PairNames, PairSearch
 from .rows import Rows, Tick
 
 _NO_VELOCITIES = np.zeros((0, 3))  # no obstacle moves (``CollisionRows._obstacle_velocities``)
@@ -86,16 +88,17 @@ class CollisionRows(DamperRows):
         links = sorted({b.link for b in bodies})
         self._body_link = np.array([links.index(b.link) for b in bodies], dtype=np.int64)
         self._n_links = len(links)
-        self._bind(self.search.candidates)
+        self._bind()
 
-    def _bind(self, found: Candidates) -> None:
-        """:func:`_rows`'s arguments that change only with the obstacle set (the candidates' arrays
-        with it), in one tuple, for the candidates ``found``: ~1 µs of Python a tick saved."""
+    def _bind(self) -> None:
+        """:func:`_rows`'s arguments that change only with the obstacle set, in one tuple (after the
+        search's arenas, ``_statics`` after ``robot_args``: :func:`_robot_rows`), for the search's
+        arguments of now (``_bound_to``): ~1 µs of Python a tick saved."""
         p = self.p
-        self._bound = (found, (
-            found.d, found.p_a, found.p_b, found.normal, found.body, found.other, found.safety, p.influence_distance,
-            MAX_ROWS, self.n_w + self.n_a, self._Jw, self._support, self._body_joint, self.M, self.n_w,
-            self._body_link, self._n_links, len(self.search.obstacles), p.gain, self._accel, p.braking))
+        self._bound_to = self.search.robot_args
+        self._statics: tuple[Any, ...] = (p.influence_distance, MAX_ROWS, self.n_w + self.n_a, self._Jw, self._support,
+                         self._body_joint, self.M, self.n_w, self._body_link, self._n_links, len(self.search.obstacles),
+                         p.gain, self._accel, p.braking)
 
     @property
     def obstacles(self) -> list[Obstacle]:
@@ -125,20 +128,29 @@ class CollisionRows(DamperRows):
             v_prev: the bounds' centre (the last command), for the latency term.
             lb, ub: the stage's box bounds on v (for the relaxations).
         """
-        n_v = self.n_w + self.n_a
-        found = self.search.search(q_base)
-        if not found.n:
-            return Rows(np.zeros((0, n_v)), np.zeros(0))
-        if found is not self._bound[0]:  # a new obstacle set: new candidates
-            self._bind(found)
+        n_v, search = self.n_w + self.n_a, self.search
+        if search.robot_args is not self._bound_to:  # a new obstacle set: new arenas
+            self._bind()
         # the rows, their bounds and which of them to keep, in one compiled call (_rows), packed
         # into one float and one int array (each array a compiled call returns is allocated and boxed)
-        F, I, m, closest, n_inside = _rows(*self._bound[1], found.n, self._obstacle_velocities(), v_prev, lb, ub,
-                                           self.latency)
+        if not search.obstacles:  # the usual scene: the search and the rows in one compiled call
+            search.place_joints()
+            args = (*search.robot_args, *self._statics, v_prev, lb, ub, self.latency)
+            n, left, F, I, m, closest, n_inside = _robot_rows(*args)
+            if left:  # coal's distances, then the rows (below)
+                found = search.after_robot(q_base, n, left)
+            else:
+                found = search.candidates
+                found.n = n
+        else:
+            found, m = search.search(q_base), -1
+        if m < 0:  # obstacles, or candidates coal computed: the rows now
+            args = (*search.arenas, *self._statics, found.n, self._obstacle_velocities(), v_prev, lb, ub, self.latency)
+            F, I, m, closest, n_inside = _rows(*args)
         min_distance, nearest, namer = math.inf, "", self.search.namer()
         if closest >= 0:
-            min_distance = float(found.d[closest])
-            nearest = namer(int(found.body[closest]), int(found.other[closest]))
+            min_distance = found.d.item(closest)
+            nearest = namer(found.body.item(closest), found.other.item(closest))
         if not m:
             return Rows(np.zeros((0, n_v)), np.zeros(0), min_distance=min_distance, closest=nearest)
         e = m * n_v
@@ -255,14 +267,35 @@ def _assemble(
 
 
 @jit
+def _robot_rows(
+    oMi: FloatArray, F: FloatArray, Lf: IntArray, I: IntArray, Li: IntArray, ok: BoolArray, reach: float,
+    d_s: float, floor_o: float, floor_margin: float,
+    d_i: float, max_rows: int, n_v: int, Jw: FloatArray, support: FloatArray, bj: IntArray,
+    M: FloatArray, n_w: int, body_link: IntArray, n_links: int, n_obstacles: int, gain: float, accel: FloatArray,
+    braking: float, v_prev: FloatArray, lb: FloatArray, ub: FloatArray, latency: float,
+) -> tuple[int, int, FloatArray, IntArray, int, int, int]:
+    """The usual tick's search and rows in one compiled call, where there are no obstacles:
+    :func:`~._pair_passes.robot_passes` (its arguments first, ``reach`` its d_i), then :func:`_rows`
+    on its candidates. Returns (n, left, then :func:`_rows`'s five), or m = −1 and no rows where
+    the compiled distances left ``left`` candidates to coal (the rows wait for them)."""
+    n, left = robot_passes(oMi, F, Lf, I, Li, ok, reach, d_s, floor_o, floor_margin)
+    if left:
+        return n, left, np.zeros(0), np.zeros(0, dtype=np.int64), -1, -1, 0
+    Fr, Ir, m, closest, inside = _rows(F, Lf, I, Li, d_i, max_rows, n_v, Jw, support, bj, M, n_w, body_link, n_links,
+                                       n_obstacles, gain, accel, braking, n, np.zeros((0, 3)), v_prev, lb, ub, latency)
+    return n, left, Fr, Ir, m, closest, inside
+
+
+@jit
 def _rows(
-    d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, body: IntArray, other: IntArray, safety: FloatArray,
+    F: FloatArray, Lf: IntArray, I: IntArray, Li: IntArray,
     d_i: float, max_rows: int, n_v: int, Jw: FloatArray, support: FloatArray, bj: IntArray,
     M: FloatArray, n_w: int, body_link: IntArray, n_links: int, n_obstacles: int, gain: float, accel: FloatArray,
     braking: float, n: int, velocity_b: FloatArray, v_prev: FloatArray, lb: FloatArray, ub: FloatArray,
     latency: float,
 ) -> tuple[FloatArray, IntArray, int, int, int]:
-    """A tick's collision rows from the candidates, in one call: :func:`_assemble`'s rows, each
+    """A tick's collision rows from the n candidates (in the search's arenas F, I:
+    :func:`~._pair_passes.candidates_of`), in one call: :func:`_assemble`'s rows, each
     one's approach of a moving obstacle n̂ᵀv_b (``velocity_b``: each obstacle's, base frame; empty:
     none moves), their bounds (:func:`~.dampers.damper_bounds`), and of each pair of links only the
     rows to keep (:func:`_distinct_rows`); the arguments that change only with the obstacle set
@@ -270,6 +303,7 @@ def _rows(
     the m kept rows and the s rows inside their safety distance (before the merge) packed in
     one float array F = [C (m × n_v, row by row), l, l_brake, damper, D (m each), DS of the s]
     and one int array I = [IA, IB (m each), IA, IB of the s]."""
+    d, P, Q, N, body, other, safety = candidates_of(F, Lf, I, Li)
     C, D, DS, IA, IB, NN, keys, closest, inside = _assemble(d, P, Q, N, body, other, safety, n, d_i, max_rows, n_v,
                                                             Jw, support, bj, M, n_w, body_link, n_links, n_obstacles)
     m = D.shape[0]
@@ -286,20 +320,20 @@ def _rows(
     keep = _distinct_rows(C, l, keys)
     mk = keep.shape[0]
     e = mk * n_v
-    F = np.empty(e + 4 * mk + inside)
-    I = np.empty(2 * mk + 2 * inside, dtype=np.int64)
+    Fo = np.empty(e + 4 * mk + inside)
+    Io = np.empty(2 * mk + 2 * inside, dtype=np.int64)
     for t in range(mk):
         k = keep[t]
         for c in range(n_v):
-            F[t * n_v + c] = C[k, c]
-        F[e + t], F[e + mk + t], F[e + 2 * mk + t], F[e + 3 * mk + t] = l[k], l_brake[k], damper[k], D[k]
-        I[t], I[mk + t] = IA[k], IB[k]
+            Fo[t * n_v + c] = C[k, c]
+        Fo[e + t], Fo[e + mk + t], Fo[e + 2 * mk + t], Fo[e + 3 * mk + t] = l[k], l_brake[k], damper[k], D[k]
+        Io[t], Io[mk + t] = IA[k], IB[k]
     s = 0
     for k in range(m):
         if D[k] < DS[k]:
-            F[e + 4 * mk + s], I[2 * mk + s], I[2 * mk + inside + s] = DS[k], IA[k], IB[k]
+            Fo[e + 4 * mk + s], Io[2 * mk + s], Io[2 * mk + inside + s] = DS[k], IA[k], IB[k]
             s += 1
-    return F, I, mk, closest, inside
+    return Fo, Io, mk, closest, inside
 
 
 @jit

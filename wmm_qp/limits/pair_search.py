@@ -412,8 +412,11 @@ class PairSearch:
                 "body": (c, "body"), "other": (c, "other")}
         F, Lf = pack([floats[k] for k in ROBOT_FLOATS], np.float64)
         I, Li = pack([ints[k] for k in ROBOT_INTS], np.int64)
-        self._robot_args = (self._oMi, F, Lf, I, Li, c.ok, p.influence_distance, p.safety_distance, self._floor_o,
-                            p.floor_margin)
+        self.arenas: tuple[Any, ...] = (F, Lf, I, Li)
+        """The arenas (F, Lf, I, Li): the candidates' arrays are views of them too (``_rows``)."""
+        self.robot_args: tuple[Any, ...] = (self._oMi, F, Lf, I, Li, c.ok, p.influence_distance,
+                                            p.safety_distance, self._floor_o, p.floor_margin)
+        """:func:`robot_passes`'s arguments (a new tuple whenever the arenas are new)."""
 
     def reset(self) -> None:
         """GJK starts every pair afresh (its warm starts forgotten), and every pair is computed at
@@ -426,14 +429,24 @@ class PairSearch:
         """Every pair the broad phase lets through at the state the arm's data was last computed
         at (its joint placements current), the base at ``q_base`` [m, m, rad]: its distance,
         closest points and normal in the candidates' first ``n`` entries."""
-        if not self._in_place:  # the joints that carry bodies: their placements, one by one
+        self.place_joints()
+        # the bodies placed, robot vs robot (base frame; the base's motion cancels) and robot vs the
+        # floor z = floor_z (the same plane in the base frame), in one compiled call
+        n, left = robot_passes(*self.robot_args)
+        return self.after_robot(q_base, n, left)
+
+    def place_joints(self) -> None:
+        """Where Pinocchio's placements cannot be read in place: the joints that carry bodies, their
+        placements copied one by one (before :func:`robot_passes`)."""
+        if not self._in_place:
             Hj = self._Hj
             for k, M in enumerate(self._placements):
                 Hj[k] = M.homogeneous
+
+    def after_robot(self, q_base: FloatArray, n: int, left: int) -> Candidates:
+        """The search after :func:`robot_passes` gave n candidates (``left`` of them to coal): the
+        obstacles' passes, then coal's distances; the candidates."""
         c = self.candidates
-        # the bodies placed, robot vs robot (base frame; the base's motion cancels) and robot vs the
-        # floor z = floor_z (the same plane in the base frame), in one compiled call
-        n, left = robot_passes(*self._robot_args)
         Rb = tb = None
         n_robot = n
         if self.obstacles:  # robot vs obstacles, in the base frame at this base pose

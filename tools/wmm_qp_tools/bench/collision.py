@@ -26,6 +26,7 @@ import numpy as np
 
 import wmm_qp as w
 from wmm_qp.config import ShapeConfig, default_config_dir
+from wmm_qp.limits import _pair_passes, collision
 from wmm_qp.scene import load_scene
 from wmm_qp_tools.bench.robot_files import loaded, shipped_robots
 from wmm_qp_tools.bench.stats import now_ns, summarize_ns
@@ -70,6 +71,16 @@ def arguments_at_tick(robot_config: str | Path, module: Any, kernel: str, ticks:
     finally:
         setattr(module, kernel, fn)
     return fn, kept[0]
+
+
+def kernel_arguments_at_tick(robot_config: str | Path, ticks: int) -> tuple[tuple[Any, ...], tuple[Any, ...]]:
+    """The arguments of the rows' two kernels at the last of ``ticks`` ticks of the paper's circle
+    in the default scene (:func:`arguments_at_tick` of ``_robot_rows``, which makes both calls there):
+    (``robot_passes``'s, ``_rows``'s on the candidates ``robot_passes`` gives on them)."""
+    _, a = arguments_at_tick(robot_config, collision, "_robot_rows", ticks)
+    robot, statics, (v_prev, lb, ub, latency) = a[:10], a[10:24], a[24:]
+    n, _ = _pair_passes.robot_passes(*robot)
+    return robot, (*robot[1:5], *statics, n, np.zeros((0, 3)), v_prev, lb, ub, latency)
 
 
 def robot_and_ticks(doc: str) -> argparse.Namespace:

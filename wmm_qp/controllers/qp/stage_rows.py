@@ -60,10 +60,12 @@ class StageRows:
             if self.dampers.l.shape[0]:
                 groups.insert(pool_at, RowGroup(first, self.dampers))
         self.groups = groups
-        n = 0
+        n, mixed = 0, False
         for g in groups:
             n += g.rows.l.shape[0]
+            mixed = mixed or not g.source.rechecked
         self.n = n
+        self._mixed = mixed  # some rows are not re-checked (rechecked())
 
     def without_yielding(self, mode: Mode) -> StageRows | None:
         """These rows without the sources that yield to the task in ``mode``; None: none does."""
@@ -72,6 +74,7 @@ class StageRows:
             return None
         out = object.__new__(StageRows)
         out.n_v, out.dampers, out.groups, out.n = self.n_v, self.dampers, kept, sum(g.rows.n for g in kept)
+        out._mixed = any(not g.source.rechecked for g in kept)
         return out
 
     # ------------------------------------------------------------------ the stacked rows
@@ -143,7 +146,7 @@ class StageRows:
     # ------------------------------------------------------------------ after the solve
     def rechecked(self) -> BoolArray | None:
         """Which stacked rows are re-checked whatever solved the stage (None: all)."""
-        if all(g.source.rechecked for g in self.groups):
+        if not self._mixed:
             return None
         return np.concatenate([np.full(g.rows.n, g.source.rechecked) for g in self.groups])
 
