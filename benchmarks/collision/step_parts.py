@@ -48,6 +48,7 @@ def one(name: str, ticks: int) -> str:
     for attr in PARTS:
         wrap(QpController, attr, attr)
     wrap(pair_search.PairSearch, "search", "  PairSearch.search")
+    wrap(collision, "_robot_rows", "  _robot_rows")
     wrap(collision, "_rows", "  _rows")
     try:
         bots = {"on": IdealRobot.at_start(model), "off": IdealRobot.at_start(model_off)}
@@ -72,7 +73,7 @@ def one(name: str, ticks: int) -> str:
         return f"{np.median(v) / 1e3:6.1f}" if len(v) else "     -"
 
     lines = [f"{name} (p50 µs, rows on / off; {ticks} ticks)"]
-    for key in ("step", *PARTS[:3], "  PairSearch.search", "  _rows", *PARTS[3:]):
+    for key in ("step", *PARTS[:3], "  _robot_rows", "  PairSearch.search", "  _rows", *PARTS[3:]):
         lines.append(f"  {key:22s} {p50('on', key)} / {p50('off', key)}")
     return "\n".join(lines)
 

@@ -133,19 +133,28 @@ def self_pass(
     segment's ends, placed; ``cap_r[i]``: the radius) are further apart than d_i: its distance is
     no less than theirs (a capsule distance instead of GJK's iterations).
 
-    Two swept segments are left out, too, while their last distance d₀ still keeps them beyond
-    d_i: no point of body i has moved further than ``moved[i, 3]`` − (its value then) since
+    Two swept segments are left out, too, while the last lower bound d₀ of their distance (their
+    distance, or their bounding spheres' gap where the spheres were beyond d_i) still keeps them
+    beyond d_i: no point of body i has moved further than ``moved[i, 3]`` − (its value then) since
     (:func:`body_travel`), so d ≥ d₀ − (how far both moved) > d_i (``slack[k]``: d₀ − d_i − 1e-9 m,
-    −inf where the pair has no such distance, and both bodies' travel then)."""
+    −inf where the pair has no such bound, and both bodies' travel then). Their candidates are
+    those of a pass without it, bit for bit (a pair of swept segments keeps no state between
+    ticks; GJK's pairs, which keep their warm start, are not left out so)."""
     for k in range(pairs.shape[0]):
         i, j = pairs[k, 0], pairs[k, 1]
-        x, y, z = centre[i, 0] - centre[j, 0], centre[i, 1] - centre[j, 1], centre[i, 2] - centre[j, 2]
-        if not math.sqrt(x * x + y * y + z * z) - pair_r[k] <= d_i:
-            continue
-        if kind[i] == 0 and kind[j] == 0:  # two capsules or spheres (most pairs): by index
+        swept = kind[i] == 0 and kind[j] == 0  # two capsules or spheres (most pairs)
+        travel = 0.0
+        if swept:
             travel = moved[i, 3] + moved[j, 3]
-            if travel - slack[k, 1] < slack[k, 0]:  # still beyond d_i (the last distance, less the travel)
+            if travel - slack[k, 1] < slack[k, 0]:  # still beyond d_i (the last bound, less the travel)
                 continue
+        x, y, z = centre[i, 0] - centre[j, 0], centre[i, 1] - centre[j, 1], centre[i, 2] - centre[j, 2]
+        gap = math.sqrt(x * x + y * y + z * z) - pair_r[k]
+        if not gap <= d_i:
+            if swept:  # the spheres' gap: a lower bound of the distance
+                slack[k, 0], slack[k, 1] = gap - d_i - COHERENCE_MARGIN, travel
+            continue
+        if swept:  # by index
             swept_swept_at(a0, a1, r, i, j, d, P, Q, N, n)
             ok[n] = True
             slack[k, 0], slack[k, 1] = d[n] - d_i - COHERENCE_MARGIN, travel
