@@ -366,10 +366,10 @@ def test_the_bounding_capsules_contain_their_shapes_and_cull_only_pairs_beyond_t
 def test_a_pair_left_out_by_its_last_distance_has_not_come_within_the_influence_distance(
         robot: str, scale: float) -> None:
     """The search leaves out a pair of capsules while its last distance (or its bounding spheres'
-    gap), less how far either body can have moved since (``body_travel``), keeps it beyond d_i. Along random walks of the arm (steps
-    of 0.01–0.04 rad a joint: a few ticks at full speed each), its candidates within d_i equal, bit
-    for bit, those of a search that computes every pair each step (reset before each), and it
-    leaves pairs out. The
+    gap), less how far either body can have moved since (``body_travel``), keeps it beyond d_i.
+    Along random walks of the arm (steps of 0.01–0.04 rad a joint: a few ticks at full speed
+    each), its candidates within d_i equal, bit for bit, those of a search that computes every pair
+    each step (reset before each), and it leaves pairs out. The
     mutations caught (in ``_pair_passes``): the travel without the bodies' rotation (its centre's
     only), the travel of the last step only, none (a pair beyond d_i once is left out while it
     passes the bounding spheres), and the spheres' gap taken for the slack without d_i."""
