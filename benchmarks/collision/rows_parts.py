@@ -39,7 +39,7 @@ def one(name: str, ticks: int) -> str:
     _, a = kernel_arguments_at_tick(f"configs/robots/{name}.toml", ticks)
     rows = collision._rows
     (F, Lf, I, Li, d_i, max_rows, n_v, Jw, support, bj, M, n_w, body_link, n_links, n_obstacles, gain, accel, braking,
-     n, _velocity_b, v_prev, lb, ub, latency) = a
+     _W, _Wi, n, _velocity_b, v_prev, lb, ub, latency) = a
     d, P, Q, N, body, other, safety = candidates_of(F, Lf, I, Li)
     parts = (d, P, Q, N, body, other, safety, n, d_i, max_rows, n_v, Jw, support, bj, M, n_w, body_link, n_links,
              n_obstacles)

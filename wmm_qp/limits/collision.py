@@ -24,13 +24,13 @@ from typing import Any
 
 import numpy as np
 
-from .._jit import jit
+from .._jit import jit, jit_inline
 from .._typing import BoolArray, FloatArray, IntArray
 from ..config import CollisionParams, ShapeConfig
 from ..model.collision import RobotGeometry
 from ..scene import obstacles_from_tables
 from ._pair_passes import candidates_of, robot_passes
-from .dampers import DamperRows, damper_bounds
+from .dampers import DamperRows, damper_bounds, damper_bounds_into
 from .inside_pairs import InsidePairs
 from .pair_search import Obstacle, PairNames, PairSearch
 from .rows import Rows, Tick
@@ -96,9 +96,10 @@ class CollisionRows(DamperRows):
         arguments of now (``_bound_to``): ~1 µs of Python a tick saved."""
         p = self.p
         self._bound_to = self.search.robot_args
+        W, Wi = _scratch(self.search.candidates.d.shape[0], self.n_w + self.n_a)  # _rows' work, every tick
         self._statics: tuple[Any, ...] = (p.influence_distance, MAX_ROWS, self.n_w + self.n_a, self._Jw, self._support,
-                         self._body_joint, self.M, self.n_w, self._body_link, self._n_links, len(self.search.obstacles),
-                         p.gain, self._accel, p.braking)
+                                          self._body_joint, self.M, self.n_w, self._body_link, self._n_links,
+                                          len(self.search.obstacles), p.gain, self._accel, p.braking, W, Wi)
 
     @property
     def obstacles(self) -> list[Obstacle]:
@@ -230,19 +231,44 @@ def _assemble(
     the nearest to their safety distance first, at most ``max_rows`` of them but every one inside
     its safety distance (MAX_ROWS): (C, D, DS, IA, IB, n̂, the rows' keys for :func:`_distinct_rows`
     (link a and the other side's link, the floor or the obstacle), the closest's index, how many
-    rows are inside their safety distance); the
-    candidates as :mod:`._pair_passes` gives them (d, P, Q, N, body, other, safety)."""
+    rows are inside their safety distance); the candidates as :mod:`._pair_passes` gives them (d,
+    P, Q, N, body, other, safety). (:func:`_assemble_into` in arrays of its own.)"""
+    W, Wi = _scratch(n, n_v)
+    return _assemble_into(d, P, Q, N, body, other, safety, n, d_i, max_rows, n_v, Jw, support, bj, M, n_w, body_link,
+                          n_links, n_obstacles, W, Wi)
+
+
+@jit
+def _scratch(n: int, n_v: int) -> tuple[FloatArray, IntArray]:
+    """Room for :func:`_rows`'s work on n candidates of n_v columns (float, int)."""
+    return np.empty(n * (SCRATCH_FLOATS + n_v) + n_v), np.empty(SCRATCH_INTS * n, dtype=np.int64)
+
+
+SCRATCH_FLOATS = 18
+"""Floats a candidate takes in :func:`_rows`'s scratch, besides its row of C (see :func:`_rows`)."""
+SCRATCH_INTS = 6
+"""Ints a candidate takes there."""
+
+
+@jit_inline
+def _assemble_into(
+    d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, body: IntArray, other: IntArray, safety: FloatArray,
+    n: int, d_i: float, max_rows: int, n_v: int, Jw: FloatArray, support: FloatArray, bj: IntArray,
+    M: FloatArray, n_w: int, body_link: IntArray, n_links: int, n_obstacles: int, W: FloatArray, Wi: IntArray,
+) -> tuple[FloatArray, FloatArray, FloatArray, IntArray, IntArray, FloatArray, IntArray, int, int]:
+    """:func:`_assemble`, its arrays views of the scratch W, Wi (:func:`_scratch`; W's start and
+    Wi's first 5 n: the rest is :func:`_rows`'s)."""
     best_k, best = -1, math.inf
     for k in range(n):
         if d[k] < best:
             best, best_k = d[k], k
-    near = np.empty(n, dtype=np.int64)
+    near = Wi[:n]
     m = 0
     for k in range(n):
         if d[k] < d_i:
             near[m] = k
             m += 1
-    margin = np.empty(m)
+    margin = W[:m]
     inside = 0
     for t in range(m):
         margin[t] = d[near[t]] - safety[near[t]]
@@ -250,10 +276,15 @@ def _assemble(
             inside += 1
     order = np.argsort(margin, kind="mergesort")[: max(max_rows, inside)]
     m = order.shape[0]
-    sel = near[order]
-    D, DSo, NN, PA, PB = np.empty(m), np.empty(m), np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3))
-    IA, IB = np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64)
-    keys = np.empty(m, dtype=np.int64)
+    sel = Wi[n : n + m]
+    for t in range(m):
+        sel[t] = near[order[t]]
+    o = n
+    D, DSo = W[o : o + m], W[o + n : o + n + m]
+    NN = W[o + 2 * n : o + 2 * n + 3 * m].reshape((m, 3))
+    PA = W[o + 5 * n : o + 5 * n + 3 * m].reshape((m, 3))
+    PB = W[o + 8 * n : o + 8 * n + 3 * m].reshape((m, 3))
+    IA, IB, keys = Wi[2 * n : 2 * n + m], Wi[3 * n : 3 * n + m], Wi[4 * n : 4 * n + m]
     for t in range(m):
         k = sel[t]
         D[t], DSo[t], IA[t], IB[t] = d[k], safety[k], body[k], other[k]
@@ -261,7 +292,8 @@ def _assemble(
             NN[t, a], PA[t, a], PB[t, a] = N[k, a], P[k, a], Q[k, a]
         side = body_link[IB[t]] if IB[t] >= 0 else n_links - 1 - IB[t]  # link b, the floor or the obstacle
         keys[t] = body_link[IA[t]] * (n_links + 2 + n_obstacles) + side
-    C = np.zeros((m, n_v))
+    C = W[12 * n : 12 * n + m * n_v].reshape((m, n_v))
+    C[:] = 0.0
     _point_rows(Jw, support, bj, IA, IB, PA, PB, NN, M, n_w, C)
     return C, D, DSo, IA, IB, NN, keys, best_k, inside
 
@@ -272,7 +304,7 @@ def _robot_rows(
     d_s: float, floor_o: float, floor_margin: float,
     d_i: float, max_rows: int, n_v: int, Jw: FloatArray, support: FloatArray, bj: IntArray,
     M: FloatArray, n_w: int, body_link: IntArray, n_links: int, n_obstacles: int, gain: float, accel: FloatArray,
-    braking: float, v_prev: FloatArray, lb: FloatArray, ub: FloatArray, latency: float,
+    braking: float, W: FloatArray, Wi: IntArray, v_prev: FloatArray, lb: FloatArray, ub: FloatArray, latency: float,
 ) -> tuple[int, int, FloatArray, IntArray, int, int, int]:
     """The usual tick's search and rows in one compiled call, where there are no obstacles:
     :func:`~._pair_passes.robot_passes` (its arguments first, ``reach`` its d_i), then :func:`_rows`
@@ -282,7 +314,8 @@ def _robot_rows(
     if left:
         return n, left, np.zeros(0), np.zeros(0, dtype=np.int64), -1, -1, 0
     Fr, Ir, m, closest, inside = _rows(F, Lf, I, Li, d_i, max_rows, n_v, Jw, support, bj, M, n_w, body_link, n_links,
-                                       n_obstacles, gain, accel, braking, n, np.zeros((0, 3)), v_prev, lb, ub, latency)
+                                       n_obstacles, gain, accel, braking, W, Wi, n, np.zeros((0, 3)), v_prev, lb, ub,
+                                       latency)
     return n, left, Fr, Ir, m, closest, inside
 
 
@@ -291,34 +324,45 @@ def _rows(
     F: FloatArray, Lf: IntArray, I: IntArray, Li: IntArray,
     d_i: float, max_rows: int, n_v: int, Jw: FloatArray, support: FloatArray, bj: IntArray,
     M: FloatArray, n_w: int, body_link: IntArray, n_links: int, n_obstacles: int, gain: float, accel: FloatArray,
-    braking: float, n: int, velocity_b: FloatArray, v_prev: FloatArray, lb: FloatArray, ub: FloatArray,
-    latency: float,
+    braking: float, W: FloatArray, Wi: IntArray, n: int, velocity_b: FloatArray, v_prev: FloatArray, lb: FloatArray,
+    ub: FloatArray, latency: float,
 ) -> tuple[FloatArray, IntArray, int, int, int]:
     """A tick's collision rows from the n candidates (in the search's arenas F, I:
     :func:`~._pair_passes.candidates_of`), in one call: :func:`_assemble`'s rows, each
     one's approach of a moving obstacle n̂ᵀv_b (``velocity_b``: each obstacle's, base frame; empty:
     none moves), their bounds (:func:`~.dampers.damper_bounds`), and of each pair of links only the
     rows to keep (:func:`_distinct_rows`); the arguments that change only with the obstacle set
-    first, then this tick's (from ``n``). Returns (F, I, m, the closest candidate's index, s),
+    first, then this tick's (from ``n``). W, Wi: room for the work (:func:`_scratch` for every
+    candidate: no array allocated a tick but the two returned). Returns (F, I, m, the closest
+    candidate's index, s),
     the m kept rows and the s rows inside their safety distance (before the merge) packed in
     one float array F = [C (m × n_v, row by row), l, l_brake, damper, D (m each), DS of the s]
     and one int array I = [IA, IB (m each), IA, IB of the s]."""
     d, P, Q, N, body, other, safety = candidates_of(F, Lf, I, Li)
-    C, D, DS, IA, IB, NN, keys, closest, inside = _assemble(d, P, Q, N, body, other, safety, n, d_i, max_rows, n_v,
-                                                            Jw, support, bj, M, n_w, body_link, n_links, n_obstacles)
+    nc = d.shape[0]  # the scratch's room: every candidate (W: margin, D, DS, n̂, p_a, p_b (3 each), C,
+    # then shift, l, l_brake, damper, offset, norms, v0; Wi: near, sel, IA, IB, keys, keep)
+    C, D, DS, IA, IB, NN, keys, closest, inside = _assemble_into(d, P, Q, N, body, other, safety, n, d_i, max_rows,
+                                                                 n_v, Jw, support, bj, M, n_w, body_link, n_links,
+                                                                 n_obstacles, W, Wi)
     m = D.shape[0]
-    shift = np.zeros(m)
+    o = (12 + n_v) * nc
+    shift, l, l_brake = W[o : o + m], W[o + nc : o + nc + m], W[o + 2 * nc : o + 2 * nc + m]
+    o += 3 * nc
+    damper, offset, norms = W[o : o + m], W[o + nc : o + nc + m], W[o + 2 * nc : o + 2 * nc + m]
+    o += 3 * nc
+    shift[:] = 0.0
+    offset[:] = 0.0
     if velocity_b.shape[0]:
         for k in range(m):
             if IB[k] <= -2:
                 v = velocity_b[-2 - IB[k]]
                 shift[k] = NN[k, 0] * v[0] + NN[k, 1] * v[1] + NN[k, 2] * v[2]
-    l, l_brake, damper = damper_bounds(C, v_prev, lb, ub, D, DS, d_i, gain, latency, shift, accel, braking,
-                                       np.zeros(m))
+    damper_bounds_into(C, v_prev, lb, ub, D, DS, d_i, gain, latency, shift, accel, braking, offset, W[o : o + n_v],
+                       l, l_brake, damper)
     # two bodies of one pair of links: one row where they are parallel (the key: link a, and
     # link b, the floor or the obstacle)
-    keep = _distinct_rows(C, l, keys)
-    mk = keep.shape[0]
+    keep = Wi[5 * nc : 5 * nc + m]
+    mk = _distinct_rows_into(C, l, keys, norms, keep)
     e = mk * n_v
     Fo = np.empty(e + 4 * mk + inside)
     Io = np.empty(2 * mk + 2 * inside, dtype=np.int64)
@@ -336,7 +380,7 @@ def _rows(
     return Fo, Io, mk, closest, inside
 
 
-@jit
+@jit_inline
 def _point_rows(
     Jw: FloatArray, support: FloatArray, bj: IntArray, IA: IntArray, IB: IntArray, pa: FloatArray, pb: FloatArray,
     n: FloatArray, M: FloatArray, n_w: int, C: FloatArray,
@@ -375,14 +419,20 @@ def _point_rows(
 def _distinct_rows(C: FloatArray, l: FloatArray, keys: IntArray) -> IntArray:
     """The rows to keep: of two rows of the same pair of links whose directions agree to within
     cos > PARALLEL (one link's several shapes against one obstacle), only the more restrictive."""
+    keep = np.empty(C.shape[0], dtype=np.int64)
+    return keep[: _distinct_rows_into(C, l, keys, np.empty(C.shape[0]), keep)]
+
+
+@jit_inline
+def _distinct_rows_into(C: FloatArray, l: FloatArray, keys: IntArray, norms: FloatArray, keep: IntArray) -> int:
+    """:func:`_distinct_rows` into the caller's arrays (``norms``: room for each row's norm):
+    the rows to keep are ``keep[:count]``; returns the count."""
     m, n_v = C.shape
-    norms = np.empty(m)
     for k in range(m):  # (by index, not np.dot: a BLAS call on two row views costs a row's work many times)
         s = 0.0
         for c in range(n_v):
             s += C[k, c] * C[k, c]
         norms[k] = math.sqrt(s) + 1e-300
-    keep = np.empty(m, dtype=np.int64)
     n = 0
     for k in range(m):
         merged = False
@@ -401,4 +451,4 @@ def _distinct_rows(C: FloatArray, l: FloatArray, keys: IntArray) -> IntArray:
         if not merged:
             keep[n] = k
             n += 1
-    return keep[:n]
+    return n

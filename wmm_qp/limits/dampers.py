@@ -90,8 +90,22 @@ def damper_bounds(
     """
     m = C.shape[0]
     l, l_brake, damper = np.empty(m), np.empty(m), np.empty(m)
-    v0 = np.minimum(np.maximum(0.0, lb), ub)
-    for k in range(m):
+    damper_bounds_into(C, v_prev, lb, ub, d, d_s, d_i, gain, latency, shift, accel, braking, offset,
+                       np.empty(lb.shape[0]), l, l_brake, damper)
+    return l, l_brake, damper
+
+
+@jit_inline
+def damper_bounds_into(
+    C: FloatArray, v_prev: FloatArray, lb: FloatArray, ub: FloatArray, d: FloatArray, d_s: FloatArray,
+    d_i: float, gain: float, latency: float, shift: FloatArray, accel: FloatArray, braking: float,
+    offset: FloatArray, v0: FloatArray, l: FloatArray, l_brake: FloatArray, damper: FloatArray,
+) -> None:
+    """:func:`damper_bounds` into arrays of the caller's (``v0``: room for the braking command;
+    the rows' kernel passes views of its scratch: no allocation a tick)."""
+    for c in range(lb.shape[0]):
+        v0[c] = np.minimum(np.maximum(0.0, lb[c]), ub[c])  # numpy's rule: a NaN bound gives a NaN v0
+    for k in range(C.shape[0]):
         dk, best, brake = _row_bounds(C, k, v_prev, v0, lb, ub, d[k], d_s[k], d_i, gain, latency, shift[k],
                                       accel, braking, offset[k])
         damper[k] = dk
@@ -99,7 +113,6 @@ def damper_bounds(
         # no solver's tolerance reads the degenerate (feasible) problem as infeasible
         l[k] = min(dk, best - RELAX_MARGIN)
         l_brake[k] = min(dk, brake - RELAX_MARGIN)
-    return l, l_brake, damper
 
 
 class DamperRows(RowSource):

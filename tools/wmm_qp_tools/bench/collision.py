@@ -78,7 +78,7 @@ def kernel_arguments_at_tick(robot_config: str | Path, ticks: int) -> tuple[tupl
     in the default scene (:func:`arguments_at_tick` of ``_robot_rows``, which makes both calls there):
     (``robot_passes``'s, ``_rows``'s on the candidates ``robot_passes`` gives on them)."""
     _, a = arguments_at_tick(robot_config, collision, "_robot_rows", ticks)
-    robot, statics, (v_prev, lb, ub, latency) = a[:10], a[10:24], a[24:]
+    robot, statics, (v_prev, lb, ub, latency) = a[:10], a[10:-4], a[-4:]
     n, _ = _pair_passes.robot_passes(*robot)
     return robot, (*robot[1:5], *statics, n, np.zeros((0, 3)), v_prev, lb, ub, latency)
 
