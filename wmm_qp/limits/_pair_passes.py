@@ -34,23 +34,31 @@ def place_kernel(
     R: FloatArray, centre: FloatArray, o_a0: FloatArray, o_a1: FloatArray, o_c: FloatArray, o_R: FloatArray,
     o_centre: FloatArray,
 ) -> None:
-    """Every primitive k placed by its joint's homogeneous transform Hj[joint[k]] (the ``o_`` arrays)."""
+    """Every primitive k placed by its joint's homogeneous transform Hj[joint[k]] (the ``o_`` arrays):
+    its bounding sphere's centre, and a swept segment's ends (kind 0) or another shape's frame, c
+    and R (what the distances read of each kind; a segment's c and R, another's ends, are left as
+    they are)."""
     for k in range(joint.shape[0]):
         j = joint[k]
+        swept = kind[k] == 0
         for r in range(3):
-            o_a0[k, r] = Hj[j, r, 3]
-            o_a1[k, r] = Hj[j, r, 3]
-            o_c[k, r] = Hj[j, r, 3]
             o_centre[k, r] = Hj[j, r, 3]
+            if swept:
+                o_a0[k, r] = Hj[j, r, 3]
+                o_a1[k, r] = Hj[j, r, 3]
+            else:
+                o_c[k, r] = Hj[j, r, 3]
             for m in range(3):
-                o_a0[k, r] += Hj[j, r, m] * a0[k, m]
-                o_a1[k, r] += Hj[j, r, m] * a1[k, m]
-                o_c[k, r] += Hj[j, r, m] * c[k, m]
                 o_centre[k, r] += Hj[j, r, m] * centre[k, m]
-                acc = 0.0
-                for q in range(3):
-                    acc += Hj[j, r, q] * R[k, q, m]
-                o_R[k, r, m] = acc
+                if swept:
+                    o_a0[k, r] += Hj[j, r, m] * a0[k, m]
+                    o_a1[k, r] += Hj[j, r, m] * a1[k, m]
+                else:
+                    o_c[k, r] += Hj[j, r, m] * c[k, m]
+                    acc = 0.0
+                    for q in range(3):
+                        acc += Hj[j, r, q] * R[k, q, m]
+                    o_R[k, r, m] = acc
 
 
 @jit
