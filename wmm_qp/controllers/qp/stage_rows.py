@@ -95,7 +95,8 @@ class StageRows:
     def for_the_arm(self, n_wheels: int, held: FloatArray, lb: FloatArray, ub: FloatArray, C_out: FloatArray,
                     l_out: FloatArray, u_out: FloatArray) -> None:
         """(C_arm, l, u) of every row with the wheels held at ``held``, for the arm alone inside its
-        bounds lb ≤ v_m ≤ ub, into ``C_out`` (its first n_arm columns), ``l_out``, ``u_out``: each
+        bounds lb ≤ v_m ≤ ub (the first n_arm entries of ``lb``, ``ub``: the stage's own bounds may
+        be passed whole, slack and all), into ``C_out`` (its first n_arm columns), ``l_out``, ``u_out``: each
         row's own bound (``damper``) relaxed to what the arm alone can do,
         l ← min(damper, max C_arm v_m + C_w w) − C_w w, the upper bound moved by the wheels' share,
         u ← u − C_w w (+INF stays). One compiled call (:func:`_rows_for_the_arm`)."""

@@ -126,7 +126,7 @@ class QpStages(Controller):
         p.g[: self.n_arm] = 0.0
         _add_return_term(ctx.kin.q_arm, arm.position_lower, arm.position_upper, self._return_gain, p.g)
         if rows.n:  # l ≤ C_arm v_m + C_w w_hold ≤ u
-            rows.for_the_arm(self.n_wheels, w_hold, p.lb[: self.n_arm], p.ub[: self.n_arm], p.C, p.l, p.u)
+            rows.for_the_arm(self.n_wheels, w_hold, p.lb, p.ub, p.C, p.l, p.u)  # (v_m's bounds: their first n_arm)
         return p, w_hold
 
     def build(self, ctx: TickContext, xdot: FloatArray, mode: Mode, rows: StageRows, brake: bool = False) -> QPProblem:
