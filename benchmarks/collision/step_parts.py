@@ -2,6 +2,8 @@
 circle, one with the default rows and scene and one without, ticked in turns in one process; each
 part of the step timed (inclusive, each figure with its own wrapper's ~0.2 µs) by wrapping the
 controller's methods with a clock. Prints, per part, its p50 with rows and without (docs/benchmarks.md §12).
+The rows' compiled calls: ``_robot_rows`` (the search and the rows in one, the default scene: no
+obstacles), or ``PairSearch.search`` and ``_rows`` (with obstacles; "-" where not called).
 
     python benchmarks/collision/step_parts.py panda_diffdrive fr3 [--ticks 3000]
 """
