@@ -4,6 +4,7 @@ are left to coal; and the pair search with GJK gives the candidates coal gives, 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 from typing import Any
 
@@ -369,7 +370,7 @@ def test_a_pair_left_out_by_its_last_distance_has_not_come_within_the_influence_
     gap), less how far either body can have moved since (``body_travel``), keeps it beyond d_i.
     Along random walks of the arm (steps of 0.01–0.04 rad a joint: a few ticks at full speed
     each), its candidates within d_i equal, bit for bit, those of a search that computes every pair
-    each step (reset before each), and it leaves pairs out. The
+    each step (its slack forgotten before each), and it leaves pairs out. The
     mutations caught (in ``_pair_passes``): the travel without the bodies' rotation (its centre's
     only), the travel of the last step only, none (a pair beyond d_i once is left out while it
     passes the bounding spheres), and the spheres' gap taken for the slack without d_i."""
@@ -385,7 +386,7 @@ def test_a_pair_left_out_by_its_last_distance_has_not_come_within_the_influence_
     for seed in range(4):
         coherent.reset()
         for _ in arm_walk(model, seed, 150, scale):
-            every.reset()
+            every._slack[:, 0] = -math.inf  # every pair computed (its warm starts kept: GJK's pairs alike)
             a, b = coherent.search(np.zeros(3)), every.search(np.zeros(3))
             near_a, near_b = np.flatnonzero(a.d[: a.n] < d_i), np.flatnonzero(b.d[: b.n] < d_i)
             assert near_a.shape == near_b.shape
@@ -422,3 +423,84 @@ def test_the_rows_wait_for_the_candidates_left_to_coal() -> None:
             np.testing.assert_allclose(rb.l, ra.l, atol=1e-6)
             compared += ra.n
     assert compared > 0
+
+
+def _spun_capsule(y0: float, dtheta: float, half: float = 0.3, r: float = 0.02,
+                  d_i: float = 0.15) -> tuple[int, int]:
+    """A capsule (half-length ``half``) spun about its own centre in the xy-plane, in steps of
+    ``dtheta``, its end sweeping towards a sphere at (0, y0, 0): its centre never moves, so only the
+    travel's rotation term (‖ΔR‖_F ρ) keeps the pair in. The compiled passes each step, with the
+    pair's slack kept and forgotten: (pairs the first left out, steps whose candidates within d_i
+    differ)."""
+    from wmm_qp.limits._pair_passes import body_travel, place_kernel, self_pass
+
+    kind, joint = np.zeros(2, np.int64), np.arange(2)
+    l_a0, l_a1 = np.array([[0.0, 0, 0], [-half, 0, 0]]), np.array([[0.0, 0, 0], [half, 0, 0]])
+    rad, radii = np.array([r, r]), np.array([r, half + r])
+    pairs = np.array([[0, 1]])
+    pair_r = radii[pairs[:, 0]] + radii[pairs[:, 1]]
+    Hj = np.tile(np.eye(4), (2, 1, 1))
+    Hj[0, 1, 3] = y0
+    kept = [(np.full((1, 2), -math.inf), np.zeros((2, 5)), Hj.copy()) for _ in range(2)]
+    a0, a1, c, centre = (np.zeros((2, 3)) for _ in range(4))
+    R, h, verts, vs = np.tile(np.eye(3), (2, 1, 1)), np.zeros((2, 3)), np.zeros((0, 3)), np.zeros(2, np.int64)
+    left = differ = 0
+    theta = 0.0
+    while theta < math.pi:
+        cs, sn = math.cos(theta), math.sin(theta)
+        Hj[1, :3, :3] = [[cs, -sn, 0.0], [sn, cs, 0.0], [0.0, 0.0, 1.0]]
+        place_kernel(Hj, joint, kind, l_a0, l_a1, np.zeros((2, 3)), np.tile(np.eye(3), (2, 1, 1)), np.zeros((2, 3)),
+                     a0, a1, c, R, centre)
+        got = []
+        for forget, (slack, moved, last_H) in zip((False, True), kept, strict=True):
+            if forget:
+                slack[:, 0] = -math.inf
+            body_travel(Hj, joint, centre, radii, last_H, moved, slack)
+            d, P, Q, N = np.empty(1), np.empty((1, 3)), np.empty((1, 3)), np.empty((1, 3))
+            n = self_pass(kind, a0, a1, rad, c, R, h, verts, vs, vs, centre, pairs, pair_r, d_i, 0.03, d, P, Q, N,
+                          np.ones(1, bool), np.empty(1, np.int64), np.empty(1, np.int64), np.empty(1), 0,
+                          np.zeros((1, 12)), np.zeros((2, 2, 3)), radii, moved, slack)
+            got.append((n, [float(x) for x in d[:n] if x < d_i]))
+        left += got[1][0] - got[0][0]
+        differ += got[0][1] != got[1][1]
+        theta += dtheta
+    return left, differ
+
+
+def test_a_capsule_spun_about_its_centre_is_not_left_out_once_its_end_comes_within_the_influence_distance() -> None:
+    """A rotation moves a body's points while its bounding sphere's centre stays: the travel's
+    rotation term alone keeps a pair in. A capsule spun about its centre towards a sphere, at three
+    distances and three step sizes (the coherent pass leaves the pair out for most steps): its
+    candidates within d_i are, at every step, those of a pass that forgets its slack. Caught: the
+    rotation term halved (‖ΔR‖₂ is ‖ΔR‖_F/√2 for a rotation, and a point at ρ moves ~‖ΔR‖₂ ρ)."""
+    left = 0
+    for y0 in (0.40, 0.43, 0.46):
+        for dtheta in (0.004, 0.01, 0.03):
+            out, differ = _spun_capsule(y0, dtheta)
+            assert differ == 0, (y0, dtheta)
+            left += out
+    assert left > 1000
+
+
+def test_the_travel_sum_keeps_its_rounding_however_many_steps_it_adds() -> None:
+    """``body_travel`` adds each step compensated (Kahan): 100,000 steps of 1e-7 m onto 0.5 m,
+    whose plain sum drifts by ~5e-12 m (every addition rounds the same way), end within 1e-15 m of
+    the exact sum; and past ``TRAVEL_RESTART`` every body's travel starts again from 0 and every
+    pair's slack is forgotten."""
+    from wmm_qp.limits._pair_passes import TRAVEL_RESTART, body_travel
+
+    step, n = 1e-7, 100_000
+    plain = 0.5
+    for _ in range(n):
+        plain += step
+    exact = math.fsum([0.5] + [step] * n)
+    assert abs(plain - exact) > 1e-12  # the case rounds, one way
+    Hj, joint, radii = np.tile(np.eye(4), (1, 1, 1)), np.zeros(1, np.int64), np.ones(1)
+    last_H, slack = Hj.copy(), np.zeros((3, 2))
+    moved = np.array([[0.0, 0.0, 0.0, 0.5, 0.0]])
+    at = (np.zeros((1, 3)), np.array([[step, 0.0, 0.0]]))
+    for k in range(n):
+        body_travel(Hj, joint, at[(k + 1) % 2], radii, last_H, moved, slack)
+    assert abs(moved[0, 3] - exact) <= 1e-15 and (slack[:, 0] == 0.0).all()
+    body_travel(Hj, joint, np.array([[step + TRAVEL_RESTART, 0.0, 0.0]]), radii, last_H, moved, slack)
+    assert moved[0, 3] == 0.0 and (slack[:, 0] == -math.inf).all()

@@ -26,6 +26,9 @@ from ._gjk import convex_pair, convex_plane, gjk, on_the_shapes, uses_gjk
 COHERENCE_MARGIN = 1e-9
 """[m] what :func:`self_pass` keeps in hand when it leaves out a pair by its last distance (that
 distance's rounding, the travel's sum's)."""
+TRAVEL_RESTART = 1.0
+"""[m] a body's travel (:func:`body_travel`) past which every body's starts again from 0 (its sum's
+rounding kept ~1e-16 m; every pair is computed that tick, a tick's travel being millimetres)."""
 
 
 @jit
@@ -307,13 +310,18 @@ def candidates_of(F: FloatArray, Lf: IntArray, I: IntArray, Li: IntArray) -> tup
 @jit
 def body_travel(Hj: FloatArray, joint: IntArray, centre: FloatArray, radii: FloatArray, last_H: FloatArray,
                 moved: FloatArray, slack: FloatArray) -> None:
-    """How far each body has moved, at most, since the search began: ``moved[k, 3]`` += the
-    largest displacement of any point of its bounding sphere (centre c, radius ρ) since the last
-    call, |Δc| + ‖ΔR‖_F ρ (a point c + u, |u| ≤ ρ, moves by Δc + ΔR u, and ‖ΔR‖₂ ≤ ‖ΔR‖_F), from
-    its joint's placement ``Hj`` against the last one (``last_H``) and its centre against the last
-    one (``moved[k, :3]``); both then take this call's. Where a displacement is not finite (a state
-    that never should reach here) every body's travel starts again from 0 and every pair's slack is
-    forgotten: :func:`self_pass` then computes every pair."""
+    """How far each body has moved, at most, since its travel last started from 0: ``moved[k, 3]``
+    += the largest displacement of any point of its bounding sphere (centre c, radius ρ) since the
+    last call, |Δc| + ‖ΔR‖_F ρ (a point c + u, |u| ≤ ρ, moves by Δc + ΔR u, and ‖ΔR‖₂ ≤ ‖ΔR‖_F),
+    from its joint's placement ``Hj`` against the last one (``last_H``) and its centre against the
+    last one (``moved[k, :3]``); both then take this call's.
+
+    The sum is compensated (Kahan's, ``moved[k, 4]``: what rounding left out), so its error stays
+    ~1e-16 of it however many small steps it adds; and once a body's travel passes
+    ``TRAVEL_RESTART`` every body's starts again from 0 and every pair's slack is forgotten
+    (:func:`self_pass` computes every pair that tick), so the error stays far below
+    ``COHERENCE_MARGIN``. The same where a displacement is not finite (a state that should
+    never reach here)."""
     spin = np.empty(Hj.shape[0])
     for j in range(Hj.shape[0]):
         s = 0.0
@@ -323,18 +331,22 @@ def body_travel(Hj: FloatArray, joint: IntArray, centre: FloatArray, radii: Floa
                 s += e * e
                 last_H[j, a, b] = Hj[j, a, b]
         spin[j] = math.sqrt(s)
-    fresh = False
+    restart = False
     for k in range(joint.shape[0]):
         x, y, z = centre[k, 0] - moved[k, 0], centre[k, 1] - moved[k, 1], centre[k, 2] - moved[k, 2]
         step = math.sqrt(x * x + y * y + z * z) + spin[joint[k]] * radii[k]
         moved[k, 0], moved[k, 1], moved[k, 2] = centre[k, 0], centre[k, 1], centre[k, 2]
         if math.isfinite(step):
-            moved[k, 3] += step
+            y_k = step - moved[k, 4]  # Kahan: the step less what the last sum lost
+            total = moved[k, 3] + y_k
+            moved[k, 4] = (total - moved[k, 3]) - y_k
+            moved[k, 3] = total
+            restart = restart or total > TRAVEL_RESTART
         else:
-            fresh = True
-    if fresh:
+            restart = True
+    if restart:
         for k in range(joint.shape[0]):
-            moved[k, 3] = 0.0
+            moved[k, 3] = moved[k, 4] = 0.0
         for k in range(slack.shape[0]):
             slack[k, 0] = -math.inf
 

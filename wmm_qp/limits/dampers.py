@@ -101,9 +101,9 @@ def damper_bounds_into(
     d_i: float, gain: float, latency: float, shift: FloatArray, accel: FloatArray, braking: float,
     offset: FloatArray, v0: FloatArray, l: FloatArray, l_brake: FloatArray, damper: FloatArray,
 ) -> None:
-    """:func:`damper_bounds` into arrays of the caller's (``v0``: room for the braking command;
-    the rows' kernel passes views of its scratch: no allocation a tick)."""
-    for c in range(lb.shape[0]):
+    """:func:`damper_bounds` into arrays of the caller's (``v0``: room for the braking command, n_v
+    entries; the rows' kernel passes views of its scratch: no allocation a tick)."""
+    for c in range(C.shape[1]):  # (v0's n_v entries: a longer lb is read only that far)
         v0[c] = np.minimum(np.maximum(0.0, lb[c]), ub[c])  # numpy's rule: a NaN bound gives a NaN v0
     for k in range(C.shape[0]):
         dk, best, brake = _row_bounds(C, k, v_prev, v0, lb, ub, d[k], d_s[k], d_i, gain, latency, shift[k],

@@ -359,7 +359,7 @@ class PairSearch:
         # beyond d_i less that (_pair_passes.body_travel, self_pass): a pair of capsules that cannot
         # have come within d_i since is not computed again
         self._last_H = np.tile(np.eye(4), (len(joints), 1, 1))
-        self._moved = np.zeros((len(bodies), 4))
+        self._moved = np.zeros((len(bodies), 5))  # last centre, travel, its sum's compensation
         self._slack = np.full((self._pairs.shape[0], 2), -math.inf)
         self._bind()
         self._make_namer()

@@ -52,7 +52,8 @@ class Rows:
         names: one per row, e.g. "a/b" (a pair of bodies), "a/floor", "fence:ee x", "EE box z".
         distances: (k,) how far each row's quantity is from its limit ([m]: a pair's distance, the
             fence's margin, the EE's to the box; [m/rad] σ_min − σ_f).
-        min_distance: [m] the closest monitored pair this tick (also beyond the influence distance).
+        min_distance: [m] the closest monitored pair this tick of those the broad phase computed
+            (beyond the influence distance it may not be the closest of all).
         closest: that pair's name.
         u: (k,) the upper bound, or None: none (l ≤ C v).
     """
