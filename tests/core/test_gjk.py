@@ -309,6 +309,16 @@ def test_the_placements_read_in_place_follow_every_forward_kinematics() -> None:
     assert placement_table(Moved(arm.data.oMi)) is None
 
 
+def _same_within(a: Any, b: Any, d_i: float) -> tuple[int, int]:
+    """Asserts the candidates ``a`` (a search that leaves pairs out) within d_i are those of ``b``
+    (one that does not), bit for bit; returns (how many fewer ``a`` has, how many are within d_i)."""
+    near_a, near_b = np.flatnonzero(a.d[: a.n] < d_i), np.flatnonzero(b.d[: b.n] < d_i)
+    assert near_a.shape == near_b.shape
+    for f in ("d", "p_a", "p_b", "normal", "body", "other"):
+        assert np.array_equal(getattr(a, f)[near_a], getattr(b, f)[near_b]), f
+    return b.n - a.n, near_b.shape[0]
+
+
 @pytest.mark.parametrize("robot", ["fr3", "tiago", "ur5_omni"])
 def test_the_bounding_capsules_contain_their_shapes_and_cull_only_pairs_beyond_the_influence_distance(
         robot: str) -> None:
@@ -353,12 +363,7 @@ def test_the_bounding_capsules_contain_their_shapes_and_cull_only_pairs_beyond_t
     for _ in arm_walk(model, 7, 60, 0.15):
         culled.reset()
         every.reset()
-        a, b = culled.search(np.zeros(3)), every.search(np.zeros(3))
-        near_a, near_b = np.flatnonzero(a.d[: a.n] < d_i), np.flatnonzero(b.d[: b.n] < d_i)
-        assert near_a.shape == near_b.shape
-        for f in ("d", "p_a", "p_b", "normal", "body", "other"):
-            assert np.array_equal(getattr(a, f)[near_a], getattr(b, f)[near_b]), f
-        left_out += b.n - a.n
+        left_out += _same_within(culled.search(np.zeros(3)), every.search(np.zeros(3)), d_i)[0]
     assert left_out > 0
 
 
@@ -387,13 +392,9 @@ def test_a_pair_left_out_by_its_last_distance_has_not_come_within_the_influence_
         coherent.reset()
         for _ in arm_walk(model, seed, 150, scale):
             every._slack[:, 0] = -math.inf  # every pair computed (its warm starts kept: GJK's pairs alike)
-            a, b = coherent.search(np.zeros(3)), every.search(np.zeros(3))
-            near_a, near_b = np.flatnonzero(a.d[: a.n] < d_i), np.flatnonzero(b.d[: b.n] < d_i)
-            assert near_a.shape == near_b.shape
-            for f in ("d", "p_a", "p_b", "normal", "body", "other"):
-                assert np.array_equal(getattr(a, f)[near_a], getattr(b, f)[near_b]), f
-            left_out += b.n - a.n
-            near_pairs += near_b.shape[0]
+            out, near = _same_within(coherent.search(np.zeros(3)), every.search(np.zeros(3)), d_i)
+            left_out += out
+            near_pairs += near
     assert left_out > 0 and near_pairs > 0
 
 
