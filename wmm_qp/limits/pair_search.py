@@ -396,8 +396,9 @@ class PairSearch:
         """:func:`robot_passes`'s arguments, in one tuple: the robot side's arrays, which the search
         fills in place each tick, packed into two arenas (:func:`pack`: each array here becomes
         its view of them) once, and again when ``set_obstacles`` makes new candidates (whoever
-        replaces one of these arrays must call this again): ~2.5 µs a tick saved, of unboxing
-        41 arrays and gathering them."""
+        replaces one of these arrays must call this again): the call unboxes 6 arrays a tick
+        instead of 40 (~48 ns each on the 2-core host of docs/benchmarks.md §12), and nothing is
+        gathered."""
         p, pl, c, loc = self.p, self.placed, self.candidates, self._shapes
         floats = {"Hj": (self, "_Hj"), "l_a0": (loc, "a0"), "l_a1": (loc, "a1"), "l_c": (loc, "c"),
                   "l_R": (loc, "R"), "l_centre": (loc, "centre"), "a0": (pl, "a0"), "a1": (pl, "a1"), "r": (pl, "r"),
