@@ -214,31 +214,22 @@ def plane_pass(
 
 
 @jit_inline
-def _f(F: FloatArray, L: IntArray, k: int) -> FloatArray:
-    """Array k of the float arena F (:func:`robot_passes`): ``L[k]`` = (offset, size), 1-D."""
-    return F[L[k, 0] : L[k, 0] + L[k, 1]]
+def _view1(A: np.ndarray, L: IntArray, k: int) -> np.ndarray:
+    """Array k of the arena A (either of :func:`robot_passes`'s, float or int): ``L[k]`` =
+    (offset, size), 1-D."""
+    return A[L[k, 0] : L[k, 0] + L[k, 1]]
 
 
 @jit_inline
-def _f2(F: FloatArray, L: IntArray, k: int) -> FloatArray:
-    """Array k of F, 2-D: ``L[k]`` = (offset, size, rows, columns)."""
-    return F[L[k, 0] : L[k, 0] + L[k, 1]].reshape((L[k, 2], L[k, 3]))
+def _view2(A: np.ndarray, L: IntArray, k: int) -> np.ndarray:
+    """Array k of A, 2-D: ``L[k]`` = (offset, size, rows, columns)."""
+    return A[L[k, 0] : L[k, 0] + L[k, 1]].reshape((L[k, 2], L[k, 3]))
 
 
 @jit_inline
-def _f3(F: FloatArray, L: IntArray, k: int) -> FloatArray:
-    """Array k of F, 3-D: ``L[k]`` = (offset, size, d0, d1, d2)."""
-    return F[L[k, 0] : L[k, 0] + L[k, 1]].reshape((L[k, 2], L[k, 3], L[k, 4]))
-
-
-@jit_inline
-def _i(I: IntArray, L: IntArray, k: int) -> IntArray:
-    return I[L[k, 0] : L[k, 0] + L[k, 1]]
-
-
-@jit_inline
-def _i2(I: IntArray, L: IntArray, k: int) -> IntArray:
-    return I[L[k, 0] : L[k, 0] + L[k, 1]].reshape((L[k, 2], L[k, 3]))
+def _view3(A: np.ndarray, L: IntArray, k: int) -> np.ndarray:
+    """Array k of A, 3-D: ``L[k]`` = (offset, size, d0, d1, d2)."""
+    return A[L[k, 0] : L[k, 0] + L[k, 1]].reshape((L[k, 2], L[k, 3], L[k, 4]))
 
 
 @jit
@@ -260,15 +251,19 @@ def robot_passes(
     to another takes and releases each one's reference (~25 ns each). ``cap_local``: each body's
     bounding capsule's ends in its joint's frame, placed into ``cap`` (:func:`self_pass`);
     ``last_H``, ``moved``, ``slack``: :func:`body_travel`'s and :func:`self_pass`'s."""
-    Hj, l_a0, l_a1, l_c, l_R = _f3(F, Lf, 0), _f2(F, Lf, 1), _f2(F, Lf, 2), _f2(F, Lf, 3), _f3(F, Lf, 4)
-    l_centre = _f2(F, Lf, 5)
-    a0, a1, r, c, R, h = _f2(F, Lf, 6), _f2(F, Lf, 7), _f(F, Lf, 8), _f2(F, Lf, 9), _f3(F, Lf, 10), _f2(F, Lf, 11)
-    verts, centre, radii, pair_r, floor_n = _f2(F, Lf, 12), _f2(F, Lf, 13), _f(F, Lf, 14), _f(F, Lf, 15), _f(F, Lf, 16)
-    d, P, Q, N, safety = _f(F, Lf, 17), _f2(F, Lf, 18), _f2(F, Lf, 19), _f2(F, Lf, 20), _f(F, Lf, 21)
-    warm, cap_local, cap_r, cap = _f2(F, Lf, 22), _f3(F, Lf, 23), _f(F, Lf, 24), _f3(F, Lf, 25)
-    last_H, moved, slack = _f3(F, Lf, 26), _f2(F, Lf, 27), _f2(F, Lf, 28)
-    joint_id, joint, kind, vs, vc = _i(I, Li, 0), _i(I, Li, 1), _i(I, Li, 2), _i(I, Li, 3), _i(I, Li, 4)
-    pairs, floor_idx, body, other = _i2(I, Li, 5), _i(I, Li, 6), _i(I, Li, 7), _i(I, Li, 8)
+    Hj, l_R, R, cap_local, cap, last_H = (_view3(F, Lf, 0), _view3(F, Lf, 4), _view3(F, Lf, 10), _view3(F, Lf, 23),
+                                          _view3(F, Lf, 25), _view3(F, Lf, 26))
+    l_a0, l_a1, l_c, l_centre = _view2(F, Lf, 1), _view2(F, Lf, 2), _view2(F, Lf, 3), _view2(F, Lf, 5)
+    a0, a1, c, h, verts, centre = (_view2(F, Lf, 6), _view2(F, Lf, 7), _view2(F, Lf, 9), _view2(F, Lf, 11),
+                                   _view2(F, Lf, 12), _view2(F, Lf, 13))
+    P, Q, N, warm, moved, slack = (_view2(F, Lf, 18), _view2(F, Lf, 19), _view2(F, Lf, 20), _view2(F, Lf, 22),
+                                   _view2(F, Lf, 27), _view2(F, Lf, 28))
+    r, radii, pair_r, floor_n, d, safety, cap_r = (_view1(F, Lf, 8), _view1(F, Lf, 14), _view1(F, Lf, 15),
+                                                   _view1(F, Lf, 16), _view1(F, Lf, 17), _view1(F, Lf, 21),
+                                                   _view1(F, Lf, 24))
+    joint_id, joint, kind, vs, vc = (_view1(I, Li, 0), _view1(I, Li, 1), _view1(I, Li, 2), _view1(I, Li, 3),
+                                     _view1(I, Li, 4))
+    pairs, floor_idx, body, other = _view2(I, Li, 5), _view1(I, Li, 6), _view1(I, Li, 7), _view1(I, Li, 8)
     if oMi.shape[0]:
         for k in range(joint_id.shape[0]):
             row = oMi[joint_id[k]]
@@ -304,7 +299,8 @@ def candidates_of(F: FloatArray, Lf: IntArray, I: IntArray, Li: IntArray) -> tup
         FloatArray, FloatArray, FloatArray, FloatArray, IntArray, IntArray, FloatArray]:
     """The candidate buffer's arrays in :func:`robot_passes`'s arenas: (d, P, Q, N, body, other,
     safety) (the obstacles' passes append to the same arrays)."""
-    return _f(F, Lf, 17), _f2(F, Lf, 18), _f2(F, Lf, 19), _f2(F, Lf, 20), _i(I, Li, 7), _i(I, Li, 8), _f(F, Lf, 21)
+    return (_view1(F, Lf, 17), _view2(F, Lf, 18), _view2(F, Lf, 19), _view2(F, Lf, 20), _view1(I, Li, 7),
+            _view1(I, Li, 8), _view1(F, Lf, 21))
 
 
 @jit

@@ -333,9 +333,9 @@ def _rows(
     none moves), their bounds (:func:`~.dampers.damper_bounds`), and of each pair of links only the
     rows to keep (:func:`_distinct_rows`); the arguments that change only with the obstacle set
     first, then this tick's (from ``n``). W, Wi: room for the work (:func:`_scratch` for every
-    candidate: of its arrays only the two returned and the sort's are allocated a tick). Returns (F, I, m, the closest
-    candidate's index, s),
-    the m kept rows and the s rows inside their safety distance (before the merge) packed in
+    candidate: of its arrays only the two returned and the sort's are allocated a tick). Returns
+    (F, I, m, the closest candidate's index, s), the m kept rows and the s rows inside their
+    safety distance (before the merge) packed in
     one float array F = [C (m × n_v, row by row), l, l_brake, damper, D (m each), DS of the s]
     and one int array I = [IA, IB (m each), IA, IB of the s]."""
     d, P, Q, N, body, other, safety = candidates_of(F, Lf, I, Li)

@@ -139,7 +139,7 @@ def placement_table(data: Any) -> FloatArray | None:
 def pack(arrays: list[tuple[Any, str]], dtype: type) -> tuple[np.ndarray, IntArray]:
     """The arrays ``getattr(owner, name)`` copied into one arena of ``dtype``, in order, each
     attribute then set to its view of it (so what fills the view fills the arena): (the arena, L),
-    ``L[k]`` = array k's (offset, size, shape…) (the compiled unpacking: ``_pair_passes._f``)."""
+    ``L[k]`` = array k's (offset, size, shape…) (the compiled unpacking: ``_pair_passes._view1``)."""
     got = [np.asarray(getattr(owner, name)) for owner, name in arrays]
     arena: np.ndarray = np.empty(sum(a.size for a in got), dtype=dtype)
     L = np.zeros((len(got), 5), dtype=np.int64)
@@ -355,9 +355,9 @@ class PairSearch:
             np.zeros((0, len(bodies)), dtype=bool), [])
         self.candidates = Candidates.room(self._pairs.shape[0] + self._floor_idx.shape[0])
         self._warm = np.zeros((self._pairs.shape[0], WARM_WIDTH))  # GJK's start for each self pair (the last result)
-        # how far each body has moved since the search began, and each self pair's last distance
-        # beyond d_i less that (_pair_passes.body_travel, self_pass): a pair of capsules that cannot
-        # have come within d_i since is not computed again
+        # how far each body has moved since its travel last restarted, and each self pair's last
+        # lower bound of its distance beyond d_i (_pair_passes.body_travel, self_pass): a pair of
+        # capsules that cannot have come within d_i since is not computed again
         self._last_H = np.tile(np.eye(4), (len(joints), 1, 1))
         self._moved = np.zeros((len(bodies), 5))  # last centre, travel, its sum's compensation
         self._slack = np.full((self._pairs.shape[0], 2), -math.inf)
