@@ -460,7 +460,8 @@ def _spun_capsule(y0: float, dtheta: float, half: float = 0.3, r: float = 0.02,
             d, P, Q, N = np.empty(1), np.empty((1, 3)), np.empty((1, 3)), np.empty((1, 3))
             n = self_pass(kind, a0, a1, rad, c, R, h, verts, vs, vs, centre, pairs, pair_r, d_i, 0.03, d, P, Q, N,
                           np.ones(1, bool), np.empty(1, np.int64), np.empty(1, np.int64), np.empty(1), 0,
-                          np.zeros((1, 12)), np.zeros((2, 2, 3)), radii, moved, slack)
+                          np.zeros((1, 12)), np.zeros((2, 2, 3)), radii, moved, slack, np.full(1, -1, np.int64),
+                          np.empty(1), 0.0)
             got.append((n, [float(x) for x in d[:n] if x < d_i]))
         left += got[1][0] - got[0][0]
         differ += got[0][1] != got[1][1]

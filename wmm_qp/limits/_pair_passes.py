@@ -135,7 +135,7 @@ def self_pass(
     centre: FloatArray, pairs: IntArray, pair_r: FloatArray, d_i: float, d_s: float,
     d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray, body: IntArray, other: IntArray,
     safety: FloatArray, n: int, warm: FloatArray, cap: FloatArray, cap_r: FloatArray, moved: FloatArray,
-    slack: FloatArray,
+    slack: FloatArray, cover: IntArray, pair_d: FloatArray, cover_within: float,
 ) -> int:
     """The robot's own pairs whose bounding spheres are within d_i (the broad phase), their
     distances appended to the candidates from entry n; returns the new count. ``warm[k]``: GJK's
@@ -150,9 +150,17 @@ def self_pass(
     (:func:`body_travel`), so d ≥ d₀ − (how far both moved) > d_i (``slack[k]``: d₀ − d_i − 1e-9 m,
     −inf where the pair has no such bound, and both bodies' travel then). Their candidates are
     those of a pass without it, bit for bit (a pair of swept segments keeps no state between
-    ticks; GJK's pairs, which keep their warm start, are not left out so)."""
+    ticks; GJK's pairs, which keep their warm start, are not left out so).
+
+    A pair of a body inside another (``cover[k]``: its containers' pair, which comes before it;
+    −1: none) is left out, too, while that pair's distance this tick (``pair_d``: inf where it was
+    not computed, beyond d_i) is beyond ``cover_within`` (d_s + ``COVER_REACH``): it is no nearer
+    (:attr:`~wmm_qp.model.collision.RobotGeometry.covered_pairs`)."""
     for k in range(pairs.shape[0]):
         i, j = pairs[k, 0], pairs[k, 1]
+        pair_d[k] = math.inf
+        if cover[k] >= 0 and not pair_d[cover[k]] < cover_within:
+            continue
         swept = kind[i] == 0 and kind[j] == 0  # two capsules or spheres (most pairs)
         travel = 0.0
         if swept:
@@ -169,6 +177,7 @@ def self_pass(
             swept_swept_at(a0, a1, r, i, j, d, P, Q, N, n)
             ok[n] = True
             slack[k, 0], slack[k, 1] = d[n] - d_i - COHERENCE_MARGIN, travel
+            pair_d[k] = d[n]
         else:
             lower = segment_distance(cap[i, 0, 0], cap[i, 0, 1], cap[i, 0, 2], cap[i, 1, 0], cap[i, 1, 1], cap[i, 1, 2],
                                      cap[j, 0, 0], cap[j, 0, 1], cap[j, 0, 2], cap[j, 1, 0], cap[j, 1, 1],
@@ -185,6 +194,8 @@ def self_pass(
             else:
                 pair_one(kind, a0, a1, r, c, R, h, verts, vs, vc, i, kind, a0, a1, r, c, R, h, verts, vs, vc, j,
                          d, P, Q, N, ok, n, warm, k)
+        if not swept:
+            pair_d[k] = d[n] if ok[n] else -math.inf  # (left to coal: unknown here, the pairs it covers computed)
         body[n], other[n], safety[n] = i, j, d_s
         n += 1
     return n
@@ -235,7 +246,7 @@ def _view3(A: np.ndarray, L: IntArray, k: int) -> np.ndarray:
 @jit
 def robot_passes(
     oMi: FloatArray, F: FloatArray, Lf: IntArray, I: IntArray, Li: IntArray, ok: BoolArray, d_i: float, d_s: float,
-    floor_o: float, floor_margin: float,
+    floor_o: float, floor_margin: float, cover_within: float,
 ) -> tuple[int, int]:
     """A tick's robot-side passes in one call: the joints' placements Hj read from Pinocchio's
     ``oMi`` (row ``joint_id[k]``: rotation column-major, translation; empty: Hj is current), the
@@ -264,6 +275,7 @@ def robot_passes(
     joint_id, joint, kind, vs, vc = (_view1(I, Li, 0), _view1(I, Li, 1), _view1(I, Li, 2), _view1(I, Li, 3),
                                      _view1(I, Li, 4))
     pairs, floor_idx, body, other = _view2(I, Li, 5), _view1(I, Li, 6), _view1(I, Li, 7), _view1(I, Li, 8)
+    cover, pair_d = _view1(I, Li, 9), _view1(F, Lf, 29)
     if oMi.shape[0]:
         for k in range(joint_id.shape[0]):
             row = oMi[joint_id[k]]
@@ -280,7 +292,8 @@ def robot_passes(
                                 + H[a, 2] * cap_local[k, e, 2])
     body_travel(Hj, joint, centre, radii, last_H, moved, slack)
     n = self_pass(kind, a0, a1, r, c, R, h, verts, vs, vc, centre, pairs, pair_r, d_i, d_s,
-                  d, P, Q, N, ok, body, other, safety, 0, warm, cap, cap_r, moved, slack)
+                  d, P, Q, N, ok, body, other, safety, 0, warm, cap, cap_r, moved, slack, cover, pair_d,
+                  cover_within)
     n = plane_pass(kind, a0, a1, r, c, R, h, verts, vs, vc, centre, radii, floor_idx, True, floor_n, floor_o,
                    d_i, -1, floor_margin, d, P, Q, N, ok, body, other, safety, n)
     return n, left_to_coal(ok, 0, n)
@@ -288,9 +301,9 @@ def robot_passes(
 
 ROBOT_FLOATS = ("Hj", "l_a0", "l_a1", "l_c", "l_R", "l_centre", "a0", "a1", "r", "c", "R", "h", "verts", "centre",
                 "radii", "pair_r", "floor_n", "d", "P", "Q", "N", "safety", "warm", "cap_local", "cap_r", "cap",
-                "last_H", "moved", "slack")
+                "last_H", "moved", "slack", "pair_d")
 """The float arrays of :func:`robot_passes`, in the order it unpacks them from its arena F."""
-ROBOT_INTS = ("joint_id", "joint", "kind", "vs", "vc", "pairs", "floor_idx", "body", "other")
+ROBOT_INTS = ("joint_id", "joint", "kind", "vs", "vc", "pairs", "floor_idx", "body", "other", "cover")
 """Its int arrays, likewise (from I)."""
 
 

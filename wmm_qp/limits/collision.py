@@ -301,7 +301,7 @@ def _assemble_into(
 @jit
 def _robot_rows(
     oMi: FloatArray, F: FloatArray, Lf: IntArray, I: IntArray, Li: IntArray, ok: BoolArray, reach: float,
-    d_s: float, floor_o: float, floor_margin: float,
+    d_s: float, floor_o: float, floor_margin: float, cover_within: float,
     d_i: float, max_rows: int, n_v: int, Jw: FloatArray, support: FloatArray, bj: IntArray,
     M: FloatArray, n_w: int, body_link: IntArray, n_links: int, n_obstacles: int, gain: float, accel: FloatArray,
     braking: float, W: FloatArray, Wi: IntArray, v_prev: FloatArray, lb: FloatArray, ub: FloatArray, latency: float,
@@ -310,7 +310,7 @@ def _robot_rows(
     :func:`~._pair_passes.robot_passes` (its arguments first, ``reach`` its d_i), then :func:`_rows`
     on its candidates. Returns (n, left, then :func:`_rows`'s five), or m = −1 and no rows where
     the compiled distances left ``left`` candidates to coal (the rows wait for them)."""
-    n, left = robot_passes(oMi, F, Lf, I, Li, ok, reach, d_s, floor_o, floor_margin)
+    n, left = robot_passes(oMi, F, Lf, I, Li, ok, reach, d_s, floor_o, floor_margin, cover_within)
     if left:
         return n, left, np.zeros(0), np.zeros(0, dtype=np.int64), -1, -1, 0
     Fr, Ir, m, closest, inside = _rows(F, Lf, I, Li, d_i, max_rows, n_v, Jw, support, bj, M, n_w, body_link, n_links,

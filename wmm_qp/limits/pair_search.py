@@ -24,6 +24,7 @@ import pinocchio as pin
 from .._typing import BoolArray, FloatArray, IntArray
 from ..config import CollisionParams, ShapeConfig
 from ..model.collision import (
+    COVER_REACH,
     RobotGeometry,
     bounding_capsule,
     bounding_sphere,
@@ -318,7 +319,12 @@ class PairSearch:
         # the broad phase: each row shape's bounding sphere (a cylinder's capsule reaches past the
         # cylinder's own sphere: culling on that would let a pair in already inside d_s)
         self._radii = np.array([b.row_radius for b in bodies], dtype=float)
-        self._pairs = np.array(geometry.self_pairs, dtype=int).reshape(-1, 2)
+        # the pairs of a body inside another last, each with its containers' pair (−1: none;
+        # self_pass computes them only near d_s: RobotGeometry.covered_pairs)
+        covered = geometry.covered_pairs
+        self._pairs = np.array(geometry.row_pairs + [(i, j) for i, j, _ in covered], dtype=int).reshape(-1, 2)
+        self._cover = np.array([-1] * len(geometry.row_pairs) + [k for _, _, k in covered], dtype=int)
+        self._pair_d = np.full(self._pairs.shape[0], math.inf)  # each pair's distance this tick (inf: beyond d_i)
         self._pair_r = self._radii[self._pairs[:, 0]] + self._radii[self._pairs[:, 1]]
         self._floor_idx = np.array(geometry.floor_bodies, dtype=int)
         self._floor_n, self._floor_o = np.array([0.0, 0.0, -1.0]), -geometry.floor_z  # free: z ≥ floor_z
@@ -397,7 +403,7 @@ class PairSearch:
         fills in place each tick, packed into two arenas (:func:`pack`: each array here becomes
         its view of them) once, and again when ``set_obstacles`` makes new candidates (whoever
         replaces one of these arrays must call this again): the call unboxes 6 arrays a tick
-        instead of 40 (~48 ns each on the 2-core host of docs/benchmarks.md §12), and nothing is
+        instead of 42 (~48 ns each on the 2-core host of docs/benchmarks.md §12), and nothing is
         gathered."""
         p, pl, c, loc = self.p, self.placed, self.candidates, self._shapes
         floats = {"Hj": (self, "_Hj"), "l_a0": (loc, "a0"), "l_a1": (loc, "a1"), "l_c": (loc, "c"),
@@ -407,16 +413,17 @@ class PairSearch:
                   "d": (c, "d"), "P": (c, "p_a"), "Q": (c, "p_b"), "N": (c, "normal"), "safety": (c, "safety"),
                   "warm": (self, "_warm"), "cap_local": (self, "_cap_local"), "cap_r": (self, "_cap_r"),
                   "cap": (self, "_cap"), "last_H": (self, "_last_H"), "moved": (self, "_moved"),
-                  "slack": (self, "_slack")}
+                  "slack": (self, "_slack"), "pair_d": (self, "_pair_d")}
         ints = {"joint_id": (self, "_joint_id"), "joint": (self, "_body_joint"), "kind": (pl, "kind"),
                 "vs": (pl, "vs"), "vc": (pl, "vc"), "pairs": (self, "_pairs"), "floor_idx": (self, "_floor_idx"),
-                "body": (c, "body"), "other": (c, "other")}
+                "body": (c, "body"), "other": (c, "other"), "cover": (self, "_cover")}
         F, Lf = pack([floats[k] for k in ROBOT_FLOATS], np.float64)
         I, Li = pack([ints[k] for k in ROBOT_INTS], np.int64)
         self.arenas: tuple[Any, ...] = (F, Lf, I, Li)
         """The arenas (F, Lf, I, Li): the candidates' arrays are views of them too (``_rows``)."""
         self.robot_args: tuple[Any, ...] = (self._oMi, F, Lf, I, Li, c.ok, p.influence_distance,
-                                            p.safety_distance, self._floor_o, p.floor_margin)
+                                            p.safety_distance, self._floor_o, p.floor_margin,
+                                            p.safety_distance + COVER_REACH)
         """:func:`robot_passes`'s arguments (a new tuple whenever the arenas are new)."""
 
     def reset(self) -> None:

@@ -18,6 +18,13 @@ Pairs, decided here once and never per tick:
   disables link1/link3 too). Every exclusion is listed in ``excluded`` with its reason;
 * robot vs the floor (the plane z = ``[base] floor_z``): every body that moves with the arm;
 * robot vs obstacles (a scene's, in the world frame): every body, the base's too.
+
+The referees check all of these. The controller's rows leave out, of them, a self pair of a body
+whose row shape lies inside another body's of its link (``covered_by``: the Panda's URDF draws
+each capsule as a cylinder and two spheres at its ends, all inside the cylinder's capsule), where
+the containers' pair is monitored, while that pair is beyond d_s + ``COVER_REACH``: a shape inside
+another is at least as far from anything, so the rows that keep the container d_s apart keep it
+too (``row_pairs``, ``covered_pairs``).
 """
 
 from __future__ import annotations
@@ -164,6 +171,36 @@ class Body:
         self.row_center, self.row_radius = bounding_sphere(self.row)
 
 
+def row_segment(body: Body) -> tuple[FloatArray, FloatArray, float] | None:
+    """(a, b, r): a body's row shape as the segment [a, b] swept by the radius r, in its joint's
+    frame, where it is a sphere or a capsule (a cylinder's row shape); None for any other."""
+    shape = body.row
+    if isinstance(shape, coal.Capsule):
+        h = np.array([0.0, 0.0, shape.halfLength])
+    elif isinstance(shape, coal.Sphere):
+        h = np.zeros(3)
+    else:
+        return None
+    return (np.asarray(body.placement.act(-h), dtype=float), np.asarray(body.placement.act(h), dtype=float),
+            float(shape.radius))
+
+
+def _to_segment(p: FloatArray, a: FloatArray, b: FloatArray) -> float:
+    """The distance of the point p to the segment [a, b]."""
+    d = b - a
+    length2 = float(d @ d)
+    t = 0.0 if length2 == 0.0 else min(1.0, max(0.0, float((p - a) @ d) / length2))
+    return float(np.linalg.norm(p - (a + t * d)))
+
+
+COVER_TOLERANCE = 1e-12
+"""[m] how far one body's row shape may reach out of another's and still count as inside it
+(``RobotGeometry.covered_by``): the rounding of their placements (~1e-17 m on the Panda's)."""
+
+COVER_REACH = 0.01
+"""[m] a self pair of a body inside another (``RobotGeometry.covered_pairs``) has rows of its own
+while its containers' pair is within d_s + this (their distance this tick)."""
+
 TOUCH_DISTANCE = 0.03
 """[m] two bodies this close in nearly every configuration touch by construction: never monitored."""
 TOUCH_SAMPLES, TOUCH_FRACTION = 200, 0.95
@@ -198,6 +235,13 @@ class RobotGeometry:
         self.excluded: list[tuple[str, str, str]] = []  # (a, b, why)
         self.self_pairs = self._self_pairs(robot)
         self.floor_bodies = [i for i, b in enumerate(self.bodies) if b.joint > 0] if np.isfinite(self.floor_z) else []
+        self.covered_by = self._covered()
+        """Each body's container (−1: none): another body of its link whose row shape contains its
+        own (``_covered``)."""
+        self.row_pairs, self.covered_pairs = self._row_pairs()
+        """The self pairs the rows monitor every tick, and (i, j, the index of the containers' pair
+        in ``row_pairs``) of those they monitor only while that pair is within d_s +
+        ``COVER_REACH`` (``_row_pairs``)."""
 
     # ------------------------------------------------------------------ building
     def _from_urdf(self, robot: RobotConfig, arm: ArmModel) -> None:
@@ -267,6 +311,55 @@ class RobotGeometry:
             else:
                 pairs.append((i, j))
         return pairs
+
+    def _covered(self) -> list[int]:
+        """Each body's container, −1 for none: a body of the same link, itself not inside another,
+        whose row shape (a sphere or a capsule: ``row_segment``) contains the body's row shape,
+        within ``COVER_TOLERANCE``. A capsule (or sphere) B lies inside a capsule A where both ends
+        of B's segment are within r_A − r_B of A's segment (the distance to a segment is convex
+        along B's). A URDF that draws a capsule as a cylinder and two spheres at its ends (the
+        Panda's) gives a cylinder whose row shape, its capsule, contains both spheres. Bodies are
+        taken largest first (a container's length + 2r is no less than what it contains), so two
+        equal bodies leave the first one monitored."""
+        segments = [row_segment(b) for b in self.bodies]
+        covered = [-1] * len(self.bodies)
+        swept = [k for k, s in enumerate(segments) if s is not None]
+        extent = {k: float(np.linalg.norm(s[1] - s[0])) + 2.0 * s[2] for k, s in enumerate(segments) if s is not None}
+        kept: list[int] = []
+        for k in sorted(swept, key=lambda k: -extent[k]):
+            b0, b1, rb = segments[k]  # type: ignore[misc]
+            for a in kept:
+                if self.bodies[a].link != self.bodies[k].link or self.bodies[a].joint != self.bodies[k].joint:
+                    continue
+                a0, a1, ra = segments[a]  # type: ignore[misc]
+                if max(_to_segment(b0, a0, a1), _to_segment(b1, a0, a1)) + rb - ra <= COVER_TOLERANCE:
+                    covered[k] = a
+                    break
+            else:
+                kept.append(k)
+        return covered
+
+    def _row_pairs(self) -> tuple[list[tuple[int, int]], list[tuple[int, int, int]]]:
+        """The self pairs the rows monitor every tick, and those they monitor only near d_s: of
+        ``self_pairs``, (i, j) where (c_i, c_j) is monitored too (c_k: k's container, or k itself;
+        not both k themselves) goes to the second list as (i, j, the index of (c_i, c_j) in the
+        first). A shape inside another is at least as far from anything, so while the containers'
+        pair is beyond d_s + ``COVER_REACH`` the rows that keep it d_s apart keep this one too;
+        nearer, it has its own rows (``self_pass``), and a pair inside d_s never comes nearer
+        (docs/model.md "verify")."""
+        def container(k: int) -> int:
+            return self.covered_by[k] if self.covered_by[k] >= 0 else k
+
+        monitored = set(self.self_pairs)
+        pairs, covered = [], []
+        for i, j in self.self_pairs:
+            a, b = sorted((container(i), container(j)))
+            if (a, b) != (i, j) and (a, b) in monitored:
+                covered.append((i, j, a, b))
+            else:
+                pairs.append((i, j))
+        index = {p: k for k, p in enumerate(pairs)}
+        return pairs, [(i, j, index[(a, b)]) for i, j, a, b in covered]
 
     # ------------------------------------------------------------------ evaluation
     def placements(self, q_arm: FloatArray) -> list[pin.SE3]:

@@ -213,7 +213,8 @@ def _on_off(model: w.WmmModel, cfg: w.ControllerConfig, scene: w.scene.Scene, ti
         "without_rows": s_off,
         "ratio_p50": round(s_on["p50"] / s_off["p50"], 2) if s_off["p50"] else float("nan"),
         "rows": {"p50": float(np.median(r)), "max": int(r.max()), "mean": round(float(r.mean()), 1)},
-        "monitored": {"self_pairs": len(geo.self_pairs), "floor_bodies": len(geo.floor_bodies),
+        "monitored": {"self_pairs": len(geo.self_pairs), "self_pairs_in_rows": len(geo.row_pairs),
+                      "floor_bodies": len(geo.floor_bodies),
                       "obstacles": len(scene.obstacles), "bodies": len(geo.bodies)},
         "_cmds": cmds, "_dt": on.dt,
     }

@@ -142,10 +142,13 @@ class QpController(QpStages, SolveCascade):
         if self.collision is None or self.fence is None:
             return "no collision rows"
         geo = self.collision.geo
-        pairs = (f"{len(geo.self_pairs)} self pairs" if geo.bodies
+        pairs = (f"{len(geo.row_pairs)} self pairs" if geo.bodies
                  else "no self pairs — this robot file has no [collision] shapes")
+        inside = sum(c >= 0 for c in geo.covered_by)
+        within = (f", {len(geo.covered_pairs)} more near d_s: {inside} bodies inside another of their link"
+                  if inside else "")
         return (f"collision rows on ({pairs}, {len(geo.floor_bodies)} bodies vs the floor, "
-                f"{len(self.collision.obstacles)} obstacles, {'fence' if self.fence.fenced else 'no fence'})")
+                f"{len(self.collision.obstacles)} obstacles, {'fence' if self.fence.fenced else 'no fence'}{within})")
 
     def last_collision_rows(self) -> Rows | None:
         return self.last_rows
