@@ -145,7 +145,7 @@ class QpController(QpStages, SolveCascade):
         pairs = (f"{len(geo.row_pairs)} self pairs" if geo.bodies
                  else "no self pairs — this robot file has no [collision] shapes")
         inside = sum(c >= 0 for c in geo.covered_by)
-        within = (f", {len(geo.covered_pairs)} more near d_s: {inside} bodies inside another of their link"
+        within = (f"; {len(geo.covered_pairs)} more of {inside} bodies inside another of their link, near d_s only"
                   if inside else "")
         return (f"collision rows on ({pairs}, {len(geo.floor_bodies)} bodies vs the floor, "
                 f"{len(self.collision.obstacles)} obstacles, {'fence' if self.fence.fenced else 'no fence'}{within})")
