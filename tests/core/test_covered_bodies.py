@@ -103,6 +103,39 @@ def test_the_search_leaves_out_only_pairs_whose_containers_are_beyond_reach(seed
         assert (left_out > 0) == np.isfinite(reach), left_out  # (the default leaves some out: the point)
 
 
+def test_a_covered_pair_is_a_candidate_while_its_containers_are_within_reach() -> None:
+    """Random configurations where a containers' pair is nearer than d_s + COVER_REACH (and not
+    touching): each of its covered pairs within d_i is computed, so it has rows of its own. (Left
+    to the containers down to contact, the Panda's right finger's sphere went 0.1 mm nearer the
+    base's box from 2.67 cm: ``wmm-qp verify --samples 1500 --solver daqp``, 4 violations.)"""
+    from wmm_qp.limits._pair_passes import robot_passes
+    from wmm_qp.limits.pair_search import PairSearch
+
+    m = model("panda_diffdrive.toml")
+    geo = robot_geometry(m.config, m.arm)
+    p = w.load_controller_config().collision
+    b, arm, reach = geo.bodies, m.config.arm, p.safety_distance + COVER_REACH
+    search = PairSearch(geo, p)
+    rng = np.random.default_rng(7)
+    hits = 0
+    for _ in range(400):
+        M = geo.placements(rng.uniform(arm.position_lower, arm.position_upper))
+        within = [(i, j) for i, j, k in geo.covered_pairs
+                  if 0.0 < distance(b[geo.row_pairs[k][0]].row, M[geo.row_pairs[k][0]], b[geo.row_pairs[k][1]].row,
+                                    M[geo.row_pairs[k][1]])[0] < reach
+                  and distance(b[i].row, M[i], b[j].row, M[j])[0] < p.influence_distance]
+        if not within:
+            continue
+        search.reset()
+        search.place_joints()
+        n, _ = robot_passes(*search.robot_args)
+        c = search.candidates
+        got = {(int(c.body[t]), int(c.other[t])) for t in range(n)}
+        assert set(within) <= got, set(within) - got
+        hits += len(within)
+    assert hits >= 20, hits
+
+
 def test_a_pair_inside_the_safety_distance_comes_no_nearer_on_the_panda() -> None:
     """States sampled inside d_s (9 cm into the base's box): a sphere at a capsule's end went 0.2 mm
     deeper while the capsule came out, when its pairs had no rows of their own there."""
@@ -129,17 +162,20 @@ def _sphere(name: str, link: str, radius: float, xyz: list[float]) -> ShapeConfi
 def test_only_a_shape_inside_another_of_its_link_is_covered() -> None:
     """The Gen3's forearm capsule (radius 0.045, to [0, −0.20843, −0.006375]): a sphere of its
     radius at that end is inside it, and a small one at its middle; one 1 mm larger there is not,
-    nor a thin capsule from its start that reaches 4 cm past its end."""
+    nor a thin capsule from its start that reaches 4 cm past its end, nor one that starts 4 cm
+    behind its start."""
     end = [0.0, -0.20843, -0.006375]
     geo = _gen3_with(_sphere("inside", "forearm_link", 0.045, end), _sphere("larger", "forearm_link", 0.046, end),
                      _sphere("mid", "forearm_link", 0.02, [0.0, -0.1, -0.003]),
                      ShapeConfig("long", "forearm_link", "capsule", np.array([0.01, 0.25, 0.0]),
-                                 np.array([0.0, -0.125, 0.0]), np.array([np.pi / 2, 0.0, 0.0])))
+                                 np.array([0.0, -0.125, 0.0]), np.array([np.pi / 2, 0.0, 0.0])),
+                     ShapeConfig("back", "forearm_link", "capsule", np.array([0.01, 0.19, 0.0]),
+                                 np.array([0.0, -0.055, 0.0]), np.array([np.pi / 2, 0.0, 0.0])))
     names = {b.name: k for k, b in enumerate(geo.bodies)}
     by = {b.name: (geo.bodies[geo.covered_by[k]].name if geo.covered_by[k] >= 0 else None)
           for k, b in enumerate(geo.bodies)}
     assert by["inside"] == "forearm" and by["mid"] == "forearm"
-    assert by["larger"] is None and by["long"] is None
+    assert by["larger"] is None and by["long"] is None and by["back"] is None
     assert by["forearm"] is None
     # the larger sphere contains the forearm's end and the small one, not the forearm: it stays
     assert any(names["larger"] in p for p in geo.row_pairs)

@@ -398,3 +398,19 @@ def test_default_section_runs_what_users_run(capsys: pytest.CaptureFixture[str])
         assert d["ratios"]["loops"][key]["in_loop_over_paced_step_p50"] > 0
     assert d["paced"]["back_to_back"]["p50"] > 0 and d["paced"]["500"]["p50"] > 0
     assert "default: rows_p99_under_1ms_every_robot" in out["targets"]
+
+
+def test_the_kernel_benchmarks_take_the_kernels_arguments_as_the_rows_pass_them() -> None:
+    """``benchmarks/collision/passes_tick.py`` and ``rows_parts.py`` time the two kernels on the
+    arguments ``_robot_rows`` passes them: split where ``robot_passes``' own end (a kernel that
+    gains an argument must not break them)."""
+    from wmm_qp_tools.bench.collision import kernel_arguments_at_tick
+
+    from wmm_qp.limits._pair_passes import robot_passes
+    from wmm_qp.limits.collision import _rows
+
+    robot, rows = kernel_arguments_at_tick("configs/robots/panda_diffdrive.toml", 5)
+    n, left = robot_passes(*robot)
+    assert n > 0 and left == 0
+    _, _, m, closest, _ = _rows(*rows)
+    assert m > 0 and closest >= 0

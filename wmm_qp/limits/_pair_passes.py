@@ -154,7 +154,8 @@ def self_pass(
 
     A pair of a body inside another (``cover[k]``: its containers' pair, which comes before it;
     −1: none) is left out, too, while that pair's distance this tick (``pair_d``: inf where it was
-    not computed, beyond d_i) is beyond ``cover_within`` (d_s + ``COVER_REACH``): it is no nearer
+    not computed, beyond d_i; −inf where it was left to coal, unknown here) is beyond
+    ``cover_within`` (d_s + ``COVER_REACH``): it is no nearer
     (:attr:`~wmm_qp.model.collision.RobotGeometry.covered_pairs`)."""
     for k in range(pairs.shape[0]):
         i, j = pairs[k, 0], pairs[k, 1]

@@ -324,7 +324,8 @@ class PairSearch:
         covered = geometry.covered_pairs
         self._pairs = np.array(geometry.row_pairs + [(i, j) for i, j, _ in covered], dtype=int).reshape(-1, 2)
         self._cover = np.array([-1] * len(geometry.row_pairs) + [k for _, _, k in covered], dtype=int)
-        self._pair_d = np.full(self._pairs.shape[0], math.inf)  # each pair's distance this tick (inf: beyond d_i)
+        self._pair_d = np.full(self._pairs.shape[0], math.inf)  # each pair's distance this tick (inf: beyond
+        # d_i, not computed; −inf: left to coal)
         self._pair_r = self._radii[self._pairs[:, 0]] + self._radii[self._pairs[:, 1]]
         self._floor_idx = np.array(geometry.floor_bodies, dtype=int)
         self._floor_n, self._floor_o = np.array([0.0, 0.0, -1.0]), -geometry.floor_z  # free: z ≥ floor_z

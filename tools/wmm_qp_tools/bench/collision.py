@@ -16,6 +16,7 @@ and the sim's step on the same commands with its referee's motion budget and wit
 from __future__ import annotations
 
 import argparse
+import inspect
 import time
 from collections.abc import Callable
 from dataclasses import replace
@@ -78,7 +79,8 @@ def kernel_arguments_at_tick(robot_config: str | Path, ticks: int) -> tuple[tupl
     in the default scene (:func:`arguments_at_tick` of ``_robot_rows``, which makes both calls there):
     (``robot_passes``'s, ``_rows``'s on the candidates ``robot_passes`` gives on them)."""
     _, a = arguments_at_tick(robot_config, collision, "_robot_rows", ticks)
-    robot, statics, (v_prev, lb, ub, latency) = a[:10], a[10:-4], a[-4:]
+    k = len(inspect.signature(_pair_passes.robot_passes).parameters)  # (_robot_rows takes its arguments first)
+    robot, statics, (v_prev, lb, ub, latency) = a[:k], a[k:-4], a[-4:]
     n, _ = _pair_passes.robot_passes(*robot)
     return robot, (*robot[1:5], *statics, n, np.zeros((0, 3)), v_prev, lb, ub, latency)
 
