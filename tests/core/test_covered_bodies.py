@@ -51,19 +51,16 @@ def test_no_pair_the_rows_leave_out_is_nearer_than_the_pair_they_keep(seed: int)
     limits: its distance (coal, on the row shapes) is no less than that of the containers' pair,
     which the rows monitor."""
     m = model("panda_diffdrive.toml")
-    geo = robot_geometry(m.config, m.arm)
+    geo = _geometry("panda_diffdrive.toml")
     arm, b = m.config.arm, geo.bodies
     assert geo.covered_pairs
-
-    def container(k: int) -> int:
-        return geo.covered_by[k] if geo.covered_by[k] >= 0 else k
 
     rng = np.random.default_rng(seed)
     for _ in range(40):
         M = geo.placements(rng.uniform(arm.position_lower, arm.position_upper))
         for i, j, k in geo.covered_pairs:
             a, c = geo.row_pairs[k]
-            assert (a, c) == tuple(sorted((container(i), container(j))))
+            assert (a, c) == tuple(sorted((geo.container(i), geo.container(j))))
             d = distance(b[i].row, M[i], b[j].row, M[j])[0]
             assert d >= distance(b[a].row, M[a], b[c].row, M[c])[0] - 1e-9, (b[i].name, b[j].name)
 
@@ -77,7 +74,7 @@ def test_the_search_leaves_out_only_pairs_whose_containers_are_beyond_reach(seed
     from wmm_qp.limits.pair_search import PairSearch
 
     m = model("panda_diffdrive.toml")
-    geo = robot_geometry(m.config, m.arm)
+    geo = _geometry("panda_diffdrive.toml")
     p = w.load_controller_config().collision
     d_i, b, arm = p.influence_distance, geo.bodies, m.config.arm
     rng = np.random.default_rng(seed)
@@ -112,7 +109,7 @@ def test_a_covered_pair_is_a_candidate_while_its_containers_are_within_reach() -
     from wmm_qp.limits.pair_search import PairSearch
 
     m = model("panda_diffdrive.toml")
-    geo = robot_geometry(m.config, m.arm)
+    geo = _geometry("panda_diffdrive.toml")
     p = w.load_controller_config().collision
     b, arm, reach = geo.bodies, m.config.arm, p.safety_distance + COVER_REACH
     search = PairSearch(geo, p)
@@ -189,10 +186,7 @@ def test_a_covered_body_keeps_its_own_pair_where_its_container_has_none() -> Non
     geo = _geometry("panda_diffdrive.toml")
     monitored = set(geo.self_pairs)
 
-    def container(k: int) -> int:
-        return geo.covered_by[k] if geo.covered_by[k] >= 0 else k
-
-    own = [(i, j) for i, j in geo.row_pairs if container(i) != i or container(j) != j]  # every tick
+    own = [(i, j) for i, j in geo.row_pairs if geo.container(i) != i or geo.container(j) != j]  # every tick
     assert own, "every covered body's pairs were left to its container"
     for i, j in own:
-        assert tuple(sorted((container(i), container(j)))) not in monitored
+        assert tuple(sorted((geo.container(i), geo.container(j)))) not in monitored

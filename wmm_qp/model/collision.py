@@ -186,7 +186,8 @@ def row_segment(body: Body) -> tuple[FloatArray, FloatArray, float] | None:
 
 
 def _to_segment(p: FloatArray, a: FloatArray, b: FloatArray) -> float:
-    """The distance of the point p to the segment [a, b]."""
+    """The distance of the point p to the segment [a, b] (at start-up; the per-tick distances are
+    ``wmm_qp.limits._distance``'s compiled ones, which this layer does not import)."""
     d = b - a
     length2 = float(d @ d)
     t = 0.0 if length2 == 0.0 else min(1.0, max(0.0, float((p - a) @ d) / length2))
@@ -329,7 +330,7 @@ class RobotGeometry:
         for k in sorted(swept, key=lambda k: -extent[k]):
             b0, b1, rb = segments[k]  # type: ignore[misc]
             for a in kept:
-                if self.bodies[a].link != self.bodies[k].link or self.bodies[a].joint != self.bodies[k].joint:
+                if self.bodies[a].link != self.bodies[k].link:  # (a link rides on one joint)
                     continue
                 a0, a1, ra = segments[a]  # type: ignore[misc]
                 if max(_to_segment(b0, a0, a1), _to_segment(b1, a0, a1)) + rb - ra <= COVER_TOLERANCE:
@@ -339,6 +340,10 @@ class RobotGeometry:
                 kept.append(k)
         return covered
 
+    def container(self, k: int) -> int:
+        """Body k's container (``covered_by``), or k itself where it has none."""
+        return self.covered_by[k] if self.covered_by[k] >= 0 else k
+
     def _row_pairs(self) -> tuple[list[tuple[int, int]], list[tuple[int, int, int]]]:
         """The self pairs the rows monitor every tick, and those they monitor only near d_s: of
         ``self_pairs``, (i, j) where (c_i, c_j) is monitored too (c_k: k's container, or k itself;
@@ -347,13 +352,10 @@ class RobotGeometry:
         pair is beyond d_s + ``COVER_REACH`` the rows that keep it d_s apart keep this one too;
         nearer, it has its own rows (``self_pass``), and a pair inside d_s never comes nearer
         (docs/model.md "verify")."""
-        def container(k: int) -> int:
-            return self.covered_by[k] if self.covered_by[k] >= 0 else k
-
         monitored = set(self.self_pairs)
         pairs, covered = [], []
         for i, j in self.self_pairs:
-            a, b = sorted((container(i), container(j)))
+            a, b = sorted((self.container(i), self.container(j)))
             if (a, b) != (i, j) and (a, b) in monitored:
                 covered.append((i, j, a, b))
             else:
