@@ -75,7 +75,7 @@ def jit_inline(fn: F) -> F:
     between compiled functions passes each array as a struct with its reference count taken and
     released, which a kernel run once a pair pays every pair; the small per-pair kernels are
     inlined instead (their callers compile longer: GJK inlined took the rows' cold compile from
-    35 to 90 s, so it is not)."""
+    35 to 90 s, so GJK itself is not; its own helpers are, into it)."""
     try:
         return cast(F, njit(cache=True, nogil=True, error_model="numpy", inline="always")(fn))
     except RuntimeError:

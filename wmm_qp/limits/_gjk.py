@@ -43,20 +43,26 @@ REL_TOL = 1e-12
 """GJK stops when ‖v‖² − v·w ≤ REL_TOL ‖v‖² (v the closest point so far, w the new support
 point): ‖v‖ then exceeds the cores' distance by at most REL_TOL ‖v‖."""
 
+_SA, _SB = 4, 8
+"""GJK's scratch rows (and numbers) of the simplex's support points on A and on B, after its points
+of A − B [0:4]."""
+_NEW_A, _NEW_B = 12, 13
+"""GJK's scratch rows of a new pair of support points (on A, on B)."""
 
-@jit
+
+@jit_inline
 def support(kind: IntArray, a0: FloatArray, a1: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
             verts: FloatArray, vs: IntArray, vc: IntArray, i: int, dx: float, dy: float, dz: float,
-            out: FloatArray) -> int:
-    """``out`` ← the point of shape i's core farthest along (dx, dy, dz); returns which point of the
-    shape it is (:func:`point`: a segment's end 0 or 1, a box's corner as three sign bits, a vertex
+            out: FloatArray, row: int) -> int:
+    """``out[row]`` ← the point of shape i's core farthest along (dx, dy, dz); returns which point of
+    the shape it is (:func:`point`: a segment's end 0 or 1, a box's corner as three sign bits, a vertex
     set's vertex index)."""
     k = kind[i]
     if k == 0:
         e0 = a0[i, 0] * dx + a0[i, 1] * dy + a0[i, 2] * dz
         e1 = a1[i, 0] * dx + a1[i, 1] * dy + a1[i, 2] * dz
         src = a0 if e0 >= e1 else a1
-        out[0], out[1], out[2] = src[i, 0], src[i, 1], src[i, 2]
+        out[row, 0], out[row, 1], out[row, 2] = src[i, 0], src[i, 1], src[i, 2]
         return 0 if e0 >= e1 else 1
     # the direction in the shape's frame: Rᵀ d
     lx = R[i, 0, 0] * dx + R[i, 1, 0] * dy + R[i, 2, 0] * dz
@@ -76,19 +82,19 @@ def support(kind: IntArray, a0: FloatArray, a1: FloatArray, c: FloatArray, R: Fl
         px, py, pz = verts[m, 0], verts[m, 1], verts[m, 2]
         which = m - vs[i]
     for r in range(3):
-        out[r] = c[i, r] + R[i, r, 0] * px + R[i, r, 1] * py + R[i, r, 2] * pz
+        out[row, r] = c[i, r] + R[i, r, 0] * px + R[i, r, 1] * py + R[i, r, 2] * pz
     return which
 
 
-@jit
+@jit_inline
 def point(kind: IntArray, a0: FloatArray, a1: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
-          verts: FloatArray, vs: IntArray, i: int, which: int, out: FloatArray) -> None:
-    """``out`` ← point ``which`` of shape i's core, as :func:`support` numbers them, where the shape
-    is now."""
+          verts: FloatArray, vs: IntArray, i: int, which: int, out: FloatArray, row: int) -> None:
+    """``out[row]`` ← point ``which`` of shape i's core, as :func:`support` numbers them, where the
+    shape is now."""
     k = kind[i]
     if k == 0:
         src = a0 if which == 0 else a1
-        out[0], out[1], out[2] = src[i, 0], src[i, 1], src[i, 2]
+        out[row, 0], out[row, 1], out[row, 2] = src[i, 0], src[i, 1], src[i, 2]
         return
     if k == 1:
         px = h[i, 0] if which & 1 else -h[i, 0]
@@ -98,10 +104,10 @@ def point(kind: IntArray, a0: FloatArray, a1: FloatArray, c: FloatArray, R: Floa
         t = vs[i] + which
         px, py, pz = verts[t, 0], verts[t, 1], verts[t, 2]
     for r in range(3):
-        out[r] = c[i, r] + R[i, r, 0] * px + R[i, r, 1] * py + R[i, r, 2] * pz
+        out[row, r] = c[i, r] + R[i, r, 0] * px + R[i, r, 1] * py + R[i, r, 2] * pz
 
 
-@jit
+@jit_inline
 def _origin(kind: IntArray, a0: FloatArray, a1: FloatArray, c: FloatArray, i: int) -> tuple[float, float, float]:
     """A point inside shape i's core: a segment's middle, a box's or vertex set's frame origin."""
     if kind[i] == 0:
@@ -109,16 +115,16 @@ def _origin(kind: IntArray, a0: FloatArray, a1: FloatArray, c: FloatArray, i: in
     return c[i, 0], c[i, 1], c[i, 2]
 
 
-@jit
-def _project(W: FloatArray, idx: IntArray, m: int, lam: FloatArray) -> float:
+@jit_inline
+def _project(W: FloatArray, idx: IntArray, m: int, lam: FloatArray, at: int) -> float:
     """The affine projection of the origin on the points W[idx[:m]]: its barycentric coordinates
-    into ``lam`` (first m entries); returns its squared norm, or inf where the points are
+    into ``lam[at:at + m]``; returns its squared norm, or inf where the points are
     degenerate or a coordinate is not positive (the projection is outside their hull). Solves the
     normal equations G μ = b of the edges e_r = y_r − y_0 (scalars: no temporaries)."""
     i0 = idx[0]
     y0x, y0y, y0z = W[i0, 0], W[i0, 1], W[i0, 2]
     if m == 1:
-        lam[0] = 1.0
+        lam[at] = 1.0
         return y0x * y0x + y0y * y0y + y0z * y0z
     i1 = idx[1]
     e1x, e1y, e1z = W[i1, 0] - y0x, W[i1, 1] - y0y, W[i1, 2] - y0z
@@ -165,57 +171,63 @@ def _project(W: FloatArray, idx: IntArray, m: int, lam: FloatArray) -> float:
     lam0 = 1.0 - mu1 - mu2 - mu3
     if not (lam0 > 0.0 and mu1 > 0.0 and (m < 3 or mu2 > 0.0) and (m < 4 or mu3 > 0.0)):
         return math.inf
-    lam[0], lam[1] = lam0, mu1
+    lam[at], lam[at + 1] = lam0, mu1
     x = lam0 * y0x + mu1 * W[i1, 0]
     y = lam0 * y0y + mu1 * W[i1, 1]
     z = lam0 * y0z + mu1 * W[i1, 2]
     if m >= 3:
-        lam[2] = mu2
+        lam[at + 2] = mu2
         x += mu2 * W[idx[2], 0]
         y += mu2 * W[idx[2], 1]
         z += mu2 * W[idx[2], 2]
     if m == 4:
-        lam[3] = mu3
+        lam[at + 3] = mu3
         x += mu3 * W[idx[3], 0]
         y += mu3 * W[idx[3], 1]
         z += mu3 * W[idx[3], 2]
     return x * x + y * y + z * z
 
 
-@jit
-def _nearest_face(W: FloatArray, n: int, first: int, idx: IntArray, lam: FloatArray,
-                  tl: FloatArray) -> tuple[float, int]:
-    """The face of the simplex W[:n] nearest the origin among those whose mask is ``first`` or more
+@jit_inline
+def _nearest_face(S: FloatArray, n: int, first: int, ids: IntArray, lam: FloatArray) -> tuple[float, int]:
+    """The face of the simplex S[:n] nearest the origin among those whose mask is ``first`` or more
     (``first`` = 1 << (n − 1): the faces with the newest point; 1: every face): its squared
-    distance and mask (0: none projects into its hull), its barycentric coordinates into lam."""
+    distance and mask (0: none projects into its hull), its barycentric coordinates into lam[:4]
+    (a trial face's into lam[4:8], its points into ids[:4])."""
     best, best_mask = math.inf, 0
     for mask in range(first, 1 << n):
         m = 0
         for t in range(n):
             if mask & (1 << t):
-                idx[m] = t
+                ids[m] = t
                 m += 1
-        dd = _project(W, idx, m, tl)
+        dd = _project(S, ids, m, lam, 4)
         if dd < best:
             best, best_mask = dd, mask
             for t in range(m):
-                lam[t] = tl[t]
+                lam[t] = lam[4 + t]
     return best, best_mask
 
 
-@jit
-def _keep_face(W: FloatArray, SA: FloatArray, SB: FloatArray, IA: IntArray, IB: IntArray, n: int,
-               mask: int) -> int:
-    """The simplex W[:n] (its support points and their numbers) cut down to the face ``mask``, in
-    order; returns its size."""
+@jit_inline
+def _keep_face(S: FloatArray, ids: IntArray, n: int, mask: int) -> int:
+    """The simplex S[:n] (its support points and their numbers, :data:`_SA`, :data:`_SB`) cut down to
+    the face ``mask``, in order; returns its size."""
     m = 0
     for t in range(n):
         if mask & (1 << t):  # t >= m: copying down never overwrites a vertex still to come
             for r in range(3):
-                W[m, r], SA[m, r], SB[m, r] = W[t, r], SA[t, r], SB[t, r]
-            IA[m], IB[m] = IA[t], IB[t]
+                S[m, r], S[_SA + m, r], S[_SB + m, r] = S[t, r], S[_SA + t, r], S[_SB + t, r]
+            ids[_SA + m], ids[_SB + m] = ids[_SA + t], ids[_SB + t]
             m += 1
     return m
+
+
+@jit_inline
+def _add(S: FloatArray, n: int) -> None:
+    """The new pair of support points (rows :data:`_NEW_A`, :data:`_NEW_B`) as the simplex's point n."""
+    for r in range(3):
+        S[n, r], S[_SA + n, r], S[_SB + n, r] = S[_NEW_A, r] - S[_NEW_B, r], S[_NEW_A, r], S[_NEW_B, r]
 
 
 WARM_WIDTH = 10
@@ -241,36 +253,34 @@ def gjk(kA: IntArray, a0A: FloatArray, a1A: FloatArray, cA: FloatArray, RA: Floa
     start is points of A − B, and GJK only stops where a support step finds nothing nearer.
     Updated here.
 
-    Three scratch allocations per call (views into them) and scalar arithmetic: an iteration is
-    ~100 ns of arithmetic, and an allocation costs about as much."""
-    buf = np.empty((14, 3))
-    W, SA, SB = buf[0:4], buf[4:8], buf[8:12]  # the simplex (A − B) and its support points on A and B
-    sa, sb = buf[12], buf[13]
-    coords = np.empty(8)
-    lam, tl = coords[:4], coords[4:]  # barycentric coordinates (the best face's, a trial face's)
-    ids = np.empty(12, dtype=np.int64)
-    idx, IA, IB = ids[0:4], ids[4:8], ids[8:12]  # a face's points; the simplex's numbers on A and B
+    Scalar arithmetic (an iteration is ~100 ns) and three scratch allocations per call. Its helpers
+    are inlined (:func:`~wmm_qp._jit.jit_inline`) and read the scratch at offsets (:data:`_SA`, ...)
+    rather than through ten views: an array that a compiled call passes or a view holds has its
+    reference count taken and released, two atomic operations (``perf``: half of a warm call's
+    time on this project's 2-core host; docs/benchmarks.md §12)."""
+    S = np.empty((14, 3))  # the simplex (A − B) [0:4], its support points on A [_SA:] and B [_SB:], a new pair
+    lam = np.empty(8)  # barycentric coordinates: the best face's [0:4], a trial face's [4:8]
+    ids = np.empty(12, dtype=np.int64)  # a face's points [0:4]; the simplex's numbers on A [_SA:], B [_SB:]
     n = 0
     if w >= 0 and warm[w, 3] > 0.0:  # the last simplex, where the shapes are now
         for t in range(int(warm[w, 3])):
             a, b = int(warm[w, 4 + t]), int(warm[w, 7 + t])
-            point(kA, a0A, a1A, cA, RA, hA, vA, vsA, i, a, sa)
-            point(kB, a0B, a1B, cB, RB, hB, vB, vsB, j, b, sb)
+            point(kA, a0A, a1A, cA, RA, hA, vA, vsA, i, a, S, _NEW_A)
+            point(kB, a0B, a1B, cB, RB, hB, vB, vsB, j, b, S, _NEW_B)
             dup = False
             for u in range(n):
-                if IA[u] == a and IB[u] == b:
+                if ids[_SA + u] == a and ids[_SB + u] == b:
                     dup = True
             if dup:
                 continue
-            for r in range(3):
-                W[n, r], SA[n, r], SB[n, r] = sa[r] - sb[r], sa[r], sb[r]
-            IA[n], IB[n] = a, b
+            _add(S, n)
+            ids[_SA + n], ids[_SB + n] = a, b
             n += 1
-        best, mask = _nearest_face(W, n, 1, idx, lam, tl)
+        best, mask = _nearest_face(S, n, 1, ids, lam)
         if mask == 0 or best < TOUCH * TOUCH:
             n = 0  # degenerate where the shapes are now: start afresh
         else:
-            n = _keep_face(W, SA, SB, IA, IB, n, mask)
+            n = _keep_face(S, ids, n, mask)
             vv = best
     if n == 0:  # the first point: the supports facing each other along the last direction, or the
         # line between the shapes' origins
@@ -280,25 +290,24 @@ def gjk(kA: IntArray, a0A: FloatArray, a1A: FloatArray, cA: FloatArray, RA: Floa
             ax, ay, az = _origin(kA, a0A, a1A, cA, i)
             bx, by, bz = _origin(kB, a0B, a1B, cB, j)
             dx, dy, dz = bx - ax, by - ay, bz - az
-        IA[0] = support(kA, a0A, a1A, cA, RA, hA, vA, vsA, vcA, i, dx, dy, dz, sa)
-        IB[0] = support(kB, a0B, a1B, cB, RB, hB, vB, vsB, vcB, j, -dx, -dy, -dz, sb)
-        for r in range(3):
-            W[0, r], SA[0, r], SB[0, r] = sa[r] - sb[r], sa[r], sb[r]
+        ids[_SA] = support(kA, a0A, a1A, cA, RA, hA, vA, vsA, vcA, i, dx, dy, dz, S, _NEW_A)
+        ids[_SB] = support(kB, a0B, a1B, cB, RB, hB, vB, vsB, vcB, j, -dx, -dy, -dz, S, _NEW_B)
+        _add(S, 0)
         n = 1
         lam[0] = 1.0
-        vv = W[0, 0] * W[0, 0] + W[0, 1] * W[0, 1] + W[0, 2] * W[0, 2]
+        vv = S[0, 0] * S[0, 0] + S[0, 1] * S[0, 1] + S[0, 2] * S[0, 2]
     vx = vy = vz = 0.0
     for r in range(n):
-        vx += lam[r] * W[r, 0]
-        vy += lam[r] * W[r, 1]
-        vz += lam[r] * W[r, 2]
+        vx += lam[r] * S[r, 0]
+        vy += lam[r] * S[r, 1]
+        vz += lam[r] * S[r, 2]
     done = False
     for _ in range(MAX_ITERATIONS):
         if vv < TOUCH * TOUCH:
             return -1.0
-        ia = support(kA, a0A, a1A, cA, RA, hA, vA, vsA, vcA, i, -vx, -vy, -vz, sa)
-        ib = support(kB, a0B, a1B, cB, RB, hB, vB, vsB, vcB, j, vx, vy, vz, sb)
-        wx, wy, wz = sa[0] - sb[0], sa[1] - sb[1], sa[2] - sb[2]
+        ia = support(kA, a0A, a1A, cA, RA, hA, vA, vsA, vcA, i, -vx, -vy, -vz, S, _NEW_A)
+        ib = support(kB, a0B, a1B, cB, RB, hB, vB, vsB, vcB, j, vx, vy, vz, S, _NEW_B)
+        wx, wy, wz = S[_NEW_A, 0] - S[_NEW_B, 0], S[_NEW_A, 1] - S[_NEW_B, 1], S[_NEW_A, 2] - S[_NEW_B, 2]
         vw = vx * wx + vy * wy + vz * wz
         if vv - vw <= REL_TOL * vv + ABS_TOL:  # w no nearer than v: v is the closest
             done = True
@@ -306,27 +315,27 @@ def gjk(kA: IntArray, a0A: FloatArray, a1A: FloatArray, cA: FloatArray, RA: Floa
         lower = vw / math.sqrt(vv)  # the distance is at least this (A − B is beyond the plane of w ⊥ v)
         dup = False
         for t in range(n):
-            if W[t, 0] == wx and W[t, 1] == wy and W[t, 2] == wz:
+            if S[t, 0] == wx and S[t, 1] == wy and S[t, 2] == wz:
                 dup = True
         if dup:  # w is a vertex already: v is the closest
             done = True
             break
-        W[n, 0], W[n, 1], W[n, 2] = wx, wy, wz
+        S[n, 0], S[n, 1], S[n, 2] = wx, wy, wz
         for r in range(3):
-            SA[n, r], SB[n, r] = sa[r], sb[r]
-        IA[n], IB[n] = ia, ib
+            S[_SA + n, r], S[_SB + n, r] = S[_NEW_A, r], S[_NEW_B, r]
+        ids[_SA + n], ids[_SB + n] = ia, ib
         n += 1
         # the nearest face of the simplex and the barycentric coordinates of v on it: first only
         # the faces with w (bit n − 1). v was the nearest point of the simplex without w and w lies
         # nearer along v (the test above), so moving from v towards w gets nearer: the nearest
         # point of the new simplex has a positive weight on w. Every face only where rounding
         # leaves none of those valid.
-        best, best_mask = _nearest_face(W, n, 1 << (n - 1), idx, lam, tl)
+        best, best_mask = _nearest_face(S, n, 1 << (n - 1), ids, lam)
         if best_mask == 0:
-            best, best_mask = _nearest_face(W, n, 1, idx, lam, tl)
+            best, best_mask = _nearest_face(S, n, 1, ids, lam)
         if best_mask == 0 or (n == 4 and best_mask == 15):
             return -1.0  # no face projects into its hull (degenerate), or the origin is inside
-        n = _keep_face(W, SA, SB, IA, IB, n, best_mask)
+        n = _keep_face(S, ids, n, best_mask)
         new_vv = best
         if not new_vv < vv:  # no progress (rounding in a flat simplex: parallel faces)
             if math.sqrt(new_vv) - lower <= STALL_TOL:  # the face's point is that close to the distance
@@ -336,16 +345,16 @@ def gjk(kA: IntArray, a0A: FloatArray, a1A: FloatArray, cA: FloatArray, RA: Floa
         vv = new_vv
         vx = vy = vz = 0.0
         for r in range(n):
-            vx += lam[r] * W[r, 0]
-            vy += lam[r] * W[r, 1]
-            vz += lam[r] * W[r, 2]
+            vx += lam[r] * S[r, 0]
+            vy += lam[r] * S[r, 1]
+            vz += lam[r] * S[r, 2]
     if not done:
         return -1.0
     for c in range(3):
         p[c] = q[c] = 0.0
         for r in range(n):
-            p[c] += lam[r] * SA[r, c]
-            q[c] += lam[r] * SB[r, c]
+            p[c] += lam[r] * S[_SA + r, c]
+            q[c] += lam[r] * S[_SB + r, c]
     dist = math.sqrt((p[0] - q[0]) ** 2 + (p[1] - q[1]) ** 2 + (p[2] - q[2]) ** 2)
     if not dist >= TOUCH:
         return -1.0
@@ -354,7 +363,7 @@ def gjk(kA: IntArray, a0A: FloatArray, a1A: FloatArray, cA: FloatArray, RA: Floa
             warm[w, c] = q[c] - p[c]
         warm[w, 3] = float(n) if n < 4 else 0.0
         for t in range(min(n, 3)):
-            warm[w, 4 + t], warm[w, 7 + t] = float(IA[t]), float(IB[t])
+            warm[w, 4 + t], warm[w, 7 + t] = float(ids[_SA + t]), float(ids[_SB + t])
     return dist
 
 
