@@ -414,3 +414,20 @@ def test_the_kernel_benchmarks_take_the_kernels_arguments_as_the_rows_pass_them(
     assert n > 0 and left == 0
     _, _, m, closest, _ = _rows(*rows)
     assert m > 0 and closest >= 0
+
+
+def test_the_gjk_benchmark_times_a_robots_warm_hull_pairs() -> None:
+    """``benchmarks/collision/gjk_calls.py`` finds the FR3's pairs of two hulls that GJK computed
+    with a warm start and calls GJK on them (a change to GJK's arguments must not break it)."""
+    import importlib.util
+    import re
+
+    spec = importlib.util.spec_from_file_location("gjk_calls", "benchmarks/collision/gjk_calls.py")
+    assert spec is not None and spec.loader is not None
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    bench.CALLS = 10
+    out = bench.one("fr3", 5)
+    found = re.match(r"fr3: (\d+) hull pairs, their warm GJK calls ([0-9.]+) µs", out)
+    assert found is not None, out
+    assert int(found.group(1)) > 0 and float(found.group(2)) > 0

@@ -256,8 +256,8 @@ def gjk(kA: IntArray, a0A: FloatArray, a1A: FloatArray, cA: FloatArray, RA: Floa
     Scalar arithmetic (an iteration is ~100 ns) and three scratch allocations per call. Its helpers
     are inlined (:func:`~wmm_qp._jit.jit_inline`) and read the scratch at offsets (:data:`_SA`, ...)
     rather than through ten views: an array that a compiled call passes or a view holds has its
-    reference count taken and released, two atomic operations (``perf``: half of a warm call's
-    time on this project's 2-core host; docs/benchmarks.md §12)."""
+    reference count taken and released, two atomic operations (``perf``: 40 % of the warm calls'
+    samples before; docs/benchmarks.md §12)."""
     S = np.empty((14, 3))  # the simplex (A − B) [0:4], its support points on A [_SA:] and B [_SB:], a new pair
     lam = np.empty(8)  # barycentric coordinates: the best face's [0:4], a trial face's [4:8]
     ids = np.empty(12, dtype=np.int64)  # a face's points [0:4]; the simplex's numbers on A [_SA:], B [_SB:]
