@@ -173,16 +173,12 @@ class Body:
 
 def row_segment(body: Body) -> tuple[FloatArray, FloatArray, float] | None:
     """(a, b, r): a body's row shape as the segment [a, b] swept by the radius r, in its joint's
-    frame, where it is a sphere or a capsule (a cylinder's row shape); None for any other."""
-    shape = body.row
-    if isinstance(shape, coal.Capsule):
-        h = np.array([0.0, 0.0, shape.halfLength])
-    elif isinstance(shape, coal.Sphere):
-        h = np.zeros(3)
-    else:
+    frame, where it is a sphere or a capsule (a cylinder's row shape: its own ``bounding_capsule``);
+    None for any other."""
+    if not isinstance(body.row, coal.Capsule | coal.Sphere):
         return None
-    return (np.asarray(body.placement.act(-h), dtype=float), np.asarray(body.placement.act(h), dtype=float),
-            float(shape.radius))
+    a, b, r = bounding_capsule(body.row)
+    return np.asarray(body.placement.act(a), dtype=float), np.asarray(body.placement.act(b), dtype=float), r
 
 
 def _to_segment(p: FloatArray, a: FloatArray, b: FloatArray) -> float:
