@@ -239,7 +239,9 @@ def test_after_its_warm_up_no_tick_compiles_a_kernel(robot: str) -> None:
 
     from wmm_qp.config import default_config_dir
 
-    out = subprocess.run([sys.executable, "-c", _NO_COMPILE_AFTER_WARM_UP,
+    # -P: the package the suite imports (the installed one), not the checkout's root on sys.path,
+    # whose numba cache CI's warm-up did not fill (its first process compiled every kernel: ~50 s)
+    out = subprocess.run([sys.executable, "-P", "-c", _NO_COMPILE_AFTER_WARM_UP,
                           str(default_config_dir() / "robots" / f"{robot}.toml")],
                          capture_output=True, text=True, timeout=600, check=True)
     compiled = json.loads(out.stdout.strip().splitlines()[-1])

@@ -80,7 +80,7 @@ def test_a_host_killed_without_closing_still_gets_its_file(tmp_path: Path) -> No
             j.tick(core, None, k, k * 0.001, 0.0)
         os.kill(os.getpid(), signal.SIGKILL)  # no close(): a crash
     """)
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    r = subprocess.run([sys.executable, "-P", "-c", code], capture_output=True, text=True, timeout=300)
     assert r.returncode == -signal.SIGKILL, r.stderr
     end = time.monotonic() + 120
     while time.monotonic() < end:  # the orphaned writer drains the ring and closes the file
