@@ -13,22 +13,22 @@ from __future__ import annotations
 
 import time
 
-import numpy as np
 from numba import njit
 from wmm_qp_tools.bench.collision import for_each_robot, rows_on_the_default_scene
 from wmm_qp_tools.bench.trajectory import IdealRobot, circle
 
 import wmm_qp as w
-from wmm_qp.limits._gjk import gjk
+from wmm_qp.limits._gjk import WARM_WIDTH, gjk
+from wmm_qp.limits._pair_passes import ROBOT_FLOATS, ROBOT_INTS, layout
 
 CALLS = 20_000
 
 
 @njit(cache=False)
-def _calls(n, kind, a0, a1, c, R, h, verts, vs, vc, i, j, p, q, warm, k):
+def _calls(n, F, I, L, i, j, ow, ws, wi):
     total = 0.0
     for _ in range(n):
-        total += gjk(kind, a0, a1, c, R, h, verts, vs, vc, i, kind, a0, a1, c, R, h, verts, vs, vc, j, p, q, warm, k)
+        total += gjk(F, I, L, i, F, I, L, j, ow, ws, wi)
     return total
 
 
@@ -40,12 +40,16 @@ def one(name: str, ticks: int) -> str:
         x_d, xd_d = circle(x0, k * ctl.dt)
         bot.apply(ctl.step(bot.state(), w.Reference(w.Mode.TRACK, x_d=x_d, xd_d=xd_d)), ctl.dt)
     s = search.placed
-    p, q, warm = np.zeros(3), np.zeros(3), search._warm.copy()
-    hulls = [k for k, (i, j) in enumerate(search._pairs) if s.kind[i] == 3 and s.kind[j] == 3 and warm[k, 3] > 0]
+    F, Lf, I, Li = (a.copy() for a in search.arenas)  # (the search's own left as they are)
+    L = layout(Lf, Li, ROBOT_FLOATS, ROBOT_INTS)
+    warm, ws, wi = (int(Lf[ROBOT_FLOATS.index("warm"), 0]), int(Lf[ROBOT_FLOATS.index("work"), 0]),
+                    int(Li[ROBOT_INTS.index("work_ids"), 0]))
+    hulls = [k for k, (i, j) in enumerate(search._pairs)
+             if s.kind[i] == 3 and s.kind[j] == 3 and F[warm + WARM_WIDTH * k + 3] > 0]
     total = 0.0
     for k in hulls:
         i, j = search._pairs[k]
-        args = (s.kind, s.a0, s.a1, s.c, s.R, s.h, s.verts, s.vs, s.vc, i, j, p, q, warm, k)
+        args = (F, I, L, i, j, warm + WARM_WIDTH * k, ws, wi)
         _calls(1, *args)
         t0 = time.perf_counter_ns()
         _calls(CALLS, *args)

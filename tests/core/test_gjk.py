@@ -16,11 +16,10 @@ from wmm_qp_tools.bench.collision import coal_search, leave_to_coal
 
 import wmm_qp as w
 from wmm_qp.limits import _gjk as G  # noqa: N812
-from wmm_qp.limits.pair_search import Table
+from wmm_qp.limits.pair_search import ShapeArenas, Table
 from wmm_qp.model.collision import convex_hull
 
 REQ = coal.DistanceRequest()
-COLD = np.zeros((1, 3))  # no warm start
 
 
 def hull(rng: np.random.Generator, n: int = 40, scale: float = 0.1) -> coal.ConvexBase:
@@ -52,6 +51,20 @@ def table(*shapes: tuple[Any, pin.SE3]) -> Table:
     return t
 
 
+def convex_pair(t: Table, p: np.ndarray, q: np.ndarray, n: np.ndarray,
+                warm: np.ndarray | None = None) -> tuple[float, bool]:
+    """``G.convex_pair`` of shapes 0 and 1 of t, its arrays packed as the compiled passes take them
+    (``ShapeArenas``); ``warm``: the pair's warm start (1, WARM_WIDTH), read and updated (None: a
+    cold start)."""
+    a = ShapeArenas(t, warm_rows=1)
+    if warm is not None:
+        a.warm[:] = warm
+    d, ok = G.convex_pair(a.F, a.I, a.L, 0, a.F, a.I, a.L, 1, p, q, n, -1 if warm is None else a.ow, a.ws, a.wi)
+    if warm is not None:
+        warm[:] = a.warm
+    return d, ok
+
+
 def coal_d(a: Any, Ma: pin.SE3, b: Any, Mb: pin.SE3) -> float:
     return float(coal.distance(a, coal.Transform3s(Ma.rotation, Ma.translation), b,
                                coal.Transform3s(Mb.rotation, Mb.translation), REQ, coal.DistanceResult()))
@@ -69,7 +82,7 @@ def test_hull_distances_agree_with_coal_and_touching_cores_are_left_to_it() -> N
         Mb = pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(scale=0.25, size=3))
         t = table((A, Ma), (B, Mb))
         assert t.kind[0] == 3
-        d, ok = G.convex_pair(*t.shapes(), 0, *t.shapes(), 1, p, q, n, COLD, -1)
+        d, ok = convex_pair(t, p, q, n)
         ref = coal_d(A, Ma, B, Mb)
         if not ok:  # only where the cores touch or overlap: the shapes are then in contact or nearly
             seen["left"] += 1
@@ -104,8 +117,8 @@ def test_a_warm_start_from_the_last_simplex_gives_the_cold_distance_as_the_shape
             Mb = Mb * pin.SE3(pin.exp3(rng.normal(scale=scale, size=3)), rng.normal(scale=scale * 0.2, size=3))
             t = table((A, Ma), (B, Mb))
             used += warm[0, 3] > 0.0
-            d, ok = G.convex_pair(*t.shapes(), 0, *t.shapes(), 1, p, q, n, warm, 0)
-            d0, ok0 = G.convex_pair(*t.shapes(), 0, *t.shapes(), 1, p0, q0, n0, COLD, -1)
+            d, ok = convex_pair(t, p, q, n, warm)
+            d0, ok0 = convex_pair(t, p0, q0, n0)
             if not (ok and ok0):
                 continue
             compared += 1
@@ -126,7 +139,7 @@ def test_box_distances_agree_with_coal_and_touching_boxes_are_left_to_it() -> No
         Mb = pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(scale=0.25, size=3))
         t = table((A, Ma), (B, Mb))
         assert t.kind.tolist() == [1, 1]
-        d, ok = G.convex_pair(*t.shapes(), 0, *t.shapes(), 1, p, q, n, COLD, -1)
+        d, ok = convex_pair(t, p, q, n)
         ref = coal_d(A, Ma, B, Mb)
         if not ok:
             seen["left"] += 1
@@ -162,7 +175,7 @@ def test_a_broken_support_function_is_caught() -> None:
         Ma, Mb = pin.SE3.Identity(), pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(size=3))
         t = table((A, Ma), (B, Mb))
         t.vc[0] -= 1  # the mutation
-        d, ok = G.convex_pair(*t.shapes(), 0, *t.shapes(), 1, p, q, n, COLD, -1)
+        d, ok = convex_pair(t, p, q, n)
         wrong += ok and abs(d - coal_d(A, Ma, B, Mb)) > 1e-6
     assert wrong > 0
 
@@ -224,7 +237,7 @@ def test_parallel_faces_give_the_exact_gap_not_a_fallback() -> None:
         for tilt in (0.0, 1e-9, 1e-4):
             Mb = pin.SE3(pin.exp3(np.array([0.0, 0.0, tilt])), np.array([0.1 + 0.15 + gap, 0.03, 0.02]))
             t = table((cube, pin.SE3.Identity()), (box, Mb))
-            d, ok = G.convex_pair(*t.shapes(), 0, *t.shapes(), 1, p, q, n, COLD, -1)
+            d, ok = convex_pair(t, p, q, n)
             assert ok, (gap, tilt)
             assert d == pytest.approx(coal_d(cube, pin.SE3.Identity(), box, Mb), abs=1e-9)
             if tilt == 0.0:
@@ -443,8 +456,10 @@ def _spun_capsule(y0: float, dtheta: float, half: float = 0.3, r: float = 0.02,
     Hj = np.tile(np.eye(4), (2, 1, 1))
     Hj[0, 1, 3] = y0
     kept = [(np.full((1, 2), -math.inf), np.zeros((2, 5)), Hj.copy()) for _ in range(2)]
-    a0, a1, c, centre = (np.zeros((2, 3)) for _ in range(4))
-    R, h, verts, vs = np.tile(np.eye(3), (2, 1, 1)), np.zeros((2, 3)), np.zeros((0, 3)), np.zeros(2, np.int64)
+    t = Table(2)
+    t.kind[:], t.r[:] = 0, rad
+    g = ShapeArenas(t, warm_rows=1)  # (t's arrays become views of its arenas: place_kernel fills them)
+    a0, a1, c, R, centre = t.a0, t.a1, t.c, t.R, np.zeros((2, 3))
     left = differ = 0
     theta = 0.0
     while theta < math.pi:
@@ -458,10 +473,9 @@ def _spun_capsule(y0: float, dtheta: float, half: float = 0.3, r: float = 0.02,
                 slack[:, 0] = -math.inf
             body_travel(Hj, joint, centre, radii, last_H, moved, slack)
             d, P, Q, N = np.empty(1), np.empty((1, 3)), np.empty((1, 3)), np.empty((1, 3))
-            n = self_pass(kind, a0, a1, rad, c, R, h, verts, vs, vs, centre, pairs, pair_r, d_i, 0.03, d, P, Q, N,
-                          np.ones(1, bool), np.empty(1, np.int64), np.empty(1, np.int64), np.empty(1), 0,
-                          np.zeros((1, 12)), np.zeros((2, 2, 3)), radii, moved, slack, np.full(1, -1, np.int64),
-                          np.empty(1), 0.0)
+            n = self_pass(t.kind, a0, a1, t.r, g.F, g.I, g.L, centre, pairs, pair_r, d_i, 0.03, d, P, Q, N,
+                          np.ones(1, bool), np.empty(1, np.int64), np.empty(1, np.int64), np.empty(1), 0, g.ow, g.ws,
+                          g.wi, np.zeros((2, 2, 3)), radii, moved, slack, np.full(1, -1, np.int64), np.empty(1), 0.0)
             got.append((n, [float(x) for x in d[:n] if x < d_i]))
         left += got[1][0] - got[0][0]
         differ += got[0][1] != got[1][1]

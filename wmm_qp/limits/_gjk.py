@@ -24,8 +24,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from .._jit import jit, jit_inline
 from .._typing import FloatArray, IntArray
 
@@ -48,71 +46,94 @@ _SA, _SB = 4, 8
 of A − B [0:4]."""
 _NEW_A, _NEW_B = 12, 13
 """GJK's scratch rows of a new pair of support points (on A, on B)."""
+WORK_FLOATS, WORK_INTS = 56, 12
+"""GJK's workspace in its caller's arenas (:func:`gjk`'s ``ws``, ``wi``): the simplex and its support
+points (14 × 3), the barycentric coordinates (8), the closest points on the cores p, q (3 + 3);
+a face's points and the simplex's numbers on each shape (12 ints)."""
+_P, _Q = 50, 53
+"""The closest points' offsets in the workspace."""
+
+Layout = tuple[int, int, int, int, int, int, int, int, int, int]
+"""Where a table of shapes lies in a float arena F and an int arena I: the offsets of its arrays in
+the order of :meth:`~wmm_qp.limits.pair_search.Table.shapes` (kind, a0, a1, r, c, R, h, verts, vs,
+vc; kind, vs and vc in I, the rest in F, each row-major): shape i's kind is ``I[L[0] + i]``, its
+rotation's entry (r, m) ``F[L[5] + 9 i + 3 r + m]``, its vertices from ``F[L[7] + 3 vs]``.
+Compiled code takes a shape table so, as two arrays and a tuple of ints, instead of ten arrays:
+each array a compiled call is handed has its reference count taken and released, two atomic
+operations (``perf``: a third of GJK's warm calls' time, docs/benchmarks.md §12)."""
 
 
 @jit_inline
-def support(kind: IntArray, a0: FloatArray, a1: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
-            verts: FloatArray, vs: IntArray, vc: IntArray, i: int, dx: float, dy: float, dz: float,
-            out: FloatArray, row: int) -> int:
+def support(F: FloatArray, I: IntArray, L: Layout, i: int, dx: float, dy: float, dz: float, out: FloatArray,
+            row: int) -> int:
     """``out[row]`` ← the point of shape i's core farthest along (dx, dy, dz); returns which point of
     the shape it is (:func:`point`: a segment's end 0 or 1, a box's corner as three sign bits, a vertex
-    set's vertex index)."""
-    k = kind[i]
+    set's vertex index). The shapes are read in the arenas F, I at the offsets L (:data:`Layout`)."""
+    k = I[L[0] + i]
     if k == 0:
-        e0 = a0[i, 0] * dx + a0[i, 1] * dy + a0[i, 2] * dz
-        e1 = a1[i, 0] * dx + a1[i, 1] * dy + a1[i, 2] * dz
-        src = a0 if e0 >= e1 else a1
-        out[row, 0], out[row, 1], out[row, 2] = src[i, 0], src[i, 1], src[i, 2]
+        o0, o1 = L[1] + 3 * i, L[2] + 3 * i
+        e0 = F[o0] * dx + F[o0 + 1] * dy + F[o0 + 2] * dz
+        e1 = F[o1] * dx + F[o1 + 1] * dy + F[o1 + 2] * dz
+        s = o0 if e0 >= e1 else o1
+        out[row, 0], out[row, 1], out[row, 2] = F[s], F[s + 1], F[s + 2]
         return 0 if e0 >= e1 else 1
+    oR = L[5] + 9 * i  # R[i, r, m] = F[oR + 3 r + m]
     # the direction in the shape's frame: Rᵀ d
-    lx = R[i, 0, 0] * dx + R[i, 1, 0] * dy + R[i, 2, 0] * dz
-    ly = R[i, 0, 1] * dx + R[i, 1, 1] * dy + R[i, 2, 1] * dz
-    lz = R[i, 0, 2] * dx + R[i, 1, 2] * dy + R[i, 2, 2] * dz
+    lx = F[oR] * dx + F[oR + 3] * dy + F[oR + 6] * dz
+    ly = F[oR + 1] * dx + F[oR + 4] * dy + F[oR + 7] * dz
+    lz = F[oR + 2] * dx + F[oR + 5] * dy + F[oR + 8] * dz
     if k == 1:
-        px = h[i, 0] if lx >= 0.0 else -h[i, 0]
-        py = h[i, 1] if ly >= 0.0 else -h[i, 1]
-        pz = h[i, 2] if lz >= 0.0 else -h[i, 2]
+        oh = L[6] + 3 * i
+        px = F[oh] if lx >= 0.0 else -F[oh]
+        py = F[oh + 1] if ly >= 0.0 else -F[oh + 1]
+        pz = F[oh + 2] if lz >= 0.0 else -F[oh + 2]
         which = (lx >= 0.0) + 2 * (ly >= 0.0) + 4 * (lz >= 0.0)
     else:
-        best, m = -math.inf, vs[i]
-        for t in range(vs[i], vs[i] + vc[i]):
-            e = verts[t, 0] * lx + verts[t, 1] * ly + verts[t, 2] * lz
+        vs, ov = I[L[8] + i], L[7]
+        best, m = -math.inf, vs
+        for t in range(vs, vs + I[L[9] + i]):
+            e = F[ov + 3 * t] * lx + F[ov + 3 * t + 1] * ly + F[ov + 3 * t + 2] * lz
             if e > best:
                 best, m = e, t
-        px, py, pz = verts[m, 0], verts[m, 1], verts[m, 2]
-        which = m - vs[i]
+        px, py, pz = F[ov + 3 * m], F[ov + 3 * m + 1], F[ov + 3 * m + 2]
+        which = m - vs
+    oc = L[4] + 3 * i
     for r in range(3):
-        out[row, r] = c[i, r] + R[i, r, 0] * px + R[i, r, 1] * py + R[i, r, 2] * pz
+        out[row, r] = F[oc + r] + F[oR + 3 * r] * px + F[oR + 3 * r + 1] * py + F[oR + 3 * r + 2] * pz
     return which
 
 
 @jit_inline
-def point(kind: IntArray, a0: FloatArray, a1: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
-          verts: FloatArray, vs: IntArray, i: int, which: int, out: FloatArray, row: int) -> None:
+def point(F: FloatArray, I: IntArray, L: Layout, i: int, which: int, out: FloatArray, row: int) -> None:
     """``out[row]`` ← point ``which`` of shape i's core, as :func:`support` numbers them, where the
     shape is now."""
-    k = kind[i]
+    k = I[L[0] + i]
     if k == 0:
-        src = a0 if which == 0 else a1
-        out[row, 0], out[row, 1], out[row, 2] = src[i, 0], src[i, 1], src[i, 2]
+        s = (L[1] if which == 0 else L[2]) + 3 * i
+        out[row, 0], out[row, 1], out[row, 2] = F[s], F[s + 1], F[s + 2]
         return
+    oR = L[5] + 9 * i
     if k == 1:
-        px = h[i, 0] if which & 1 else -h[i, 0]
-        py = h[i, 1] if which & 2 else -h[i, 1]
-        pz = h[i, 2] if which & 4 else -h[i, 2]
+        oh = L[6] + 3 * i
+        px = F[oh] if which & 1 else -F[oh]
+        py = F[oh + 1] if which & 2 else -F[oh + 1]
+        pz = F[oh + 2] if which & 4 else -F[oh + 2]
     else:
-        t = vs[i] + which
-        px, py, pz = verts[t, 0], verts[t, 1], verts[t, 2]
+        t = L[7] + 3 * (I[L[8] + i] + which)
+        px, py, pz = F[t], F[t + 1], F[t + 2]
+    oc = L[4] + 3 * i
     for r in range(3):
-        out[row, r] = c[i, r] + R[i, r, 0] * px + R[i, r, 1] * py + R[i, r, 2] * pz
+        out[row, r] = F[oc + r] + F[oR + 3 * r] * px + F[oR + 3 * r + 1] * py + F[oR + 3 * r + 2] * pz
 
 
 @jit_inline
-def _origin(kind: IntArray, a0: FloatArray, a1: FloatArray, c: FloatArray, i: int) -> tuple[float, float, float]:
+def _origin(F: FloatArray, I: IntArray, L: Layout, i: int) -> tuple[float, float, float]:
     """A point inside shape i's core: a segment's middle, a box's or vertex set's frame origin."""
-    if kind[i] == 0:
-        return 0.5 * (a0[i, 0] + a1[i, 0]), 0.5 * (a0[i, 1] + a1[i, 1]), 0.5 * (a0[i, 2] + a1[i, 2])
-    return c[i, 0], c[i, 1], c[i, 2]
+    if I[L[0] + i] == 0:
+        o0, o1 = L[1] + 3 * i, L[2] + 3 * i
+        return 0.5 * (F[o0] + F[o1]), 0.5 * (F[o0 + 1] + F[o1 + 1]), 0.5 * (F[o0 + 2] + F[o1 + 2])
+    oc = L[4] + 3 * i
+    return F[oc], F[oc + 1], F[oc + 2]
 
 
 @jit_inline
@@ -231,20 +252,20 @@ def _add(S: FloatArray, n: int) -> None:
 
 
 WARM_WIDTH = 10
-"""A pair's warm start (``warm[w]``): the direction from A's closest point to B's [0:3], the size of
-the last simplex [3] and its points' numbers on A [4:7] and on B [7:10] (:func:`point`)."""
+"""A pair's warm start (:func:`gjk`'s ``FA[ow:ow + WARM_WIDTH]``): the direction from A's closest
+point to B's [0:3], the size of the last simplex [3] and its points' numbers on A [4:7] and on B
+[7:10] (:func:`point`)."""
 
 
 @jit
-def gjk(kA: IntArray, a0A: FloatArray, a1A: FloatArray, cA: FloatArray, RA: FloatArray, hA: FloatArray,
-        vA: FloatArray, vsA: IntArray, vcA: IntArray, i: int,
-        kB: IntArray, a0B: FloatArray, a1B: FloatArray, cB: FloatArray, RB: FloatArray, hB: FloatArray,
-        vB: FloatArray, vsB: IntArray, vcB: IntArray, j: int, p: FloatArray, q: FloatArray,
-        warm: FloatArray, w: int) -> float:
-    """The distance of shape i of A's core to shape j of B's, its closest points into p and q;
-    −1 where GJK gives none (cores within :data:`TOUCH` or overlapping, or no convergence).
+def gjk(FA: FloatArray, IA: IntArray, LA: Layout, i: int, FB: FloatArray, IB: IntArray, LB: Layout, j: int,
+        ow: int, ws: int, wi: int) -> float:
+    """The distance of shape i of A's core to shape j of B's (the tables A and B in their arenas,
+    :data:`Layout`), its closest points into the workspace (``FA[ws + _P:]``, ``FA[ws + _Q:]``);
+    −1 where GJK gives none (cores within :data:`TOUCH` or overlapping, or no convergence). The
+    workspace: ``FA[ws:ws + WORK_FLOATS]`` and ``IA[wi:wi + WORK_INTS]`` (:data:`WORK_FLOATS`).
 
-    ``warm[w]`` (w ≥ 0, :data:`WARM_WIDTH` entries): where the last call for this pair ended, the
+    ``FA[ow:ow + WARM_WIDTH]`` (ow ≥ 0): where the last call for this pair ended, the
     simplex it ended on (its points by their numbers on the shapes, :func:`point`) and the
     direction between the closest points. GJK starts from that simplex where the shapes are now (a
     pair moves little in a tick: it is the closest feature or next to it, and GJK ends after one
@@ -253,20 +274,22 @@ def gjk(kA: IntArray, a0A: FloatArray, a1A: FloatArray, cA: FloatArray, RA: Floa
     start is points of A − B, and GJK only stops where a support step finds nothing nearer.
     Updated here.
 
-    Scalar arithmetic (an iteration is ~100 ns) and three scratch allocations per call. Its helpers
-    are inlined (:func:`~wmm_qp._jit.jit_inline`) and read the scratch at offsets (:data:`_SA`, ...)
-    rather than through ten views: an array that a compiled call passes or a view holds has its
-    reference count taken and released, two atomic operations (``perf``: 40 % of the warm calls'
-    samples before; docs/benchmarks.md §12)."""
-    S = np.empty((14, 3))  # the simplex (A − B) [0:4], its support points on A [_SA:] and B [_SB:], a new pair
-    lam = np.empty(8)  # barycentric coordinates: the best face's [0:4], a trial face's [4:8]
-    ids = np.empty(12, dtype=np.int64)  # a face's points [0:4]; the simplex's numbers on A [_SA:], B [_SB:]
+    Scalar arithmetic (an iteration is ~100 ns), no allocation. Its helpers are inlined
+    (:func:`~wmm_qp._jit.jit_inline`) and read the scratch at offsets (:data:`_SA`, ...) rather than
+    through ten views, and its shapes in two arenas rather than ten arrays a side: an array that a
+    compiled call passes or a view holds has its reference count taken and released, two atomic
+    operations (``perf``: 40 % of the warm calls' samples with ten views and twenty arrays;
+    docs/benchmarks.md §12)."""
+    S = FA[ws : ws + 42].reshape((14, 3))  # the simplex (A − B) [0:4], its support points on A [_SA:] and
+    # B [_SB:], a new pair
+    lam = FA[ws + 42 : ws + _P]  # barycentric coordinates: the best face's [0:4], a trial face's [4:8]
+    ids = IA[wi : wi + WORK_INTS]  # a face's points [0:4]; the simplex's numbers on A [_SA:], B [_SB:]
     n = 0
-    if w >= 0 and warm[w, 3] > 0.0:  # the last simplex, where the shapes are now
-        for t in range(int(warm[w, 3])):
-            a, b = int(warm[w, 4 + t]), int(warm[w, 7 + t])
-            point(kA, a0A, a1A, cA, RA, hA, vA, vsA, i, a, S, _NEW_A)
-            point(kB, a0B, a1B, cB, RB, hB, vB, vsB, j, b, S, _NEW_B)
+    if ow >= 0 and FA[ow + 3] > 0.0:  # the last simplex, where the shapes are now
+        for t in range(int(FA[ow + 3])):
+            a, b = int(FA[ow + 4 + t]), int(FA[ow + 7 + t])
+            point(FA, IA, LA, i, a, S, _NEW_A)
+            point(FB, IB, LB, j, b, S, _NEW_B)
             dup = False
             for u in range(n):
                 if ids[_SA + u] == a and ids[_SB + u] == b:
@@ -284,14 +307,14 @@ def gjk(kA: IntArray, a0A: FloatArray, a1A: FloatArray, cA: FloatArray, RA: Floa
             vv = best
     if n == 0:  # the first point: the supports facing each other along the last direction, or the
         # line between the shapes' origins
-        if w >= 0 and (warm[w, 0] != 0.0 or warm[w, 1] != 0.0 or warm[w, 2] != 0.0):
-            dx, dy, dz = warm[w, 0], warm[w, 1], warm[w, 2]
+        if ow >= 0 and (FA[ow] != 0.0 or FA[ow + 1] != 0.0 or FA[ow + 2] != 0.0):
+            dx, dy, dz = FA[ow], FA[ow + 1], FA[ow + 2]
         else:
-            ax, ay, az = _origin(kA, a0A, a1A, cA, i)
-            bx, by, bz = _origin(kB, a0B, a1B, cB, j)
+            ax, ay, az = _origin(FA, IA, LA, i)
+            bx, by, bz = _origin(FB, IB, LB, j)
             dx, dy, dz = bx - ax, by - ay, bz - az
-        ids[_SA] = support(kA, a0A, a1A, cA, RA, hA, vA, vsA, vcA, i, dx, dy, dz, S, _NEW_A)
-        ids[_SB] = support(kB, a0B, a1B, cB, RB, hB, vB, vsB, vcB, j, -dx, -dy, -dz, S, _NEW_B)
+        ids[_SA] = support(FA, IA, LA, i, dx, dy, dz, S, _NEW_A)
+        ids[_SB] = support(FB, IB, LB, j, -dx, -dy, -dz, S, _NEW_B)
         _add(S, 0)
         n = 1
         lam[0] = 1.0
@@ -305,8 +328,8 @@ def gjk(kA: IntArray, a0A: FloatArray, a1A: FloatArray, cA: FloatArray, RA: Floa
     for _ in range(MAX_ITERATIONS):
         if vv < TOUCH * TOUCH:
             return -1.0
-        ia = support(kA, a0A, a1A, cA, RA, hA, vA, vsA, vcA, i, -vx, -vy, -vz, S, _NEW_A)
-        ib = support(kB, a0B, a1B, cB, RB, hB, vB, vsB, vcB, j, vx, vy, vz, S, _NEW_B)
+        ia = support(FA, IA, LA, i, -vx, -vy, -vz, S, _NEW_A)
+        ib = support(FB, IB, LB, j, vx, vy, vz, S, _NEW_B)
         wx, wy, wz = S[_NEW_A, 0] - S[_NEW_B, 0], S[_NEW_A, 1] - S[_NEW_B, 1], S[_NEW_A, 2] - S[_NEW_B, 2]
         vw = vx * wx + vy * wy + vz * wz
         if vv - vw <= REL_TOL * vv + ABS_TOL:  # w no nearer than v: v is the closest
@@ -350,35 +373,37 @@ def gjk(kA: IntArray, a0A: FloatArray, a1A: FloatArray, cA: FloatArray, RA: Floa
             vz += lam[r] * S[r, 2]
     if not done:
         return -1.0
+    p, q = ws + _P, ws + _Q
     for c in range(3):
-        p[c] = q[c] = 0.0
+        pc = qc = 0.0
         for r in range(n):
-            p[c] += lam[r] * S[_SA + r, c]
-            q[c] += lam[r] * S[_SB + r, c]
-    dist = math.sqrt((p[0] - q[0]) ** 2 + (p[1] - q[1]) ** 2 + (p[2] - q[2]) ** 2)
+            pc += lam[r] * S[_SA + r, c]
+            qc += lam[r] * S[_SB + r, c]
+        FA[p + c], FA[q + c] = pc, qc
+    dist = math.sqrt((FA[p] - FA[q]) ** 2 + (FA[p + 1] - FA[q + 1]) ** 2 + (FA[p + 2] - FA[q + 2]) ** 2)
     if not dist >= TOUCH:
         return -1.0
-    if w >= 0:
+    if ow >= 0:
         for c in range(3):
-            warm[w, c] = q[c] - p[c]
-        warm[w, 3] = float(n) if n < 4 else 0.0
+            FA[ow + c] = FA[q + c] - FA[p + c]
+        FA[ow + 3] = float(n) if n < 4 else 0.0
         for t in range(min(n, 3)):
-            warm[w, 4 + t], warm[w, 7 + t] = float(ids[_SA + t]), float(ids[_SB + t])
+            FA[ow + 4 + t], FA[ow + 7 + t] = float(ids[_SA + t]), float(ids[_SB + t])
     return dist
 
 
 @jit
-def convex_pair(kA: IntArray, a0A: FloatArray, a1A: FloatArray, rA: FloatArray, cA: FloatArray, RA: FloatArray,
-                hA: FloatArray, vA: FloatArray, vsA: IntArray, vcA: IntArray, i: int,
-                kB: IntArray, a0B: FloatArray, a1B: FloatArray, rB: FloatArray, cB: FloatArray, RB: FloatArray,
-                hB: FloatArray, vB: FloatArray, vsB: IntArray, vcB: IntArray, j: int,
-                p: FloatArray, q: FloatArray, n: FloatArray, warm: FloatArray, w: int) -> tuple[float, bool]:
-    """Shape i of A against shape j of B (either a vertex set, segment or box): the signed distance
-    (the cores' less both radii), the closest points on the shapes into p and q, the unit normal
-    from B to A into n; and whether GJK gave it (False: leave the pair to coal). ``warm``, ``w``:
-    GJK's start for this pair (:func:`gjk`)."""
-    dist = gjk(kA, a0A, a1A, cA, RA, hA, vA, vsA, vcA, i, kB, a0B, a1B, cB, RB, hB, vB, vsB, vcB, j, p, q, warm, w)
-    return on_the_shapes(dist, rA[i] if kA[i] == 0 else 0.0, rB[j] if kB[j] == 0 else 0.0, p, q, n)
+def convex_pair(FA: FloatArray, IA: IntArray, LA: Layout, i: int, FB: FloatArray, IB: IntArray, LB: Layout, j: int,
+                p: FloatArray, q: FloatArray, n: FloatArray, ow: int, ws: int, wi: int) -> tuple[float, bool]:
+    """Shape i of A against shape j of B (either a vertex set, segment or box; the tables in their
+    arenas, :data:`Layout`): the signed distance (the cores' less both radii), the closest points on
+    the shapes into p and q, the unit normal from B to A into n; and whether GJK gave it (False:
+    leave the pair to coal). ``ow``: GJK's start for this pair, ``ws``, ``wi``: its workspace
+    (:func:`gjk`)."""
+    dist = gjk(FA, IA, LA, i, FB, IB, LB, j, ow, ws, wi)
+    ra = FA[LA[3] + i] if IA[LA[0] + i] == 0 else 0.0
+    rb = FB[LB[3] + j] if IB[LB[0] + j] == 0 else 0.0
+    return on_the_shapes(dist, ra, rb, FA, ws, p, q, n)
 
 
 @jit_inline
@@ -389,16 +414,18 @@ def uses_gjk(ka: int, kb: int) -> bool:
 
 
 @jit_inline
-def on_the_shapes(dist: float, ra: float, rb: float, p: FloatArray, q: FloatArray, n: FloatArray) -> tuple[float, bool]:
-    """:func:`gjk`'s core distance and closest points (p, q) moved onto the shapes of radii ra and
-    rb (a swept segment's; 0 otherwise): (the signed distance, whether GJK gave one), the unit
-    normal from B to A into n."""
+def on_the_shapes(dist: float, ra: float, rb: float, W: FloatArray, ws: int, p: FloatArray, q: FloatArray,
+                  n: FloatArray) -> tuple[float, bool]:
+    """:func:`gjk`'s core distance and closest points (in its workspace ``W[ws:]``) moved onto the
+    shapes of radii ra and rb (a swept segment's; 0 otherwise), into p and q: (the signed distance,
+    whether GJK gave one), the unit normal from B to A into n."""
     if dist < 0.0:
         return 0.0, False
     for r in range(3):
-        n[r] = (p[r] - q[r]) / dist
-        p[r] -= ra * n[r]
-        q[r] += rb * n[r]
+        pr, qr = W[ws + _P + r], W[ws + _Q + r]
+        n[r] = (pr - qr) / dist
+        p[r] = pr - ra * n[r]
+        q[r] = qr + rb * n[r]
     return dist - ra - rb, True
 
 

@@ -21,7 +21,7 @@ import numpy as np
 from .._jit import jit, jit_inline
 from .._typing import BoolArray, FloatArray, IntArray
 from ._distance import box_plane, segment_distance, swept_box, swept_plane, swept_swept, swept_swept_at
-from ._gjk import convex_pair, convex_plane, gjk, on_the_shapes, uses_gjk
+from ._gjk import WARM_WIDTH, Layout, convex_pair, convex_plane, gjk, on_the_shapes, uses_gjk
 
 COHERENCE_MARGIN = 1e-9
 """[m] what :func:`self_pass` keeps in hand when it leaves out a pair by its last distance (that
@@ -64,49 +64,54 @@ def place_kernel(
                     o_R[k, r, m] = acc
 
 
+@jit_inline
+def _row3(F: FloatArray, o: int, i: int) -> FloatArray:
+    """Entry i of a table's (n, 3) array at offset o of the arena F (:data:`._gjk.Layout`), a view."""
+    return F[o + 3 * i : o + 3 * i + 3]
+
+
 @jit
 def pair_one(
-    ka: IntArray, a0: FloatArray, a1: FloatArray, ra: FloatArray, ca: FloatArray, Ra: FloatArray, ha: FloatArray,
-    va: FloatArray, vsa: IntArray, vca: IntArray,
-    i: int, kb: IntArray, b0: FloatArray, b1: FloatArray, rb: FloatArray, cb: FloatArray, Rb: FloatArray,
-    hb: FloatArray, vb: FloatArray, vsb: IntArray, vcb: IntArray,
-    j: int, d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray, k: int,
-    warm: FloatArray, w: int,
+    FA: FloatArray, IA: IntArray, LA: Layout, i: int, FB: FloatArray, IB: IntArray, LB: Layout, j: int,
+    d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray, k: int, ow: int, ws: int, wi: int,
 ) -> None:
-    """Entry k ← the distance of A[i] to B[j] (ok False where coal must compute it); ``warm[w]``:
-    GJK's start for the pair (w < 0: none; :func:`._gjk.gjk`)."""
+    """Entry k ← the distance of A[i] to B[j] (ok False where coal must compute it); the tables in
+    their arenas (:data:`._gjk.Layout`); ``ow``, ``ws``, ``wi``: GJK's start for the pair (−1: none)
+    and its workspace, in A's arenas (:func:`._gjk.gjk`)."""
     ok[k] = True
-    if uses_gjk(ka[i], kb[j]):
+    ka, kb = IA[LA[0] + i], IB[LB[0] + j]
+    if uses_gjk(ka, kb):
         # a hull, or two boxes: GJK (touching cores: coal)
-        dd, got = convex_pair(ka, a0, a1, ra, ca, Ra, ha, va, vsa, vca, i, kb, b0, b1, rb, cb, Rb, hb, vb, vsb, vcb,
-                              j, P[k], Q[k], N[k], warm, w)
+        dd, got = convex_pair(FA, IA, LA, i, FB, IB, LB, j, P[k], Q[k], N[k], ow, ws, wi)
         d[k], ok[k] = dd, got
-    elif ka[i] == 0 and kb[j] == 0:
-        d[k] = swept_swept(a0[i], a1[i], ra[i], b0[j], b1[j], rb[j], P[k], Q[k], N[k])
-    elif ka[i] == 0 and kb[j] == 1:
-        d[k] = swept_box(a0[i], a1[i], ra[i], cb[j], Rb[j], hb[j], P[k], Q[k], N[k])
-        ok[k] = d[k] + ra[i] >= 0.0  # the segment itself inside the box: see swept_box
-    elif ka[i] == 1 and kb[j] == 0:
-        d[k] = swept_box(b0[j], b1[j], rb[j], ca[i], Ra[i], ha[i], Q[k], P[k], N[k])
+    elif ka == 0 and kb == 0:
+        d[k] = swept_swept(_row3(FA, LA[1], i), _row3(FA, LA[2], i), FA[LA[3] + i], _row3(FB, LB[1], j),
+                           _row3(FB, LB[2], j), FB[LB[3] + j], P[k], Q[k], N[k])
+    elif ka == 0 and kb == 1:
+        ra = FA[LA[3] + i]
+        d[k] = swept_box(_row3(FA, LA[1], i), _row3(FA, LA[2], i), ra, _row3(FB, LB[4], j),
+                         FB[LB[5] + 9 * j : LB[5] + 9 * j + 9].reshape((3, 3)), _row3(FB, LB[6], j), P[k], Q[k], N[k])
+        ok[k] = d[k] + ra >= 0.0  # the segment itself inside the box: see swept_box
+    elif ka == 1 and kb == 0:
+        rb = FB[LB[3] + j]
+        d[k] = swept_box(_row3(FB, LB[1], j), _row3(FB, LB[2], j), rb, _row3(FA, LA[4], i),
+                         FA[LA[5] + 9 * i : LA[5] + 9 * i + 9].reshape((3, 3)), _row3(FA, LA[6], i), Q[k], P[k], N[k])
         N[k] = -N[k]
-        ok[k] = d[k] + rb[j] >= 0.0
+        ok[k] = d[k] + rb >= 0.0
     else:
         ok[k] = False
 
 
 @jit
 def pairs_kernel(
-    ka: IntArray, a0: FloatArray, a1: FloatArray, ra: FloatArray, ca: FloatArray, Ra: FloatArray, ha: FloatArray,
-    va: FloatArray, vsa: IntArray, vca: IntArray,
-    kb: IntArray, b0: FloatArray, b1: FloatArray, rb: FloatArray, cb: FloatArray, Rb: FloatArray, hb: FloatArray,
-    vb: FloatArray, vsb: IntArray, vcb: IntArray,
+    FA: FloatArray, IA: IntArray, LA: Layout, FB: FloatArray, IB: IntArray, LB: Layout,
     first: IntArray, second: IntArray, d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray,
+    ws: int, wi: int,
 ) -> None:
-    """Entry k ← the distance of A[first[k]] to B[second[k]], for every k (GJK from its cold start)."""
-    cold = np.zeros((1, 3))
+    """Entry k ← the distance of A[first[k]] to B[second[k]], for every k (GJK from its cold start;
+    its workspace in A's arenas)."""
     for k in range(first.shape[0]):
-        pair_one(ka, a0, a1, ra, ca, Ra, ha, va, vsa, vca, first[k], kb, b0, b1, rb, cb, Rb, hb, vb, vsb, vcb,
-                 second[k], d, P, Q, N, ok, k, cold, -1)
+        pair_one(FA, IA, LA, first[k], FB, IB, LB, second[k], d, P, Q, N, ok, k, -1, ws, wi)
 
 
 @jit
@@ -130,16 +135,17 @@ def plane_one(
 
 @jit
 def self_pass(
-    kind: IntArray, a0: FloatArray, a1: FloatArray, r: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
-    verts: FloatArray, vs: IntArray, vc: IntArray,
+    kind: IntArray, a0: FloatArray, a1: FloatArray, r: FloatArray, F: FloatArray, I: IntArray, L: Layout,
     centre: FloatArray, pairs: IntArray, pair_r: FloatArray, d_i: float, d_s: float,
     d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray, body: IntArray, other: IntArray,
-    safety: FloatArray, n: int, warm: FloatArray, cap: FloatArray, cap_r: FloatArray, moved: FloatArray,
-    slack: FloatArray, cover: IntArray, pair_d: FloatArray, cover_within: float,
+    safety: FloatArray, n: int, warm: int, ws: int, wi: int, cap: FloatArray, cap_r: FloatArray,
+    moved: FloatArray, slack: FloatArray, cover: IntArray, pair_d: FloatArray, cover_within: float,
 ) -> int:
     """The robot's own pairs whose bounding spheres are within d_i (the broad phase), their
-    distances appended to the candidates from entry n; returns the new count. ``warm[k]``: GJK's
-    start for pair k (:func:`._gjk.gjk`). A pair that is not two swept segments (whose distance
+    distances appended to the candidates from entry n; returns the new count. The bodies' table is
+    in the arenas F, I (:data:`._gjk.Layout`; ``kind``, ``a0``, ``a1``, ``r``: its views, read by the
+    pairs of swept segments); ``F[warm + WARM_WIDTH k:]``: GJK's start for pair k, ``ws``, ``wi``: its
+    workspace (:func:`._gjk.gjk`). A pair that is not two swept segments (whose distance
     is as cheap) is left out, too, where the bounding capsules of its shapes (``cap[i]``: the
     segment's ends, placed; ``cap_r[i]``: the radius) are further apart than d_i: its distance is
     no less than theirs (a capsule distance instead of GJK's iterations).
@@ -185,16 +191,13 @@ def self_pass(
                                      cap[j, 1, 2])[0] - cap_r[i] - cap_r[j]
             if lower > d_i:
                 continue
-            if uses_gjk(kind[i], kind[j]):  # GJK called directly, convex_pair's work inline (each
-                # call between compiled functions passes two dozen arrays: pair_one's and
-                # convex_pair's are saved)
-                dist = gjk(kind, a0, a1, c, R, h, verts, vs, vc, i, kind, a0, a1, c, R, h, verts, vs, vc, j, P[n], Q[n],
-                           warm, k)
-                d[n], ok[n] = on_the_shapes(dist, r[i] if kind[i] == 0 else 0.0, r[j] if kind[j] == 0 else 0.0, P[n],
-                                            Q[n], N[n])
+            if uses_gjk(kind[i], kind[j]):  # GJK called directly, convex_pair's work inline (a call
+                # between compiled functions takes and releases each array's reference: those saved)
+                dist = gjk(F, I, L, i, F, I, L, j, warm + WARM_WIDTH * k, ws, wi)
+                d[n], ok[n] = on_the_shapes(dist, r[i] if kind[i] == 0 else 0.0, r[j] if kind[j] == 0 else 0.0, F, ws,
+                                            P[n], Q[n], N[n])
             else:
-                pair_one(kind, a0, a1, r, c, R, h, verts, vs, vc, i, kind, a0, a1, r, c, R, h, verts, vs, vc, j,
-                         d, P, Q, N, ok, n, warm, k)
+                pair_one(F, I, L, i, F, I, L, j, d, P, Q, N, ok, n, warm + WARM_WIDTH * k, ws, wi)
         if not swept:
             pair_d[k] = d[n] if ok[n] else -math.inf  # (left to coal: unknown here, the pairs it covers computed)
         body[n], other[n], safety[n] = i, j, d_s
@@ -268,8 +271,8 @@ def robot_passes(
     l_a0, l_a1, l_c, l_centre = _view2(F, Lf, 1), _view2(F, Lf, 2), _view2(F, Lf, 3), _view2(F, Lf, 5)
     a0, a1, c, h, verts, centre = (_view2(F, Lf, 6), _view2(F, Lf, 7), _view2(F, Lf, 9), _view2(F, Lf, 11),
                                    _view2(F, Lf, 12), _view2(F, Lf, 13))
-    P, Q, N, warm, moved, slack = (_view2(F, Lf, 18), _view2(F, Lf, 19), _view2(F, Lf, 20), _view2(F, Lf, 22),
-                                   _view2(F, Lf, 27), _view2(F, Lf, 28))
+    P, Q, N, moved, slack = (_view2(F, Lf, 18), _view2(F, Lf, 19), _view2(F, Lf, 20), _view2(F, Lf, 27),
+                             _view2(F, Lf, 28))
     r, radii, pair_r, floor_n, d, safety, cap_r = (_view1(F, Lf, 8), _view1(F, Lf, 14), _view1(F, Lf, 15),
                                                    _view1(F, Lf, 16), _view1(F, Lf, 17), _view1(F, Lf, 21),
                                                    _view1(F, Lf, 24))
@@ -292,9 +295,9 @@ def robot_passes(
                 cap[k, e, a] = (H[a, 3] + H[a, 0] * cap_local[k, e, 0] + H[a, 1] * cap_local[k, e, 1]
                                 + H[a, 2] * cap_local[k, e, 2])
     body_travel(Hj, joint, centre, radii, last_H, moved, slack)
-    n = self_pass(kind, a0, a1, r, c, R, h, verts, vs, vc, centre, pairs, pair_r, d_i, d_s,
-                  d, P, Q, N, ok, body, other, safety, 0, warm, cap, cap_r, moved, slack, cover, pair_d,
-                  cover_within)
+    n = self_pass(kind, a0, a1, r, F, I, robot_layout(Lf, Li), centre, pairs, pair_r, d_i, d_s,
+                  d, P, Q, N, ok, body, other, safety, 0, Lf[_WARM, 0], Lf[_WORK, 0], Li[_WORK_IDS, 0], cap, cap_r,
+                  moved, slack, cover, pair_d, cover_within)
     n = plane_pass(kind, a0, a1, r, c, R, h, verts, vs, vc, centre, radii, floor_idx, True, floor_n, floor_o,
                    d_i, -1, floor_margin, d, P, Q, N, ok, body, other, safety, n)
     return n, left_to_coal(ok, 0, n)
@@ -302,10 +305,33 @@ def robot_passes(
 
 ROBOT_FLOATS = ("Hj", "l_a0", "l_a1", "l_c", "l_R", "l_centre", "a0", "a1", "r", "c", "R", "h", "verts", "centre",
                 "radii", "pair_r", "floor_n", "d", "P", "Q", "N", "safety", "warm", "cap_local", "cap_r", "cap",
-                "last_H", "moved", "slack", "pair_d")
-"""The float arrays of :func:`robot_passes`, in the order it unpacks them from its arena F."""
-ROBOT_INTS = ("joint_id", "joint", "kind", "vs", "vc", "pairs", "floor_idx", "body", "other", "cover")
+                "last_H", "moved", "slack", "pair_d", "warm_solid", "work")
+"""The float arrays of :func:`robot_passes`, in the order it unpacks them from its arena F
+(``warm_solid``: GJK's starts of the (solid obstacle, body) pairs, :func:`solid_pass`'s; ``work``:
+GJK's workspace, :data:`._gjk.WORK_FLOATS`)."""
+ROBOT_INTS = ("joint_id", "joint", "kind", "vs", "vc", "pairs", "floor_idx", "body", "other", "cover", "work_ids")
 """Its int arrays, likewise (from I)."""
+TABLE_FLOATS, TABLE_INTS = ("a0", "a1", "r", "c", "R", "h", "verts"), ("kind", "vs", "vc")
+"""A shape table's arrays in its float and int arenas (:data:`._gjk.Layout`)."""
+_WARM, _WARM_SOLID, _WORK, _WORK_IDS = (ROBOT_FLOATS.index("warm"), ROBOT_FLOATS.index("warm_solid"),
+                                        ROBOT_FLOATS.index("work"), ROBOT_INTS.index("work_ids"))
+_RF = tuple(ROBOT_FLOATS.index(k) for k in TABLE_FLOATS)
+_RI = tuple(ROBOT_INTS.index(k) for k in TABLE_INTS)
+
+
+@jit_inline
+def robot_layout(Lf: IntArray, Li: IntArray) -> Layout:
+    """The placed bodies' table in :func:`robot_passes`'s arenas, as :data:`._gjk.Layout` gives it."""
+    return (Li[_RI[0], 0], Lf[_RF[0], 0], Lf[_RF[1], 0], Lf[_RF[2], 0], Lf[_RF[3], 0], Lf[_RF[4], 0], Lf[_RF[5], 0],
+            Lf[_RF[6], 0], Li[_RI[1], 0], Li[_RI[2], 0])
+
+
+def layout(Lf: IntArray, Li: IntArray, floats: tuple[str, ...], ints: tuple[str, ...]) -> Layout:
+    """A shape table's :data:`._gjk.Layout` in arenas packed in the orders ``floats``, ``ints``
+    (:func:`~wmm_qp.limits.pair_search.pack`'s ``L``), as Python ints."""
+    f = [int(Lf[floats.index(k), 0]) for k in TABLE_FLOATS]
+    i = [int(Li[ints.index(k), 0]) for k in TABLE_INTS]
+    return (i[0], f[0], f[1], f[2], f[3], f[4], f[5], f[6], i[1], i[2])
 
 
 @jit_inline
@@ -373,21 +399,22 @@ def left_to_coal(ok: BoolArray, start: int, n: int) -> int:
 
 @jit
 def solid_pass(
-    kind: IntArray, a0: FloatArray, a1: FloatArray, r: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
-    verts: FloatArray, vs: IntArray, vc: IntArray, centre: FloatArray, radii: FloatArray,
-    okind: IntArray, o0: FloatArray, o1: FloatArray, orad: FloatArray, oc: FloatArray, oR: FloatArray,
-    oh: FloatArray, overts: FloatArray, ovs: IntArray, ovc: IntArray,
+    FA: FloatArray, IA: IntArray, LA: Layout, centre: FloatArray, radii: FloatArray,
+    FB: FloatArray, IB: IntArray, LB: Layout, okind: IntArray, oc: FloatArray, oR: FloatArray, oh: FloatArray,
     ocentre: FloatArray, oradii: FloatArray, checked: BoolArray, solid: IntArray,
     d_i: float, d_s: float,
     d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray, body: IntArray, other: IntArray,
-    safety: FloatArray, n: int, warm: FloatArray,
+    safety: FloatArray, n: int, warm: int, ws: int, wi: int,
 ) -> int:
-    """Every checked body against every solid obstacle (placed in the base frame) within d_i: the
-    broad phase on the bodies' bounding spheres (against a box: the sphere's distance to the box
-    itself), appended from entry n (the other side coded −2 − the obstacle's index). ``warm[o ×
-    bodies + b]``: GJK's start for the pair (:func:`._gjk.gjk`)."""
+    """Every checked body (the table A, in its arenas: :data:`._gjk.Layout`) against every solid
+    obstacle (B, placed in the base frame; ``okind``, ``oc``, ``oR``, ``oh``: its views) within d_i:
+    the broad phase on the bodies' bounding spheres (against a box: the sphere's distance to the box
+    itself), appended from entry n (the other side coded −2 − the obstacle's index).
+    ``FA[warm + WARM_WIDTH (o × bodies + b):]``: GJK's start for the pair, ``ws``, ``wi``: its
+    workspace (:func:`._gjk.gjk`)."""
+    bodies = centre.shape[0]
     for o in range(okind.shape[0]):
-        for b in range(kind.shape[0]):
+        for b in range(bodies):
             if not checked[o, b]:
                 continue
             if okind[o] == 1:  # in the box's frame: the sphere's centre outside each slab
@@ -403,8 +430,7 @@ def solid_pass(
                 gap = math.sqrt(x * x + y * y + z * z) - radii[b] - oradii[o]
             if not gap <= d_i:
                 continue
-            pair_one(kind, a0, a1, r, c, R, h, verts, vs, vc, b, okind, o0, o1, orad, oc, oR, oh, overts, ovs, ovc, o,
-                     d, P, Q, N, ok, n, warm, o * kind.shape[0] + b)
+            pair_one(FA, IA, LA, b, FB, IB, LB, o, d, P, Q, N, ok, n, warm + WARM_WIDTH * (o * bodies + b), ws, wi)
             body[n], other[n], safety[n] = b, -2 - solid[o], d_s
             n += 1
     return n

@@ -35,10 +35,13 @@ from ..model.collision import (
     shape_pose,
     transform,
 )
-from ._gjk import WARM_WIDTH
+from ._gjk import WARM_WIDTH, WORK_FLOATS, WORK_INTS, Layout
 from ._pair_passes import (
     ROBOT_FLOATS,
     ROBOT_INTS,
+    TABLE_FLOATS,
+    TABLE_INTS,
+    layout,
     left_to_coal,
     pairs_kernel,
     place_kernel,
@@ -154,12 +157,37 @@ def pack(arrays: list[tuple[Any, str]], dtype: type) -> tuple[np.ndarray, IntArr
     return arena, L
 
 
+class ShapeArenas:
+    """A table's arrays packed into one float and one int arena (:func:`pack`: the table's arrays
+    become views of them, so what places the table fills the arenas), as the compiled GJK takes a
+    table (:data:`._gjk.Layout`), with ``warm_rows`` warm starts (:data:`._gjk.WARM_WIDTH`) and GJK's
+    workspace after it. Pack a table once its shapes are set (``Table.set`` and ``same_shapes``
+    replace the vertex array).
+
+    Attributes:
+        F, I: the arenas; L: the table's layout in them.
+        warm: (warm_rows, WARM_WIDTH) the warm starts, a view; ``ow``: their offset in F.
+        ws, wi: the workspace's offsets in F and I.
+    """
+
+    def __init__(self, table: Table, warm_rows: int = 0) -> None:
+        self.warm, self.work = np.zeros((warm_rows, WARM_WIDTH)), np.zeros(WORK_FLOATS)
+        self.work_ids = np.zeros(WORK_INTS, dtype=np.int64)
+        floats, ints = (*TABLE_FLOATS, "warm", "work"), (*TABLE_INTS, "work_ids")
+        self.F, Lf = pack([(self if k in ("warm", "work") else table, k) for k in floats], np.float64)
+        self.I, Li = pack([(self if k == "work_ids" else table, k) for k in ints], np.int64)
+        self.L: Layout = layout(Lf, Li, floats, ints)
+        self.ow, self.ws, self.wi = int(Lf[floats.index("warm"), 0]), int(Lf[floats.index("work"), 0]), int(Li[-1, 0])
+
+
 def _pair_distances(A: Table, first: IntArray, second: IntArray, B: Table, buf: tuple) -> tuple:
     """Distances of A[first[k]] to B[second[k]] into buf = (d, p, q, n, ok) (ok False where coal
-    must compute it: touching cores, a capsule whose segment is inside a box)."""
+    must compute it: touching cores, a capsule whose segment is inside a box); packs A's and B's
+    arrays (:class:`ShapeArenas`)."""
     d, P, Q, N, ok = buf
-    pairs_kernel(*A.shapes(), *B.shapes(), np.asarray(first, dtype=np.int64), np.asarray(second, dtype=np.int64),
-                 d, P, Q, N, ok)
+    a, b = ShapeArenas(A), ShapeArenas(B)
+    pairs_kernel(a.F, a.I, a.L, b.F, b.I, b.L, np.asarray(first, dtype=np.int64), np.asarray(second, dtype=np.int64),
+                 d, P, Q, N, ok, a.ws, a.wi)
     return d, P, Q, N, ok
 
 
@@ -368,9 +396,11 @@ class PairSearch:
         self._last_H = np.tile(np.eye(4), (len(joints), 1, 1))
         self._moved = np.zeros((len(bodies), 5))  # last centre, travel, its sum's compensation
         self._slack = np.full((self._pairs.shape[0], 2), -math.inf)
+        self._warm_solid = np.zeros((0, WARM_WIDTH))  # ... for each (solid obstacle, body)
+        self._work, self._work_ids = np.zeros(WORK_FLOATS), np.zeros(WORK_INTS, dtype=np.int64)  # GJK's workspace
+        self._obstacle_arenas = ShapeArenas(self._solid[2])
         self._bind()
         self._make_namer()
-        self._warm_solid = np.zeros((0, WARM_WIDTH))  # ... for each (solid obstacle, body)
 
     def set_obstacles(self, obstacles: tuple[ShapeConfig, ...] | list[ShapeConfig]) -> None:
         """Replace the obstacle set (atomically: the next tick sees the new set only).
@@ -386,6 +416,7 @@ class PairSearch:
             o = obs[k]
             world.set(r, row_shape(o.shape), o.world, o.center)  # o.center, o.radius: of the row shape
         placed.same_shapes(world)
+        self._obstacle_arenas = ShapeArenas(placed)  # (placed's arrays become its views: place() fills them)
         checked = np.array([obs[k].checked for k in solid], dtype=bool).reshape(len(solid), len(self.geo.bodies))
         radii = np.array([obs[k].radius for k in solid], dtype=float)
         self._solid = (np.array(solid, dtype=np.int64), world, placed, radii, checked,
@@ -414,14 +445,23 @@ class PairSearch:
                   "d": (c, "d"), "P": (c, "p_a"), "Q": (c, "p_b"), "N": (c, "normal"), "safety": (c, "safety"),
                   "warm": (self, "_warm"), "cap_local": (self, "_cap_local"), "cap_r": (self, "_cap_r"),
                   "cap": (self, "_cap"), "last_H": (self, "_last_H"), "moved": (self, "_moved"),
-                  "slack": (self, "_slack"), "pair_d": (self, "_pair_d")}
+                  "slack": (self, "_slack"), "pair_d": (self, "_pair_d"), "warm_solid": (self, "_warm_solid"),
+                  "work": (self, "_work")}
         ints = {"joint_id": (self, "_joint_id"), "joint": (self, "_body_joint"), "kind": (pl, "kind"),
                 "vs": (pl, "vs"), "vc": (pl, "vc"), "pairs": (self, "_pairs"), "floor_idx": (self, "_floor_idx"),
-                "body": (c, "body"), "other": (c, "other"), "cover": (self, "_cover")}
+                "body": (c, "body"), "other": (c, "other"), "cover": (self, "_cover"), "work_ids": (self, "_work_ids")}
         F, Lf = pack([floats[k] for k in ROBOT_FLOATS], np.float64)
         I, Li = pack([ints[k] for k in ROBOT_INTS], np.int64)
         self.arenas: tuple[Any, ...] = (F, Lf, I, Li)
         """The arenas (F, Lf, I, Li): the candidates' arrays are views of them too (``_rows``)."""
+        o = self._obstacle_arenas
+        robot = layout(Lf, Li, ROBOT_FLOATS, ROBOT_INTS)
+        self._solid_args: tuple[FloatArray, IntArray, Layout, FloatArray, FloatArray, FloatArray, IntArray,
+                                Layout] = (F, I, robot, pl.centre, self._radii, o.F, o.I, o.L)
+        """:func:`solid_pass`'s first arguments: the bodies' table and the obstacles' in their arenas."""
+        self._gjk_at = (int(Lf[ROBOT_FLOATS.index("warm_solid"), 0]), int(Lf[ROBOT_FLOATS.index("work"), 0]),
+                        int(Li[ROBOT_INTS.index("work_ids"), 0]))
+        """:func:`solid_pass`'s GJK starts and workspace, their offsets in the robot's arenas."""
         self.robot_args: tuple[Any, ...] = (self._oMi, F, Lf, I, Li, c.ok, p.influence_distance,
                                             p.safety_distance, self._floor_o, p.floor_margin,
                                             p.safety_distance + COVER_REACH)
@@ -470,8 +510,8 @@ class PairSearch:
                 H = self._H_world  # world → base frame
                 H[0, :3, :3], H[0, :3, 3] = Rb.T, -(Rb.T @ tb)
                 place(H, self._solid_joint, world, placed)
-                n = solid_pass(*pl.shapes(), pl.centre, self._radii, *placed.shapes(), placed.centre, radii, checked,
-                               solid, d_i, p.safety_distance, *buf, n, self._warm_solid)
+                n = solid_pass(*self._solid_args, placed.kind, placed.c, placed.R, placed.h, placed.centre, radii,
+                               checked, solid, d_i, p.safety_distance, *buf, n, *self._gjk_at)
             for index in planes:
                 o = self.obstacles[index]
                 o.place(Rb, tb)
