@@ -318,11 +318,15 @@ def test_a_capsule_whose_segment_is_inside_a_box_is_left_to_coal() -> None:
     """The kernel's depth is its deepest point's (−0.07 m here), but the capsule's penetration
     depth must push the whole segment out through one face (−0.11 m, coal's). Rows built on the
     kernel's let a Gen3 forearm deep in a wall go deeper (``wmm-qp verify --scene
-    configs/scenes/cluttered.toml --samples 2000``: 5 collisions, with daqp and with osqp)."""
+    configs/scenes/cluttered.toml --samples 2000``: 5 collisions, with daqp and with osqp). Two
+    capsules against a wall through the obstacles' pass the search runs (``solid_pass``, its tables
+    packed as the search packs them): the one whose segment is inside is left to coal, the other is
+    the kernel's, exact."""
     import coal
     import pinocchio as pin
 
-    from wmm_qp.limits.pair_search import Table, _pair_distances
+    from wmm_qp.limits._pair_passes import solid_pass
+    from wmm_qp.limits.pair_search import ShapeArenas, Table
 
     along_x = pin.rpy.rpyToMatrix(0.0, math.pi / 2, 0.0)
     capsule, wall = coal.Capsule(0.02, 0.08), coal.Box(0.1, 2.0, 2.0)  # segment x in ±0.04, wall x in ±0.05
@@ -330,8 +334,13 @@ def test_a_capsule_whose_segment_is_inside_a_box_is_left_to_coal() -> None:
     A.set(0, capsule, pin.SE3(along_x, np.zeros(3)), np.zeros(3))  # the segment inside the wall
     A.set(1, capsule, pin.SE3(along_x, np.array([0.1, 0.0, 0.0])), np.zeros(3))  # only its radius inside
     B.set(0, wall, pin.SE3.Identity(), np.zeros(3))
-    buf = (np.empty(2), np.empty((2, 3)), np.empty((2, 3)), np.empty((2, 3)), np.empty(2, dtype=np.bool_))
-    d, _, _, _, ok = _pair_distances(A, np.array([0, 1]), np.array([0, 0]), B, buf)
+    a, b = ShapeArenas(A, warm_rows=2), ShapeArenas(B)
+    d, P, Q, N = np.empty(2), np.empty((2, 3)), np.empty((2, 3)), np.empty((2, 3))
+    ok, body, other = np.ones(2, dtype=np.bool_), np.empty(2, dtype=np.int64), np.empty(2, dtype=np.int64)
+    n = solid_pass(a.F, a.I, a.L, A.centre, np.full(2, 0.06), b.F, b.I, b.L, B.kind, B.c, B.R, B.h, B.centre,
+                   np.full(1, math.inf), np.ones((1, 2), dtype=np.bool_), np.zeros(1, dtype=np.int64), 0.15, 0.03,
+                   d, P, Q, N, ok, body, other, np.empty(2), 0, a.ow, a.ws, a.wi)
+    assert n == 2 and body.tolist() == [0, 1] and other.tolist() == [-2, -2]
     assert not ok[0] and ok[1]
     assert d[0] == pytest.approx(-0.07)  # what the kernel would have used
     req = coal.DistanceRequest()

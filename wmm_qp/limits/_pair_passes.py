@@ -103,18 +103,6 @@ def pair_one(
 
 
 @jit
-def pairs_kernel(
-    FA: FloatArray, IA: IntArray, LA: Layout, FB: FloatArray, IB: IntArray, LB: Layout,
-    first: IntArray, second: IntArray, d: FloatArray, P: FloatArray, Q: FloatArray, N: FloatArray, ok: BoolArray,
-    ws: int, wi: int,
-) -> None:
-    """Entry k ← the distance of A[first[k]] to B[second[k]], for every k (GJK from its cold start;
-    its workspace in A's arenas)."""
-    for k in range(first.shape[0]):
-        pair_one(FA, IA, LA, first[k], FB, IB, LB, second[k], d, P, Q, N, ok, k, -1, ws, wi)
-
-
-@jit
 def plane_one(
     kind: IntArray, a0: FloatArray, a1: FloatArray, r: FloatArray, c: FloatArray, R: FloatArray, h: FloatArray,
     verts: FloatArray, vs: IntArray, vc: IntArray,

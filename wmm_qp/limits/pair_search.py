@@ -43,7 +43,6 @@ from ._pair_passes import (
     TABLE_INTS,
     layout,
     left_to_coal,
-    pairs_kernel,
     place_kernel,
     plane_pass,
     robot_passes,
@@ -178,17 +177,6 @@ class ShapeArenas:
         self.I, Li = pack([(self if k == "work_ids" else table, k) for k in ints], np.int64)
         self.L: Layout = layout(Lf, Li, floats, ints)
         self.ow, self.ws, self.wi = int(Lf[floats.index("warm"), 0]), int(Lf[floats.index("work"), 0]), int(Li[-1, 0])
-
-
-def _pair_distances(A: Table, first: IntArray, second: IntArray, B: Table, buf: tuple) -> tuple:
-    """Distances of A[first[k]] to B[second[k]] into buf = (d, p, q, n, ok) (ok False where coal
-    must compute it: touching cores, a capsule whose segment is inside a box); packs A's and B's
-    arrays (:class:`ShapeArenas`)."""
-    d, P, Q, N, ok = buf
-    a, b = ShapeArenas(A), ShapeArenas(B)
-    pairs_kernel(a.F, a.I, a.L, b.F, b.I, b.L, np.asarray(first, dtype=np.int64), np.asarray(second, dtype=np.int64),
-                 d, P, Q, N, ok, a.ws, a.wi)
-    return d, P, Q, N, ok
 
 
 @dataclass
