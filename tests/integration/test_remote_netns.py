@@ -144,12 +144,12 @@ def test_console_drives_the_chosen_robot_through_a_tls_router_and_a_viewer_canno
             spawn(f"daemon{k}", robot_ns, [*py, "serve", *svc, "--rate", "250", "--zenoh-config",
                                             str(folder / "daemon" / "acl_daemon.json5")])
             connect += ["--connect", f"tcp/127.0.0.1:{sp}", "--connect", f"tcp/127.0.0.1:{dp}"]
-        router = spawn("router", robot_ns, [sys.executable, "-m", "wmm_qp_service.console.router",
+        router = spawn("router", robot_ns, [sys.executable, "-P", "-m", "wmm_qp_service.console.router",
                                             "--zenoh-config", str(rdir / "router.json5"), *connect])
         wait_for("the router up", lambda: "up" in (tmp_path / "router.log").read_text() or router.poll() is not None)
         assert router.poll() is None, (tmp_path / "router.log").read_text()
 
-        r = subprocess.run(["ip", "netns", "exec", console_ns, sys.executable, "-m", "support.remote_scenario",
+        r = subprocess.run(["ip", "netns", "exec", console_ns, sys.executable, "-P", "-m", "support.remote_scenario",
                             prefix, str(remote / "operator" / "remote.json5"), str(remote / "viewer" / "remote.json5"),
                             str(tmp_path)], capture_output=True, text=True, timeout=600, env=env,
                            stdin=subprocess.DEVNULL)

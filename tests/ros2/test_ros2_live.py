@@ -62,7 +62,7 @@ def test_in_a_network_namespace_with_only_loopback(tmp_path: Path) -> None:
     if (why := why_not_live()) is not None:
         pytest.skip(why)
     env = {**os.environ, NETNS: "1", "PYTHONUNBUFFERED": "1"}
-    argv = ["unshare", "-n", "sh", "-c", 'ip link set lo up && exec "$@"', "sh", sys.executable, "-m", "pytest",
+    argv = ["unshare", "-n", "sh", "-c", 'ip link set lo up && exec "$@"', "sh", sys.executable, "-P", "-m", "pytest",
             str(Path(__file__)), "-q", "-x", "-rs", "-p", "no:cacheprovider", "-k", "test_live_",
             f"--basetemp={tmp_path / 'inside'}"]
     r = subprocess.run(argv, env=env, cwd=ROOT, capture_output=True, text=True, timeout=2400, check=False)

@@ -81,7 +81,7 @@ def console_process(args: list[str], log: Path, timeout: float = 60.0,
                     prefix: list[str] | None = None) -> Iterator[tuple[subprocess.Popen[str], str]]:
     """Run ``wmm-qp console ARGS`` (under ``prefix``, e.g. ``ip netns exec NS``) until its URL is
     printed; yields (process, url); always stopped."""
-    cmd = [*(prefix or []), sys.executable, "-m", "wmm_qp_service.cli", "console", *args]
+    cmd = [*(prefix or []), sys.executable, "-P", "-m", "wmm_qp_service.cli", "console", *args]
     p = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=open(log, "w"),  # noqa: SIM115
                          text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"))
     lines: queue.Queue[str] = queue.Queue()
