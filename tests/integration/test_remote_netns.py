@@ -121,7 +121,9 @@ def test_console_drives_the_chosen_robot_through_a_tls_router_and_a_viewer_canno
                     f'user: "{user}", password: "file:{user}.secret"'})
 
         py = list(CLI)
-        path = os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")])
+        # (no empty entry: an empty PYTHONPATH entry is the working directory, the checkout's root,
+        # whose wmm_qp would shadow the installed one, with another numba cache, cold in CI)
+        path = os.pathsep.join(p for p in (str(TESTS), os.environ.get("PYTHONPATH", "")) if p)
         env = dict(os.environ, PYTHONUNBUFFERED="1", PYTHONPATH=path)
         prefix = f"wmmremote{tag}"
 

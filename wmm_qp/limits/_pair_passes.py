@@ -301,8 +301,7 @@ ROBOT_INTS = ("joint_id", "joint", "kind", "vs", "vc", "pairs", "floor_idx", "bo
 """Its int arrays, likewise (from I)."""
 TABLE_FLOATS, TABLE_INTS = ("a0", "a1", "r", "c", "R", "h", "verts"), ("kind", "vs", "vc")
 """A shape table's arrays in its float and int arenas (:data:`._gjk.Layout`)."""
-_WARM, _WARM_SOLID, _WORK, _WORK_IDS = (ROBOT_FLOATS.index("warm"), ROBOT_FLOATS.index("warm_solid"),
-                                        ROBOT_FLOATS.index("work"), ROBOT_INTS.index("work_ids"))
+_WARM, _WORK, _WORK_IDS = ROBOT_FLOATS.index("warm"), ROBOT_FLOATS.index("work"), ROBOT_INTS.index("work_ids")
 _RF = tuple(ROBOT_FLOATS.index(k) for k in TABLE_FLOATS)
 _RI = tuple(ROBOT_INTS.index(k) for k in TABLE_INTS)
 

@@ -176,7 +176,8 @@ class ShapeArenas:
         self.F, Lf = pack([(self if k in ("warm", "work") else table, k) for k in floats], np.float64)
         self.I, Li = pack([(self if k == "work_ids" else table, k) for k in ints], np.int64)
         self.L: Layout = layout(Lf, Li, floats, ints)
-        self.ow, self.ws, self.wi = int(Lf[floats.index("warm"), 0]), int(Lf[floats.index("work"), 0]), int(Li[-1, 0])
+        self.ow, self.ws = int(Lf[floats.index("warm"), 0]), int(Lf[floats.index("work"), 0])
+        self.wi = int(Li[ints.index("work_ids"), 0])
 
 
 @dataclass
