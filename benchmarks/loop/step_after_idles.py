@@ -48,10 +48,6 @@ def idles(robot: w.RobotConfig, cfg: w.ControllerConfig) -> dict[str, Callable[[
     n = int(IDLE_S / ((time.perf_counter() - t0) / 10_000_000))  # iterations in IDLE_S
     buf = np.zeros(4 << 17)  # 4 MiB of float64
 
-    def pyspin() -> None:
-        end = time.perf_counter() + IDLE_S
-        while time.perf_counter() < end:
-            pass
 
     def sweep() -> None:
         np.add(buf, 1.0, out=buf)
@@ -71,7 +67,7 @@ def idles(robot: w.RobotConfig, cfg: w.ControllerConfig) -> dict[str, Callable[[
         time.sleep(0.75 * IDLE_S)
         twin.run(1)
 
-    return {"none": lambda: None, "sleep": lambda: time.sleep(IDLE_S), "pyspin": pyspin,
+    return {"none": lambda: None, "sleep": lambda: time.sleep(IDLE_S), "pyspin": lambda: spin(IDLE_S),
             "cspin": lambda: _arithmetic(n), "sweep": sweep,
             "sleep+spin": sleep_spin, "sleep+twin": sleep_twin}
 

@@ -50,8 +50,9 @@ WORK_FLOATS, WORK_INTS = 56, 12
 """GJK's workspace in its caller's arenas (:func:`gjk`'s ``ws``, ``wi``): the simplex and its support
 points (14 × 3), the barycentric coordinates (8), the closest points on the cores p, q (3 + 3);
 a face's points and the simplex's numbers on each shape (12 ints)."""
-_P, _Q = 50, 53
-"""The closest points' offsets in the workspace."""
+_LAM, _P, _Q = 42, 50, 53
+"""The barycentric coordinates' and the closest points' offsets in the workspace (the simplex's
+14 × 3 first)."""
 
 Layout = tuple[int, int, int, int, int, int, int, int, int, int]
 """Where a table of shapes lies in a float arena F and an int arena I: the offsets of its arrays in
@@ -280,9 +281,9 @@ def gjk(FA: FloatArray, IA: IntArray, LA: Layout, i: int, FB: FloatArray, IB: In
     compiled call passes or a view holds has its reference count taken and released, two atomic
     operations (``perf``: 40 % of the warm calls' samples with ten views and twenty arrays;
     docs/benchmarks.md §12)."""
-    S = FA[ws : ws + 42].reshape((14, 3))  # the simplex (A − B) [0:4], its support points on A [_SA:] and
+    S = FA[ws : ws + _LAM].reshape((14, 3))  # the simplex (A − B) [0:4], its support points on A [_SA:] and
     # B [_SB:], a new pair
-    lam = FA[ws + 42 : ws + _P]  # barycentric coordinates: the best face's [0:4], a trial face's [4:8]
+    lam = FA[ws + _LAM : ws + _P]  # barycentric coordinates: the best face's [0:4], a trial face's [4:8]
     ids = IA[wi : wi + WORK_INTS]  # a face's points [0:4]; the simplex's numbers on A [_SA:], B [_SB:]
     n = 0
     if ow >= 0 and FA[ow + 3] > 0.0:  # the last simplex, where the shapes are now
@@ -343,9 +344,7 @@ def gjk(FA: FloatArray, IA: IntArray, LA: Layout, i: int, FB: FloatArray, IB: In
         if dup:  # w is a vertex already: v is the closest
             done = True
             break
-        S[n, 0], S[n, 1], S[n, 2] = wx, wy, wz
-        for r in range(3):
-            S[_SA + n, r], S[_SB + n, r] = S[_NEW_A, r], S[_NEW_B, r]
+        _add(S, n)  # (its point of A − B is w)
         ids[_SA + n], ids[_SB + n] = ia, ib
         n += 1
         # the nearest face of the simplex and the barycentric coordinates of v on it: first only
